@@ -1,0 +1,536 @@
+#include "core/config.h"
+#include "core/paths.h"  // generated: GEO_SOURCE_DIR
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+namespace geo {
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string join(const std::string& prefix, const std::string& key) {
+  return prefix.empty() ? key : prefix + "." + key;
+}
+
+// Formats a double with the fewest digits that read back to the same value.
+std::string format_double(double v) {
+  for (int precision = 1; precision <= 17; ++precision) {
+    std::ostringstream os;
+    os.precision(precision);
+    os << v;
+    if (std::stod(os.str()) == v) return os.str();
+  }
+  std::ostringstream os;
+  os.precision(17);
+  os << v;
+  return os.str();
+}
+
+template <class T> std::string to_text(const T& v) {
+  std::ostringstream os;
+  os << v;
+  return os.str();
+}
+std::string to_text(double v) { return format_double(v); }
+std::string to_text(const std::string& v) { return "'" + v + "'"; }
+std::string to_text(const std::vector<std::string>& v) {
+  std::string s = "[";
+  for (size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + v[i];
+  return s + "]";
+}
+
+// ---------------------------------------------------------------- parsing
+
+struct ParseContext {
+  std::string source;
+  std::map<std::string, int>* lines;
+  std::set<std::string> overridden;  // key paths set by --set
+
+  std::string where(const std::string& path, const YAML::Node& node) const {
+    if (overridden.count(path)) return source + " (--set " + path + ")";
+    return source + " line " + std::to_string(node.Mark().line + 1);
+  }
+  void record(const std::string& path, const YAML::Node& node) {
+    (*lines)[path] = overridden.count(path) ? 0 : node.Mark().line + 1;
+  }
+};
+
+template <class T> void read_value(const YAML::Node& node, const std::string& path, T& out,
+                                   ParseContext& ctx);
+
+template <class T> const char* type_name();
+template <> const char* type_name<int>() { return "an integer"; }
+template <> const char* type_name<int64_t>() { return "an integer"; }
+template <> const char* type_name<double>() { return "a number"; }
+template <> const char* type_name<bool>() { return "a boolean (true/false)"; }
+template <> const char* type_name<std::string>() { return "a string"; }
+
+template <class T> void read_scalar(const YAML::Node& node, const std::string& path, T& out,
+                                    ParseContext& ctx) {
+  std::string shown = node.IsScalar() ? "'" + node.Scalar() + "'" : "a list or map";
+  if (!node.IsScalar())
+    throw ConfigError(ctx.where(path, node) + ": key '" + path + "' must be " + type_name<T>() +
+                      ", got " + shown);
+  try {
+    out = node.as<T>();
+  } catch (const YAML::Exception&) {
+    throw ConfigError(ctx.where(path, node) + ": key '" + path + "' must be " + type_name<T>() +
+                      ", got " + shown);
+  }
+  if constexpr (std::is_floating_point_v<T>) {
+    if (!std::isfinite(out))
+      throw ConfigError(ctx.where(path, node) + ": key '" + path + "' must be finite, got " +
+                        shown);
+  }
+}
+
+struct ParseVisitor {
+  const YAML::Node& node;
+  std::string prefix;
+  ParseContext& ctx;
+  std::vector<std::string> known;
+
+  template <class T> void operator()(const char* key, T& out) {
+    known.emplace_back(key);
+    const YAML::Node child = node[key];
+    if (!child.IsDefined() || child.IsNull()) return;  // keep the default
+    const std::string path = join(prefix, key);
+    ctx.record(path, child);
+    read_value(child, path, out, ctx);
+  }
+
+  void reject_unknown() const {
+    for (const auto& kv : node) {
+      const std::string key = kv.first.as<std::string>();
+      if (std::find(known.begin(), known.end(), key) != known.end()) continue;
+      std::string valid;
+      for (const auto& k : known) valid += (valid.empty() ? "" : ", ") + k;
+      throw ConfigError(ctx.where(join(prefix, key), kv.first) + ": unknown key '" +
+                        join(prefix, key) + "' (valid keys here: " + valid + ")");
+    }
+  }
+};
+
+void read_value(const YAML::Node& n, const std::string& p, int& o, ParseContext& c) {
+  read_scalar(n, p, o, c);
+}
+void read_value(const YAML::Node& n, const std::string& p, int64_t& o, ParseContext& c) {
+  read_scalar(n, p, o, c);
+}
+void read_value(const YAML::Node& n, const std::string& p, double& o, ParseContext& c) {
+  read_scalar(n, p, o, c);
+}
+void read_value(const YAML::Node& n, const std::string& p, bool& o, ParseContext& c) {
+  read_scalar(n, p, o, c);
+}
+void read_value(const YAML::Node& n, const std::string& p, std::string& o, ParseContext& c) {
+  read_scalar(n, p, o, c);
+}
+
+template <class T> void read_value(const YAML::Node& node, const std::string& path,
+                                   std::vector<T>& out, ParseContext& ctx) {
+  if (!node.IsSequence())
+    throw ConfigError(ctx.where(path, node) + ": key '" + path + "' must be a list");
+  out.clear();
+  for (size_t i = 0; i < node.size(); ++i) {
+    T item{};
+    const std::string item_path = path + "[" + std::to_string(i) + "]";
+    ctx.record(item_path, node[i]);
+    read_value(node[i], item_path, item, ctx);
+    out.push_back(std::move(item));
+  }
+}
+
+// Structs: anything with fields().
+template <class T> void read_value(const YAML::Node& node, const std::string& path, T& out,
+                                   ParseContext& ctx) {
+  if (!node.IsMap())
+    throw ConfigError(ctx.where(path, node) + ": key '" + (path.empty() ? "<top>" : path) +
+                      "' must be a map of keys");
+  ParseVisitor visitor{node, path, ctx, {}};
+  out.fields(visitor);
+  visitor.reject_unknown();
+}
+
+// ---------------------------------------------------------------- emitting
+
+struct EmitVisitor {
+  YAML::Emitter& out;
+  template <class T> void operator()(const char* key, T& value) {
+    out << YAML::Key << key << YAML::Value;
+    emit(value);
+  }
+  void emit(int v) { out << v; }
+  void emit(int64_t v) { out << v; }
+  void emit(bool v) { out << v; }
+  void emit(double v) { out << format_double(v); }
+  void emit(std::string& v) {
+    if (v.empty()) out << YAML::DoubleQuoted << v;
+    else out << v;
+  }
+  template <class T> void emit(std::vector<T>& v) {
+    out << YAML::BeginSeq;
+    for (auto& item : v) emit(item);
+    out << YAML::EndSeq;
+  }
+  void emit(std::vector<std::string>& v) {
+    out << YAML::Flow << YAML::BeginSeq;
+    for (auto& item : v) out << item;
+    out << YAML::EndSeq;
+  }
+  template <class T> void emit(T& s) {
+    out << YAML::BeginMap;
+    s.fields(*this);
+    out << YAML::EndMap;
+  }
+};
+
+// ---------------------------------------------------------------- overrides
+
+// Splits "stages[0].learning_rate" or "stages.0.learning_rate" into parts.
+std::vector<std::string> split_key(const std::string& key) {
+  std::vector<std::string> parts;
+  std::string cur;
+  for (char ch : key) {
+    if (ch == '.' || ch == '[' || ch == ']') {
+      if (!cur.empty()) parts.push_back(cur);
+      cur.clear();
+    } else {
+      cur += ch;
+    }
+  }
+  if (!cur.empty()) parts.push_back(cur);
+  return parts;
+}
+
+std::string canonical_key(const std::vector<std::string>& parts) {
+  std::string path;
+  for (const auto& p : parts) {
+    bool index = !p.empty() && std::all_of(p.begin(), p.end(), ::isdigit);
+    path += index ? "[" + p + "]" : (path.empty() ? p : "." + p);
+  }
+  return path;
+}
+
+void apply_override(YAML::Node& root, const std::string& text, ParseContext& ctx) {
+  const auto eq = text.find('=');
+  if (eq == std::string::npos || eq == 0)
+    throw ConfigError("--set '" + text + "': expected key.path=value");
+  const auto parts = split_key(text.substr(0, eq));
+  if (parts.empty()) throw ConfigError("--set '" + text + "': empty key");
+  YAML::Node value;
+  try {
+    value = YAML::Load(text.substr(eq + 1));
+  } catch (const YAML::Exception& e) {
+    throw ConfigError("--set '" + text + "': value is not valid YAML: " + e.what());
+  }
+  YAML::Node node = root;
+  for (size_t i = 0; i + 1 < parts.size(); ++i) {
+    const auto& part = parts[i];
+    const bool index = std::all_of(part.begin(), part.end(), ::isdigit);
+    if (index) {
+      const size_t k = std::stoul(part);
+      if (!node.IsSequence() || k >= node.size())
+        throw ConfigError("--set '" + text + "': '" + canonical_key({parts.begin(), parts.begin() + i + 1}) +
+                          "' does not exist (the list has " +
+                          std::to_string(node.IsSequence() ? node.size() : 0) + " entries)");
+      node.reset(node[k]);
+    } else {
+      if (!node[part]) {
+        // Sequences (stages) must exist to be indexed; maps are created on demand.
+        node[part] = YAML::Node(YAML::NodeType::Map);
+      }
+      node.reset(node[part]);
+    }
+  }
+  const auto& last = parts.back();
+  if (std::all_of(last.begin(), last.end(), ::isdigit)) {
+    const size_t k = std::stoul(last);
+    if (!node.IsSequence() || k >= node.size())
+      throw ConfigError("--set '" + text + "': index " + last + " is out of range");
+    node[k] = value;
+  } else {
+    node[last] = value;
+  }
+  ctx.overridden.insert(canonical_key(parts));
+}
+
+// For `stages[i].x` overrides when the file has no stages: materialise the defaults first.
+void materialise_default_stages(YAML::Node& root) {
+  if (root["stages"]) return;
+  YAML::Emitter out;
+  Config defaults;
+  EmitVisitor visitor{out};
+  visitor.emit(defaults.stages);
+  root["stages"] = YAML::Load(out.c_str());
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------- validation
+
+class Checker {
+ public:
+  explicit Checker(const Config& config) : config_(config) {}
+
+  // RAII prefix for nested structs: Checker::Scope s(c, "stages[0]");
+  class Scope {
+   public:
+    Scope(Checker& c, const std::string& name) : c_(c), saved_(c.prefix_) {
+      c_.prefix_ = join(saved_, name);
+    }
+    ~Scope() { c_.prefix_ = saved_; }
+
+   private:
+    Checker& c_;
+    std::string saved_;
+  };
+
+  template <class T> void require(bool ok, const char* key, const T& value, const std::string& rule) {
+    if (ok) return;
+    const std::string path = join(prefix_, key);
+    std::string where;
+    auto it = config_.lines.find(path);
+    if (it != config_.lines.end())
+      where = it->second > 0 ? " (line " + std::to_string(it->second) + ")" : " (from --set)";
+    else
+      where = " (default)";
+    errors_.push_back("key '" + path + "' = " + to_text(value) + where + ": " + rule);
+  }
+
+  void fail_if_any() const {
+    if (errors_.empty()) return;
+    std::string msg = config_.source + ": invalid configuration:";
+    for (const auto& e : errors_) msg += "\n  " + e;
+    throw ConfigError(msg);
+  }
+
+ private:
+  const Config& config_;
+  std::string prefix_;
+  std::vector<std::string> errors_;
+};
+
+namespace {
+bool one_of(const std::string& v, std::initializer_list<const char*> options) {
+  for (const char* o : options)
+    if (v == o) return true;
+  return false;
+}
+}  // namespace
+
+void ModelConfig::validate(Checker& c) const {
+  c.require(encoder_depth == 18 || encoder_depth == 34 || encoder_depth == 50, "encoder_depth",
+            encoder_depth, "must be 18, 34 or 50");
+  c.require(fr_ratio >= 1, "fr_ratio", fr_ratio, "must be >= 1");
+  c.require(one_of(upsample, {"nearest", "bilinear"}), "upsample", upsample,
+            "must be nearest or bilinear");
+  c.require(num_scales >= 1 && num_scales <= 4, "num_scales", num_scales, "must be in 1..4");
+}
+
+void AugmentConfig::validate(Checker& c) const {
+  c.require(scale_max >= 1.0, "scale_max", scale_max, "must be >= 1");
+  c.require(photometric_prob >= 0 && photometric_prob <= 1, "photometric_prob", photometric_prob,
+            "must be in [0, 1]");
+  c.require(gamma_min > 0 && gamma_min <= gamma_max, "gamma_min", gamma_min,
+            "must be > 0 and <= gamma_max");
+  c.require(brightness_min > 0 && brightness_min <= brightness_max, "brightness_min",
+            brightness_min, "must be > 0 and <= brightness_max");
+  c.require(color_min > 0 && color_min <= color_max, "color_min", color_min,
+            "must be > 0 and <= color_max");
+}
+
+void DataConfig::validate(Checker& c) const {
+  c.require(one_of(format, {"auto", "kitti_raw", "packed"}), "format", format,
+            "must be auto, kitti_raw or packed");
+  c.require(height >= 16 && height % 8 == 0, "height", height,
+            "must be a positive multiple of 8 (4 pyramid scales), at least 16");
+  c.require(width >= 16 && width % 8 == 0, "width", width,
+            "must be a positive multiple of 8 (4 pyramid scales), at least 16");
+  c.require(seq_length >= 3 && seq_length % 2 == 1, "seq_length", seq_length,
+            "must be odd and >= 3 (target in the middle)");
+  c.require(num_workers >= 0, "num_workers", num_workers, "must be >= 0");
+  c.require(one_of(on_bad_sample, {"stop", "skip"}), "on_bad_sample", on_bad_sample,
+            "must be stop or skip");
+  Checker::Scope s(c, "augment");
+  augment.validate(c);
+}
+
+void LossConfig::validate(Checker& c) const {
+  c.require(ssim_alpha >= 0 && ssim_alpha <= 1, "ssim_alpha", ssim_alpha, "must be in [0, 1]");
+  c.require(occ_alpha1 >= 0, "occ_alpha1", occ_alpha1, "must be >= 0");
+  c.require(occ_alpha2 >= 0, "occ_alpha2", occ_alpha2, "must be >= 0");
+  c.require(consistency_a >= 0, "consistency_a", consistency_a, "must be >= 0");
+  c.require(consistency_b >= 0, "consistency_b", consistency_b, "must be >= 0");
+}
+
+void LossWeights::validate(Checker& c) const {
+  c.require(rigid >= 0, "rigid", rigid, "must be >= 0");
+  c.require(flow >= 0, "flow", flow, "must be >= 0");
+  c.require(disp_smooth >= 0, "disp_smooth", disp_smooth, "must be >= 0");
+  c.require(flow_smooth >= 0, "flow_smooth", flow_smooth, "must be >= 0");
+  c.require(flow_consistency >= 0, "flow_consistency", flow_consistency, "must be >= 0");
+}
+
+bool StageConfig::trains(const std::string& net) const {
+  return std::find(train.begin(), train.end(), net) != train.end();
+}
+
+bool StageConfig::uses_flow() const { return trains("flow"); }
+
+void StageConfig::validate(Checker& c) const {
+  c.require(!name.empty(), "name", name, "must not be empty");
+  c.require(iterations > 0, "iterations", iterations, "must be > 0");
+  c.require(!train.empty(), "train", train, "must name at least one of depth, pose, flow");
+  for (const auto& net : train)
+    c.require(one_of(net, {"depth", "pose", "flow"}), "train", train,
+              "entries must be depth, pose or flow (got '" + net + "')");
+  c.require(learning_rate > 0, "learning_rate", learning_rate, "must be > 0");
+  c.require(batch_size >= 1, "batch_size", batch_size, "must be >= 1");
+  c.require(one_of(lr_schedule, {"constant", "step"}), "lr_schedule", lr_schedule,
+            "must be constant or step");
+  c.require(lr_schedule != "step" || lr_step > 0, "lr_step", lr_step,
+            "must be > 0 when lr_schedule is step");
+  c.require(lr_gamma > 0 && lr_gamma <= 1, "lr_gamma", lr_gamma, "must be in (0, 1]");
+  if (uses_flow())
+    c.require(weights.flow > 0 || weights.flow_smooth > 0 || weights.flow_consistency > 0,
+              "train", train, "trains flow, so at least one flow loss weight must be > 0");
+  Checker::Scope s(c, "weights");
+  weights.validate(c);
+}
+
+void OptimizerConfig::validate(Checker& c) const {
+  c.require(type == "adam", "type", type, "must be adam (the paper's optimiser)");
+  c.require(beta1 >= 0 && beta1 < 1, "beta1", beta1, "must be in [0, 1)");
+  c.require(beta2 >= 0 && beta2 < 1, "beta2", beta2, "must be in [0, 1)");
+  c.require(eps > 0, "eps", eps, "must be > 0");
+  c.require(weight_decay >= 0, "weight_decay", weight_decay, "must be >= 0");
+  c.require(grad_clip >= 0, "grad_clip", grad_clip, "must be >= 0 (0 = off)");
+}
+
+void LoggingConfig::validate(Checker& c) const {
+  c.require(one_of(level, {"trace", "debug", "info", "warn", "error"}), "level", level,
+            "must be trace, debug, info, warn or error");
+  c.require(interval > 0, "interval", interval, "must be > 0");
+  c.require(summary_interval >= 0, "summary_interval", summary_interval, "must be >= 0 (0 = off)");
+  c.require(checkpoint_interval > 0, "checkpoint_interval", checkpoint_interval, "must be > 0");
+  c.require(val_interval >= 0, "val_interval", val_interval, "must be >= 0 (0 = off)");
+  c.require(keep_last >= 1, "keep_last", keep_last, "must be >= 1");
+  c.require(max_bad_steps >= 1, "max_bad_steps", max_bad_steps, "must be >= 1");
+}
+
+void RunConfig::validate(Checker& c) const {
+  c.require(!name.empty(), "name", name, "must not be empty");
+  c.require(!dir.empty(), "dir", dir, "must not be empty");
+  c.require(seed >= 0, "seed", seed, "must be >= 0");
+  c.require(one_of(device, {"auto", "cpu", "cuda"}), "device", device, "must be auto, cpu or cuda");
+  c.require(threads >= 0, "threads", threads, "must be >= 0 (0 = all cores)");
+}
+
+void Config::validate() const {
+  Checker c(*this);
+  {
+    Checker::Scope s(c, "model");
+    model.validate(c);
+  }
+  {
+    Checker::Scope s(c, "data");
+    data.validate(c);
+  }
+  {
+    Checker::Scope s(c, "loss");
+    loss.validate(c);
+  }
+  c.require(!stages.empty(), "stages", stages.size(), "must list at least one stage");
+  std::set<std::string> names;
+  for (size_t i = 0; i < stages.size(); ++i) {
+    Checker::Scope s(c, "stages[" + std::to_string(i) + "]");
+    stages[i].validate(c);
+    c.require(names.insert(stages[i].name).second, "name", stages[i].name,
+              "stage names must be unique");
+  }
+  {
+    Checker::Scope s(c, "optimizer");
+    optimizer.validate(c);
+  }
+  {
+    Checker::Scope s(c, "logging");
+    logging.validate(c);
+  }
+  {
+    Checker::Scope s(c, "run");
+    run.validate(c);
+  }
+  c.fail_if_any();
+}
+
+// ---------------------------------------------------------------- entry points
+
+Config parse_config(const std::string& yaml_text, const std::string& source,
+                    const std::vector<std::string>& overrides) {
+  YAML::Node root;
+  try {
+    root = YAML::Load(yaml_text);
+  } catch (const YAML::ParserException& e) {
+    throw ConfigError(source + " line " + std::to_string(e.mark.line + 1) +
+                      ": malformed YAML: " + e.msg);
+  }
+  if (root.IsNull()) root = YAML::Node(YAML::NodeType::Map);
+  Config config;
+  config.source = source;
+  ParseContext ctx{source, &config.lines, {}};
+  for (const auto& o : overrides) {
+    if (o.rfind("stages", 0) == 0) materialise_default_stages(root);
+    apply_override(root, o, ctx);
+  }
+  read_value(root, "", config, ctx);
+  config.validate();
+  return config;
+}
+
+Config load_config(const std::string& path, const std::vector<std::string>& overrides) {
+  std::ifstream in(path);
+  if (!in) throw ConfigError(path + ": cannot open config file (does it exist?)");
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  return parse_config(buffer.str(), path, overrides);
+}
+
+std::string shipped_config_dir() {
+  if (const char* env = std::getenv("GEO_CONFIG_DIR")) return env;
+  return std::string(kSourceDir) + "/configs";
+}
+
+std::string resolve_config_path(const std::string& name) {
+  std::vector<std::string> tried;
+  auto exists = [&](const fs::path& p) {
+    tried.push_back(p.string());
+    return fs::is_regular_file(p);
+  };
+  if (exists(name)) return name;
+  const fs::path dir = shipped_config_dir();
+  const fs::path bare = fs::path(name).filename();
+  if (exists(dir / bare)) return (dir / bare).string();
+  if (bare.extension() != ".yaml" && exists(dir / (bare.string() + ".yaml")))
+    return (dir / (bare.string() + ".yaml")).string();
+  std::string msg = "config '" + name + "' not found; looked at:";
+  for (const auto& t : tried) msg += " " + t;
+  throw ConfigError(msg);
+}
+
+std::string to_yaml(const Config& config) {
+  YAML::Emitter out;
+  EmitVisitor visitor{out};
+  visitor.emit(const_cast<Config&>(config));  // fields() is shared with parsing; nothing is written
+  return std::string(out.c_str()) + "\n";
+}
+
+}  // namespace geo

@@ -1,0 +1,274 @@
+// Typed configuration: YAML parsed once into nested structs, validated, never mutated afterwards.
+//
+// Each struct lists its keys exactly once, in `fields(v)`: the same list drives parsing (unknown
+// keys are errors naming the full key path), emitting the resolved config, and `--set key=value`
+// overrides. Defaults are the paper's settings (reference.md); the comment on each says where from.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace geo {
+
+// Thrown for every configuration problem; the message names the file, key, value and line.
+class ConfigError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+class Checker;  // collects validation failures with key paths and YAML lines (config.cpp)
+
+struct ModelConfig {
+  int encoder_depth = 50;            // ResNet-50 encoder (paper Sec. 3.1); 18/34 for speed and tests
+  bool use_fr = true;                // feature refinement on (paper); false = Table 4 "w/o FR"
+  bool fr_encoder = true;            // FR after each residual stage, Refined1..4 (paper)
+  bool fr_decoder = true;            // FR after each decoder stage, Refined5..10 (paper)
+  int fr_ratio = 16;                 // channel-attention reduction ratio r (paper, CBAM)
+  bool fr_spatial_bn = false;        // BatchNorm after the 7x7 spatial conv (CBAM's code; optional)
+  std::string upsample = "nearest";  // decoder upsampling: nearest (GeoNet) or bilinear
+  int num_scales = 4;                // disparity / flow outputs at full, 1/2, 1/4, 1/8 (GeoNet)
+
+  template <class V> void fields(V& v) {
+    v("encoder_depth", encoder_depth);
+    v("use_fr", use_fr);
+    v("fr_encoder", fr_encoder);
+    v("fr_decoder", fr_decoder);
+    v("fr_ratio", fr_ratio);
+    v("fr_spatial_bn", fr_spatial_bn);
+    v("upsample", upsample);
+    v("num_scales", num_scales);
+  }
+  void validate(Checker& c) const;
+};
+
+struct AugmentConfig {
+  bool enabled = true;              // GeoNet augmentation (reference.md Sec. 4)
+  double scale_max = 1.15;          // scale x,y by U[1, scale_max] then random-crop back (GeoNet)
+  double photometric_prob = 0.5;    // probability of photometric jitter per batch (GeoNet)
+  double gamma_min = 0.8, gamma_max = 1.2;              // gamma U[0.8,1.2] (GeoNet)
+  double brightness_min = 0.5, brightness_max = 2.0;    // brightness U[0.5,2] (GeoNet)
+  double color_min = 0.8, color_max = 1.2;              // per-channel colour U[0.8,1.2] (GeoNet)
+
+  template <class V> void fields(V& v) {
+    v("enabled", enabled);
+    v("scale_max", scale_max);
+    v("photometric_prob", photometric_prob);
+    v("gamma_min", gamma_min);
+    v("gamma_max", gamma_max);
+    v("brightness_min", brightness_min);
+    v("brightness_max", brightness_max);
+    v("color_min", color_min);
+    v("color_max", color_max);
+  }
+  void validate(Checker& c) const;
+};
+
+struct DataConfig {
+  std::string root;                   // dataset root (KITTI raw, packed cache or a geo_synth world)
+  std::string format = "auto";        // auto | kitti_raw | packed
+  std::string split = "eigen_zhou";   // split folder under configs/splits (paper: Eigen split)
+  std::string train_list;             // explicit training list; empty = <split>/train_files.txt
+  std::string val_list;               // explicit validation list; empty = <split>/val_files.txt
+  int height = 128;                   // training height (paper Sec. 4.2)
+  int width = 416;                    // training width (paper Sec. 4.2)
+  int seq_length = 3;                 // target in the middle + 2 sources (paper); 5 for odometry
+  int num_workers = 2;                // loader threads prefetching batches
+  std::string on_bad_sample = "stop"; // stop | skip
+  AugmentConfig augment;
+
+  template <class V> void fields(V& v) {
+    v("root", root);
+    v("format", format);
+    v("split", split);
+    v("train_list", train_list);
+    v("val_list", val_list);
+    v("height", height);
+    v("width", width);
+    v("seq_length", seq_length);
+    v("num_workers", num_workers);
+    v("on_bad_sample", on_bad_sample);
+    v("augment", augment);
+  }
+  void validate(Checker& c) const;
+};
+
+struct LossConfig {
+  double ssim_alpha = 0.85;          // alpha*(1-SSIM)/2 + (1-alpha)*L1 (paper, GeoNet)
+  double occ_alpha1 = 0.01;          // occlusion test, eq. 13 alpha1 (paper)
+  double occ_alpha2 = 0.5;           // occlusion test, eq. 13 alpha2 (paper)
+  double consistency_a = 3.0;        // geometric consistency bound a (eq. 15, GeoNet alpha)
+  double consistency_b = 0.05;       // geometric consistency bound b (eq. 15, GeoNet beta)
+  bool consistency_scale_factor = true;  // GeoNet multiplies the difference norm by 2^s
+  bool mask_out_of_view = false;     // drop samples that leave the image (GeoNet clamps: false)
+  bool min_reprojection = false;     // per-pixel minimum over sources (monodepth2; off)
+  bool automask = false;             // auto-mask static pixels (monodepth2; off)
+
+  template <class V> void fields(V& v) {
+    v("ssim_alpha", ssim_alpha);
+    v("occ_alpha1", occ_alpha1);
+    v("occ_alpha2", occ_alpha2);
+    v("consistency_a", consistency_a);
+    v("consistency_b", consistency_b);
+    v("consistency_scale_factor", consistency_scale_factor);
+    v("mask_out_of_view", mask_out_of_view);
+    v("min_reprojection", min_reprojection);
+    v("automask", automask);
+  }
+  void validate(Checker& c) const;
+};
+
+// Weights of the total loss, eq. 16 (paper): l_br = 1, l_fr = 1, l_ds = 0.5, l_fs = 0.2, l_fg = 0.2.
+struct LossWeights {
+  double rigid = 1.0;              // l_br, rigid reconstruction
+  double flow = 1.0;               // l_fr, flow reconstruction
+  double disp_smooth = 0.5;        // l_ds, disparity smoothness
+  double flow_smooth = 0.2;        // l_fs, flow smoothness
+  double flow_consistency = 0.2;   // l_fg, geometric consistency
+
+  template <class V> void fields(V& v) {
+    v("rigid", rigid);
+    v("flow", flow);
+    v("disp_smooth", disp_smooth);
+    v("flow_smooth", flow_smooth);
+    v("flow_consistency", flow_consistency);
+  }
+  void validate(Checker& c) const;
+};
+
+// One training stage (reference.md Sec. 4). Stages are data, not flags.
+struct StageConfig {
+  std::string name = "stage1";
+  int64_t iterations = 350000;       // stage 1: 350k (paper); stage 2: 1500k
+  std::vector<std::string> train = {"depth", "pose"};  // networks updated: depth, pose, flow
+  double learning_rate = 2e-4;       // Adam lr (paper Sec. 4.2)
+  int batch_size = 4;                // paper Sec. 4.2
+  std::string lr_schedule = "constant";  // constant | step
+  int64_t lr_step = 0;               // step schedule: multiply by lr_gamma every lr_step iterations
+  double lr_gamma = 0.5;
+  std::string init;                  // checkpoint (or run folder) to start from; empty = scratch
+  LossWeights weights;
+
+  bool trains(const std::string& net) const;
+  bool uses_flow() const;  // flow terms are computed only when the stage has non-zero flow weights
+
+  template <class V> void fields(V& v) {
+    v("name", name);
+    v("iterations", iterations);
+    v("train", train);
+    v("learning_rate", learning_rate);
+    v("batch_size", batch_size);
+    v("lr_schedule", lr_schedule);
+    v("lr_step", lr_step);
+    v("lr_gamma", lr_gamma);
+    v("init", init);
+    v("weights", weights);
+  }
+  void validate(Checker& c) const;
+};
+
+struct OptimizerConfig {
+  std::string type = "adam";   // Adam (paper Sec. 4.2)
+  double beta1 = 0.9;          // paper Sec. 4.2
+  double beta2 = 0.999;        // paper Sec. 4.2
+  double eps = 1e-8;           // PyTorch / TensorFlow default
+  double weight_decay = 0.0;   // none in the paper
+  double grad_clip = 0.0;      // max global gradient norm; 0 = off (not in the paper)
+
+  template <class V> void fields(V& v) {
+    v("type", type);
+    v("beta1", beta1);
+    v("beta2", beta2);
+    v("eps", eps);
+    v("weight_decay", weight_decay);
+    v("grad_clip", grad_clip);
+  }
+  void validate(Checker& c) const;
+};
+
+struct LoggingConfig {
+  std::string level = "info";        // trace | debug | info | warn | error
+  int64_t interval = 100;            // progress line every N iterations
+  int64_t summary_interval = 5000;   // visual summaries every N iterations (0 = off)
+  int64_t checkpoint_interval = 5000;  // checkpoint every N iterations (and at the end)
+  int64_t val_interval = 5000;       // validation every N iterations (0 = off)
+  int keep_last = 3;                 // checkpoints kept besides the best
+  int max_bad_steps = 10;            // stop after this many NaN/Inf steps in a row
+
+  template <class V> void fields(V& v) {
+    v("level", level);
+    v("interval", interval);
+    v("summary_interval", summary_interval);
+    v("checkpoint_interval", checkpoint_interval);
+    v("val_interval", val_interval);
+    v("keep_last", keep_last);
+    v("max_bad_steps", max_bad_steps);
+  }
+  void validate(Checker& c) const;
+};
+
+struct RunConfig {
+  std::string name = "geo";     // run folder prefix
+  std::string dir = "runs";     // parent folder of run folders
+  int64_t seed = 42;            // seeds torch and the data pipeline
+  std::string device = "auto";  // auto | cpu | cuda
+  int threads = 0;              // intra-op threads; 0 = all cores
+
+  template <class V> void fields(V& v) {
+    v("name", name);
+    v("dir", dir);
+    v("seed", seed);
+    v("device", device);
+    v("threads", threads);
+  }
+  void validate(Checker& c) const;
+};
+
+struct Config {
+  ModelConfig model;
+  DataConfig data;
+  LossConfig loss;
+  std::vector<StageConfig> stages = {StageConfig{}};
+  OptimizerConfig optimizer;
+  LoggingConfig logging;
+  RunConfig run;
+
+  template <class V> void fields(V& v) {
+    v("model", model);
+    v("data", data);
+    v("loss", loss);
+    v("stages", stages);
+    v("optimizer", optimizer);
+    v("logging", logging);
+    v("run", run);
+  }
+
+  // Throws ConfigError listing every problem found (key path, value, YAML line when known).
+  void validate() const;
+
+  // Where each key came from: "stages[0].learning_rate" -> 12 (1-based line), for messages.
+  std::map<std::string, int> lines;
+  std::string source;  // file the config was read from ("<string>" for text)
+};
+
+// Parses YAML text. `overrides` are "key.path=value" strings applied before typing (and so
+// validated the same way). `source` names the text in messages.
+Config parse_config(const std::string& yaml_text, const std::string& source = "<string>",
+                    const std::vector<std::string>& overrides = {});
+
+// Reads a YAML file (missing or unreadable file -> ConfigError naming the path).
+Config load_config(const std::string& path, const std::vector<std::string>& overrides = {});
+
+// Resolves a config argument: an existing path as given; otherwise a bare name (with or without
+// .yaml) is looked up in the shipped configs/ folder. Throws naming every place it looked.
+std::string resolve_config_path(const std::string& name);
+
+// The shipped configs/ folder (GEO_CONFIG_DIR env var, else the source tree's configs/).
+std::string shipped_config_dir();
+
+// The resolved config as YAML (every key, defaults included). parse_config(to_yaml(c)) == c.
+std::string to_yaml(const Config& config);
+
+}  // namespace geo

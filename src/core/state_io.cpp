@@ -1,0 +1,86 @@
+#include "core/state_io.h"
+
+#include <filesystem>
+#include <set>
+#include <stdexcept>
+#include <unistd.h>
+
+namespace geo {
+
+namespace {
+std::map<std::string, torch::Tensor> state_of(const torch::nn::Module& module) {
+  std::map<std::string, torch::Tensor> state;
+  for (const auto& p : module.named_parameters(/*recurse=*/true)) state[p.key()] = p.value();
+  for (const auto& b : module.named_buffers(/*recurse=*/true)) state[b.key()] = b.value();
+  return state;
+}
+
+std::string list(const std::vector<std::string>& names, size_t max_shown = 20) {
+  std::string s;
+  for (size_t i = 0; i < names.size() && i < max_shown; ++i) s += (i ? ", " : "") + names[i];
+  if (names.size() > max_shown) s += ", ... (" + std::to_string(names.size()) + " in all)";
+  return s;
+}
+}  // namespace
+
+void write_state(const torch::nn::Module& module, torch::serialize::OutputArchive& archive) {
+  for (const auto& [name, tensor] : state_of(module)) archive.write(name, tensor.detach().cpu());
+}
+
+void read_state(torch::nn::Module& module, torch::serialize::InputArchive& archive,
+                const std::string& what) {
+  auto state = state_of(module);
+  const auto keys = archive.keys();
+  const std::set<std::string> in_file(keys.begin(), keys.end());
+  std::vector<std::string> missing, unexpected, mismatched;
+  for (const auto& kv : state)
+    if (!in_file.count(kv.first)) missing.push_back(kv.first);
+  for (const auto& k : keys)
+    if (!state.count(k)) unexpected.push_back(k);
+  std::map<std::string, torch::Tensor> loaded;
+  for (const auto& [name, target] : state) {
+    if (!in_file.count(name)) continue;
+    torch::Tensor t;
+    archive.read(name, t);
+    if (t.sizes() != target.sizes()) {
+      std::ostringstream os;
+      os << name << " (file " << t.sizes() << ", model " << target.sizes() << ")";
+      mismatched.push_back(os.str());
+    }
+    loaded[name] = t;
+  }
+  if (!missing.empty() || !unexpected.empty() || !mismatched.empty()) {
+    std::string msg = what + ": does not match the network (nothing was loaded)";
+    if (!missing.empty()) msg += "\n  missing keys: " + list(missing);
+    if (!unexpected.empty()) msg += "\n  unexpected keys: " + list(unexpected);
+    if (!mismatched.empty()) msg += "\n  shape mismatches: " + list(mismatched);
+    throw std::runtime_error(msg);
+  }
+  torch::NoGradGuard no_grad;
+  for (auto& [name, target] : state) target.copy_(loaded[name]);
+}
+
+void save_state(const torch::nn::Module& module, const std::string& path) {
+  torch::serialize::OutputArchive archive;
+  write_state(module, archive);
+  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
+  archive.save_to(tmp);
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) throw std::runtime_error(path + ": cannot rename temporary file into place: " + ec.message());
+}
+
+void load_state(torch::nn::Module& module, const std::string& path) {
+  if (!std::filesystem::is_regular_file(path))
+    throw std::runtime_error(path + ": no such file");
+  torch::serialize::InputArchive archive;
+  try {
+    archive.load_from(path);
+  } catch (const c10::Error& e) {
+    throw std::runtime_error(path + ": not a readable geo/LibTorch state file (" +
+                             std::string(e.what_without_backtrace()) + ")");
+  }
+  read_state(module, archive, path);
+}
+
+}  // namespace geo

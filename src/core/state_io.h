@@ -1,0 +1,23 @@
+// Saving and loading a module's parameters and buffers by name (state-dict keys are a file
+// format). Loading is strict: missing or unexpected keys and shape mismatches are errors that
+// list the offending names; nothing is partially loaded.
+#pragma once
+
+#include <torch/torch.h>
+
+#include <string>
+
+namespace geo {
+
+// Writes every named parameter and buffer of `module` to `path` (temporary file + rename).
+void save_state(const torch::nn::Module& module, const std::string& path);
+
+// Loads `path` into `module`, copying onto the module's device and dtype.
+void load_state(torch::nn::Module& module, const std::string& path);
+
+// Same, into / out of an archive under a key prefix (for checkpoints holding several networks).
+void write_state(const torch::nn::Module& module, torch::serialize::OutputArchive& archive);
+void read_state(torch::nn::Module& module, torch::serialize::InputArchive& archive,
+                const std::string& what);
+
+}  // namespace geo

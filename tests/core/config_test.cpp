@@ -1,0 +1,180 @@
+#include "core/config.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+
+namespace {
+
+using geo::Config;
+using geo::ConfigError;
+
+// Runs `fn` and returns the ConfigError message (fails the test if nothing is thrown).
+template <class Fn> std::string error_of(Fn&& fn) {
+  try {
+    fn();
+  } catch (const ConfigError& e) {
+    return e.what();
+  }
+  ADD_FAILURE() << "expected a ConfigError";
+  return "";
+}
+
+TEST(Config, DefaultsAreThePapersSettings) {
+  const Config c = geo::parse_config("");
+  EXPECT_EQ(c.model.encoder_depth, 50);
+  EXPECT_TRUE(c.model.use_fr);
+  EXPECT_EQ(c.model.fr_ratio, 16);
+  EXPECT_EQ(c.data.height, 128);
+  EXPECT_EQ(c.data.width, 416);
+  EXPECT_DOUBLE_EQ(c.loss.ssim_alpha, 0.85);
+  EXPECT_DOUBLE_EQ(c.loss.occ_alpha1, 0.01);
+  EXPECT_DOUBLE_EQ(c.loss.occ_alpha2, 0.5);
+  EXPECT_DOUBLE_EQ(c.loss.consistency_a, 3.0);
+  EXPECT_DOUBLE_EQ(c.loss.consistency_b, 0.05);
+  ASSERT_EQ(c.stages.size(), 1u);
+  EXPECT_EQ(c.stages[0].iterations, 350000);
+  EXPECT_DOUBLE_EQ(c.stages[0].learning_rate, 2e-4);
+  EXPECT_EQ(c.stages[0].batch_size, 4);
+  EXPECT_DOUBLE_EQ(c.stages[0].weights.disp_smooth, 0.5);
+  EXPECT_DOUBLE_EQ(c.stages[0].weights.flow_smooth, 0.2);
+  EXPECT_DOUBLE_EQ(c.optimizer.beta1, 0.9);
+  EXPECT_DOUBLE_EQ(c.optimizer.beta2, 0.999);
+}
+
+TEST(Config, ValidConfigRoundTrips) {
+  const std::string text = R"(
+model: {encoder_depth: 18, use_fr: false, fr_ratio: 8}
+data: {root: /data/kitti, height: 64, width: 208, augment: {scale_max: 1.3}}
+loss: {ssim_alpha: 0.8, automask: true}
+stages:
+  - {name: a, iterations: 10, train: [depth, pose], learning_rate: 1.0e-3, batch_size: 2}
+  - name: b
+    iterations: 20
+    train: [flow]
+    learning_rate: 3.3e-5
+    weights: {flow: 1, flow_smooth: 0.2, flow_consistency: 0.1}
+run: {seed: 7, device: cpu}
+)";
+  const Config a = geo::parse_config(text);
+  EXPECT_EQ(a.model.encoder_depth, 18);
+  EXPECT_FALSE(a.model.use_fr);
+  EXPECT_EQ(a.data.root, "/data/kitti");
+  EXPECT_DOUBLE_EQ(a.data.augment.scale_max, 1.3);
+  ASSERT_EQ(a.stages.size(), 2u);
+  EXPECT_EQ(a.stages[1].train, std::vector<std::string>{"flow"});
+  EXPECT_DOUBLE_EQ(a.stages[1].learning_rate, 3.3e-5);
+  EXPECT_TRUE(a.stages[1].uses_flow());
+  EXPECT_FALSE(a.stages[0].uses_flow());
+  const std::string emitted = geo::to_yaml(a);
+  const Config b = geo::parse_config(emitted);
+  EXPECT_EQ(geo::to_yaml(b), emitted);
+  EXPECT_DOUBLE_EQ(b.stages[1].learning_rate, 3.3e-5);
+  EXPECT_DOUBLE_EQ(b.loss.ssim_alpha, 0.8);
+  EXPECT_TRUE(b.loss.automask);
+  EXPECT_EQ(b.run.seed, 7);
+}
+
+TEST(Config, UnknownKeyNamesFullPathAndLine) {
+  const std::string msg = error_of([] {
+    geo::parse_config("model:\n  encoder_depth: 50\n  use_frr: true\n", "x.yaml");
+  });
+  EXPECT_NE(msg.find("unknown key 'model.use_frr'"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("x.yaml line 3"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("use_fr"), std::string::npos) << msg;  // lists the valid keys
+}
+
+TEST(Config, UnknownKeyInsideAStage) {
+  const std::string msg = error_of([] {
+    geo::parse_config("stages:\n  - name: s\n    iters: 5\n", "x.yaml");
+  });
+  EXPECT_NE(msg.find("unknown key 'stages[0].iters'"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("line 3"), std::string::npos) << msg;
+}
+
+TEST(Config, WrongTypeNamesKeyValueAndLine) {
+  const std::string msg = error_of([] {
+    geo::parse_config("data:\n  height: tall\n", "x.yaml");
+  });
+  EXPECT_NE(msg.find("'data.height'"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("an integer"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("'tall'"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("x.yaml line 2"), std::string::npos) << msg;
+}
+
+TEST(Config, NegativeLearningRateNamesKeyValueAndLine) {
+  const std::string msg = error_of([] {
+    geo::parse_config("stages:\n  - name: s\n    learning_rate: -0.001\n", "x.yaml");
+  });
+  EXPECT_NE(msg.find("'stages[0].learning_rate' = -0.001 (line 3): must be > 0"),
+            std::string::npos)
+      << msg;
+}
+
+TEST(Config, ReportsEveryInvalidValue) {
+  const std::string msg = error_of([] {
+    geo::parse_config("model: {encoder_depth: 101}\nrun: {device: tpu}\n", "x.yaml");
+  });
+  EXPECT_NE(msg.find("'model.encoder_depth' = 101 (line 1)"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("'run.device' = 'tpu' (line 2)"), std::string::npos) << msg;
+}
+
+TEST(Config, MissingFileNamesPath) {
+  const std::string msg = error_of([] { geo::load_config("/nonexistent/dir/cfg.yaml"); });
+  EXPECT_NE(msg.find("/nonexistent/dir/cfg.yaml"), std::string::npos) << msg;
+}
+
+TEST(Config, MalformedYamlNamesLine) {
+  const std::string msg = error_of([] { geo::parse_config("model:\n  a: [1, 2\n", "bad.yaml"); });
+  EXPECT_NE(msg.find("bad.yaml line"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("malformed YAML"), std::string::npos) << msg;
+}
+
+TEST(Config, OverridesApplyAndAreValidated) {
+  const Config c = geo::parse_config("", "<s>",
+                                     {"loss.ssim_alpha=0.8", "stages[0].learning_rate=1e-3",
+                                      "data.root=/tmp/k", "stages.0.train=[depth]"});
+  EXPECT_DOUBLE_EQ(c.loss.ssim_alpha, 0.8);
+  EXPECT_DOUBLE_EQ(c.stages[0].learning_rate, 1e-3);
+  EXPECT_EQ(c.data.root, "/tmp/k");
+  EXPECT_EQ(c.stages[0].train, std::vector<std::string>{"depth"});
+
+  std::string msg = error_of([] { geo::parse_config("", "<s>", {"loss.ssim_alpha=2"}); });
+  EXPECT_NE(msg.find("'loss.ssim_alpha' = 2 (from --set)"), std::string::npos) << msg;
+  msg = error_of([] { geo::parse_config("", "<s>", {"loss.ssim_weight=0.8"}); });
+  EXPECT_NE(msg.find("unknown key 'loss.ssim_weight'"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("--set"), std::string::npos) << msg;
+  msg = error_of([] { geo::parse_config("", "<s>", {"stages[3].iterations=5"}); });
+  EXPECT_NE(msg.find("stages[3]"), std::string::npos) << msg;
+  msg = error_of([] { geo::parse_config("", "<s>", {"no_equals_sign"}); });
+  EXPECT_NE(msg.find("expected key.path=value"), std::string::npos) << msg;
+}
+
+TEST(Config, ShippedConfigsParseWithThePapersSchedule) {
+  const Config s1 = geo::load_config(geo::resolve_config_path("stage1.yaml"));
+  ASSERT_EQ(s1.stages.size(), 1u);
+  EXPECT_EQ(s1.stages[0].iterations, 350000);
+  EXPECT_FALSE(s1.stages[0].uses_flow());
+  const Config s2 = geo::load_config(geo::resolve_config_path("stage2"));
+  ASSERT_EQ(s2.stages.size(), 1u);
+  EXPECT_EQ(s2.stages[0].iterations, 1500000);
+  EXPECT_TRUE(s2.stages[0].uses_flow());
+  EXPECT_DOUBLE_EQ(s2.stages[0].weights.flow_consistency, 0.2);
+  const Config smoke = geo::load_config(geo::resolve_config_path("smoke.yaml"));
+  EXPECT_EQ(smoke.stages.size(), 2u);
+}
+
+TEST(Config, ResolveNamesEveryPlaceTried) {
+  std::string msg;
+  try {
+    geo::resolve_config_path("nope.yaml");
+  } catch (const ConfigError& e) {
+    msg = e.what();
+  }
+  EXPECT_NE(msg.find("config 'nope.yaml' not found"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("configs/nope.yaml"), std::string::npos) << msg;
+}
+
+}  // namespace
