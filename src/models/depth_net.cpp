@@ -1,1 +1,44 @@
-// placeholder
+#include "models/depth_net.h"
+
+namespace geo {
+
+DepthNetOptions DepthNetOptions::from(const ModelConfig& m) {
+  DepthNetOptions o;
+  o.encoder_depth = m.encoder_depth;
+  o.use_fr = m.use_fr;
+  o.fr_encoder = m.fr_encoder;
+  o.fr_decoder = m.fr_decoder;
+  o.fr_ratio = m.fr_ratio;
+  o.fr_spatial_bn = m.fr_spatial_bn;
+  o.upsample = m.upsample;
+  return o;
+}
+
+EncoderDecoderOptions encoder_decoder_options(const DepthNetOptions& o, int64_t in, int64_t out) {
+  EncoderDecoderOptions e;
+  e.encoder.in_channels = in;
+  e.encoder.depth = o.encoder_depth;
+  e.encoder.use_fr = o.use_fr && o.fr_encoder;
+  e.encoder.fr_ratio = o.fr_ratio;
+  e.encoder.fr_spatial_bn = o.fr_spatial_bn;
+  e.out_channels = out;
+  e.fr_decoder = o.use_fr && o.fr_decoder;
+  e.upsample = o.upsample;
+  return e;
+}
+
+DepthNetImpl::DepthNetImpl(const DepthNetOptions& o) : options(o) {
+  const double scale = o.disp_scale, min_disp = o.min_disp;
+  net = register_module("net", EncoderDecoder(encoder_decoder_options(o, 3, 1),
+                                              [scale, min_disp](const torch::Tensor& x) {
+                                                return scale * torch::sigmoid(x) + min_disp;
+                                              }));
+}
+
+DepthOutput DepthNetImpl::forward(const torch::Tensor& image) {
+  TORCH_CHECK(image.dim() == 4 && image.size(1) == 3, "DepthNet input must be [B,3,H,W], got ",
+              image.sizes());
+  return DepthOutput{net(normalize_image(image))};
+}
+
+}  // namespace geo

@@ -1,1 +1,91 @@
-// placeholder
+#include "models/resnet_encoder.h"
+
+namespace geo {
+
+namespace {
+
+// GeoNet's resconv: 1x1 (n) -> 3x3/stride (n) -> 1x1 (4n, no ReLU) + shortcut, then ReLU.
+// The shortcut projects (1x1/stride + BN) when the channels or the resolution change.
+struct BottleneckImpl : torch::nn::Module {
+  BottleneckImpl(int64_t in, int64_t n, int64_t stride) {
+    c1 = register_module("conv1", ConvBn(in, n, 1));
+    c2 = register_module("conv2", ConvBn(n, n, 3, stride));
+    c3 = register_module("conv3", ConvBn(n, 4 * n, 1, 1, /*relu=*/false));
+    if (in != 4 * n || stride != 1) proj = register_module("shortcut", ConvBn(in, 4 * n, 1, stride, false));
+  }
+  torch::Tensor forward(const torch::Tensor& x) {
+    const auto shortcut = proj ? proj(x) : x;
+    return torch::relu(c3(c2(c1(x))) + shortcut);
+  }
+  ConvBn c1{nullptr}, c2{nullptr}, c3{nullptr}, proj{nullptr};
+};
+TORCH_MODULE(Bottleneck);
+
+// Basic block (ResNet-18/34): 3x3/stride -> 3x3 (no ReLU) + shortcut, then ReLU.
+struct BasicBlockImpl : torch::nn::Module {
+  BasicBlockImpl(int64_t in, int64_t n, int64_t stride) {
+    c1 = register_module("conv1", ConvBn(in, n, 3, stride));
+    c2 = register_module("conv2", ConvBn(n, n, 3, 1, /*relu=*/false));
+    if (in != n || stride != 1) proj = register_module("shortcut", ConvBn(in, n, 1, stride, false));
+  }
+  torch::Tensor forward(const torch::Tensor& x) {
+    const auto shortcut = proj ? proj(x) : x;
+    return torch::relu(c2(c1(x)) + shortcut);
+  }
+  ConvBn c1{nullptr}, c2{nullptr}, proj{nullptr};
+};
+TORCH_MODULE(BasicBlock);
+
+}  // namespace
+
+ResNetEncoderImpl::ResNetEncoderImpl(const ResNetEncoderOptions& o) : options(o) {
+  std::vector<int> blocks;
+  const bool bottleneck = o.depth == 50;
+  if (o.depth == 18) blocks = {2, 2, 2, 2};
+  else if (o.depth == 34 || o.depth == 50) blocks = {3, 4, 6, 3};
+  else TORCH_CHECK(false, "encoder depth must be 18, 34 or 50, got ", o.depth);
+  TORCH_CHECK(o.in_channels >= 1, "in_channels must be >= 1, got ", o.in_channels);
+
+  conv1 = register_module("conv1", ConvBn(o.in_channels, 64, 7, 2));
+  channels_ = {64, 64};
+  int64_t in = 64;
+  const int64_t widths[4] = {64, 128, 256, 512};
+  for (int s = 0; s < 4; ++s) {
+    torch::nn::Sequential stage;
+    for (int b = 0; b < blocks[s]; ++b) {
+      const int64_t stride = b == blocks[s] - 1 ? 2 : 1;  // GeoNet: stride in the last block
+      if (bottleneck) {
+        stage->push_back(Bottleneck(in, widths[s], stride));
+        in = 4 * widths[s];
+      } else {
+        stage->push_back(BasicBlock(in, widths[s], stride));
+        in = widths[s];
+      }
+    }
+    stages.push_back(register_module("stage" + std::to_string(s + 1), stage));
+    channels_.push_back(in);
+    if (o.use_fr) {
+      FeatureRefinementOptions fo(in);
+      fo.ratio = o.fr_ratio;
+      fo.spatial_bn = o.fr_spatial_bn;
+      refine.push_back(register_module("refined" + std::to_string(s + 1), FeatureRefinement(fo)));
+    }
+  }
+}
+
+std::vector<torch::Tensor> ResNetEncoderImpl::forward(const torch::Tensor& x) {
+  TORCH_CHECK(x.dim() == 4 && x.size(1) == options.in_channels, "encoder input must be [B,",
+              options.in_channels, ",H,W], got ", x.sizes());
+  std::vector<torch::Tensor> feats;
+  feats.push_back(conv1(x));
+  namespace F = torch::nn::functional;
+  feats.push_back(F::max_pool2d(feats.back(), F::MaxPool2dFuncOptions(3).stride(2).padding(1)));
+  for (size_t s = 0; s < stages.size(); ++s) {
+    auto y = stages[s]->forward(feats.back());
+    if (!refine.empty()) y = refine[s](y);
+    feats.push_back(y);
+  }
+  return feats;
+}
+
+}  // namespace geo

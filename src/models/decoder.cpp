@@ -1,0 +1,55 @@
+#include "models/decoder.h"
+
+namespace geo {
+
+namespace {
+constexpr int64_t kDecoderWidths[6] = {512, 256, 128, 64, 32, 16};  // paper ("63" is a typo for 64)
+}
+
+EncoderDecoderImpl::EncoderDecoderImpl(const EncoderDecoderOptions& o, Head h)
+    : options(o), head(std::move(h)) {
+  encoder = register_module("encoder", ResNetEncoder(o.encoder));
+  const auto& enc = encoder->channels();  // conv1, pool1, stage1..4
+  int64_t in = enc[5];
+  for (int k = 0; k < 6; ++k) {
+    const int64_t width = kDecoderWidths[k];
+    const std::string id = std::to_string(6 - k);  // GeoNet names: upconv6 ... upconv1
+    upconv.push_back(register_module("upconv" + id, ConvBn(in, width, 3)));
+    // Skip of decoder stage 6..2 is encoder feature 4..0; stage 1 has none.
+    int64_t cat = width + (k < 5 ? enc[4 - k] : 0);
+    if (k >= 3) cat += o.out_channels;  // upsampled coarser prediction (stages 3, 2, 1)
+    iconv.push_back(register_module("iconv" + id, ConvBn(cat, width, 3)));
+    if (o.fr_decoder) {
+      FeatureRefinementOptions fo(width);
+      fo.ratio = o.encoder.fr_ratio;
+      fo.spatial_bn = o.encoder.fr_spatial_bn;
+      refine.push_back(register_module("refined" + std::to_string(k + 5), FeatureRefinement(fo)));
+    }
+    if (k >= 2) {
+      pred.push_back(register_module(
+          "pred" + std::to_string(6 - k),
+          torch::nn::Conv2d(torch::nn::Conv2dOptions(width, o.out_channels, 3).padding(1))));
+    }
+    in = width;
+  }
+  init_weights(*this);
+}
+
+std::vector<torch::Tensor> EncoderDecoderImpl::forward(const torch::Tensor& x) {
+  const auto feats = encoder(x);
+  std::vector<torch::Tensor> preds;  // coarsest first while building
+  auto y = feats[5];
+  for (int k = 0; k < 6; ++k) {
+    const torch::Tensor& ref = k < 5 ? feats[4 - k] : x;  // stage 1 resizes to the input size
+    auto up = resize_like(upconv[k](upsample2(y, options.upsample)), ref);
+    std::vector<torch::Tensor> parts{up};
+    if (k < 5) parts.push_back(feats[4 - k]);
+    if (k >= 3) parts.push_back(resize_like(upsample2(preds.back(), options.upsample), ref));
+    y = iconv[k](torch::cat(parts, 1));
+    if (!refine.empty()) y = refine[k](y);
+    if (k >= 2) preds.push_back(head(pred[k - 2](y)));
+  }
+  return {preds[3], preds[2], preds[1], preds[0]};
+}
+
+}  // namespace geo

@@ -1,0 +1,35 @@
+// Feature refinement (FR): CBAM-style channel attention then spatial attention (Woo et al. 2018),
+// as placed by the paper after every encoder stage and decoder stage (reference.md Sec. 1).
+#pragma once
+
+#include <torch/torch.h>
+
+namespace geo {
+
+struct FeatureRefinementOptions {
+  explicit FeatureRefinementOptions(int64_t channels_) : channels(channels_) {}
+  int64_t channels;
+  int64_t ratio = 16;        // hidden width C / r of the shared MLP (paper, CBAM)
+  int64_t min_hidden = 1;    // hidden width never below this (C / r < 1 for C < 16)
+  int64_t kernel = 7;        // spatial attention conv (CBAM)
+  bool spatial_bn = false;   // BatchNorm after the spatial conv (CBAM's code; off in the paper)
+};
+
+struct FeatureRefinementImpl : torch::nn::Module {
+  explicit FeatureRefinementImpl(const FeatureRefinementOptions& options);
+
+  // F2 = (F * a_c) * a_s, same shape as x [B,C,H,W].
+  torch::Tensor forward(const torch::Tensor& x);
+
+  // a_c = sigmoid(MLP(avgpool F) + MLP(maxpool F)) [B,C,1,1].
+  torch::Tensor channel_gate(const torch::Tensor& x);
+  // a_s = sigmoid(conv7x7([max_c F1, mean_c F1])) [B,1,H,W].
+  torch::Tensor spatial_gate(const torch::Tensor& f1);
+
+  FeatureRefinementOptions options;
+  torch::nn::Conv2d mlp_in{nullptr}, mlp_out{nullptr}, spatial{nullptr};
+  torch::nn::BatchNorm2d spatial_bn{nullptr};
+};
+TORCH_MODULE(FeatureRefinement);
+
+}  // namespace geo
