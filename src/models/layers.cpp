@@ -34,7 +34,7 @@ torch::Tensor resize_like(const torch::Tensor& x, const torch::Tensor& ref) {
 
 void init_weights(torch::nn::Module& module) {
   torch::NoGradGuard no_grad;
-  for (auto& m : module.modules(/*include_self=*/true)) {
+  for (auto& m : module.modules(/*include_self=*/false)) {  // also callable from constructors
     if (auto* conv = m->as<torch::nn::Conv2d>()) {
       torch::nn::init::xavier_uniform_(conv->weight);
       if (conv->bias.defined()) conv->bias.zero_();

@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <functional>
 
 #include "core/state_io.h"
 #include "models/depth_net.h"
@@ -70,15 +71,15 @@ TEST(PoseNet, ShapesForThreeAndFiveFrameSnippets) {
   torch::manual_seed(23);
   geo::PoseNet net3;
   const auto t = torch::rand({2, 3, 128, 416});
-  const auto p = net3(t, {torch::rand({2, 3, 128, 416}), torch::rand({2, 3, 128, 416})});
+  const auto p = net3->forward(t, {torch::rand({2, 3, 128, 416}), torch::rand({2, 3, 128, 416})});
   EXPECT_EQ(p.sizes(), (Sizes{2, 2, 6}));
   geo::PoseNetOptions o;
   o.seq_length = 5;
   geo::PoseNet net5(o);
   net5->eval();
   const auto odd = torch::rand({1, 3, 75, 250});
-  EXPECT_EQ(net5(odd, {odd, odd, odd, odd}).sizes(), (Sizes{1, 4, 6}));
-  EXPECT_THROW(net5(odd, {odd}), c10::Error);
+  EXPECT_EQ(net5->forward(odd, {odd, odd, odd, odd}).sizes(), (Sizes{1, 4, 6}));
+  EXPECT_THROW(net5->forward(odd, {odd}), c10::Error);
 }
 
 TEST(FlowNet, ResidualFlowShapesAt128x416AndOddSize) {
@@ -104,14 +105,22 @@ TEST(FlowNet, ResidualFlowShapesAt128x416AndOddSize) {
 }
 
 // Every parameter gets a finite, non-zero gradient from a loss on the outputs.
-template <class Net, class Fwd> void expect_all_gradients(Net& net, Fwd&& loss_of) {
-  net->train();
+void expect_all_gradients(torch::nn::Module& net, const std::function<torch::Tensor()>& loss_of) {
+  net.train();
   loss_of().backward();
   std::vector<std::string> without;
-  for (const auto& p : net->named_parameters()) {
+  for (const auto& p : net.named_parameters()) {
     const auto& g = p.value().grad();
-    if (!g.defined() || g.abs().sum().item<double>() == 0 || !torch::isfinite(g).all().item<bool>())
+    if (!g.defined() || !torch::isfinite(g).all().item<bool>()) {
       without.push_back(p.key());
+      continue;
+    }
+    // The one legitimate exception: the shared MLP of an FR block whose hidden width is clamped
+    // to 1 (C = 16, r = 16) feeds a single ReLU unit; on non-negative features it can be inactive
+    // for a whole batch, and then both MLP weights have an exactly-zero gradient.
+    const bool one_wide_mlp = p.key().find("mlp_") != std::string::npos &&
+                              (p.value().size(0) == 1 || p.value().size(1) == 1);
+    if (g.abs().sum().item<double>() == 0 && !one_wide_mlp) without.push_back(p.key());
   }
   EXPECT_TRUE(without.empty()) << "no gradient: " << without.size() << " parameters, first "
                                << (without.empty() ? "" : without[0]);
@@ -121,21 +130,21 @@ TEST(Networks, EveryParameterReceivesAGradient) {
   torch::manual_seed(25);
   geo::DepthNetOptions d50;  // ResNet-50 with FR, small input
   geo::DepthNet depth(d50);
-  expect_all_gradients(depth, [&] {
+  expect_all_gradients(*depth, [&] {
     const auto out = depth(torch::rand({2, 3, 64, 64}));
     torch::Tensor loss = torch::zeros({});
     for (const auto& d : out.disp) loss = loss + (d * torch::randn_like(d)).sum();
     return loss;
   });
   geo::PoseNet pose;
-  expect_all_gradients(pose, [&] {
-    const auto p = pose(torch::rand({2, 3, 64, 64}), {torch::rand({2, 3, 64, 64}), torch::rand({2, 3, 64, 64})});
+  expect_all_gradients(*pose, [&] {
+    const auto p = pose->forward(torch::rand({2, 3, 64, 64}), {torch::rand({2, 3, 64, 64}), torch::rand({2, 3, 64, 64})});
     return (p * torch::randn_like(p)).sum();
   });
   geo::FlowNetOptions fo;
   fo.backbone = small();
   geo::FlowNet flow(fo);
-  expect_all_gradients(flow, [&] {
+  expect_all_gradients(*flow, [&] {
     const auto out = flow(torch::randn({2, 12, 64, 64}));
     torch::Tensor loss = torch::zeros({});
     for (const auto& f : out.flow) loss = loss + (f * torch::randn_like(f)).sum();
