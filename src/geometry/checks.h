@@ -24,13 +24,4 @@ inline void check_shape(const torch::Tensor& t, const char* name,
               t.sizes());
 }
 
-// Checks that `a` and `b` have the same batch size and spatial size (dims 0, 2, 3 of NCHW).
-inline void check_same_bhw(const torch::Tensor& a, const char* name_a, const torch::Tensor& b,
-                           const char* name_b) {
-  TORCH_CHECK(a.dim() == 4 && b.dim() == 4 && a.size(0) == b.size(0) && a.size(2) == b.size(2) &&
-                  a.size(3) == b.size(3),
-              name_a, " ", a.sizes(), " and ", name_b, " ", b.sizes(),
-              " must share batch, height and width");
-}
-
 }  // namespace geo

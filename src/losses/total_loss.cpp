@@ -12,10 +12,6 @@ namespace geo {
 
 namespace {
 
-torch::Tensor mean_of(const std::vector<torch::Tensor>& v) {
-  return torch::stack(v).mean();
-}
-
 // Per-pixel mask for one direction and source: ones, times the in-view mask and the auto-mask.
 torch::Tensor loss_mask(const torch::Tensor& error, const torch::Tensor& valid,
                         const torch::Tensor& identity_error, const LossConfig& cfg) {
@@ -39,7 +35,7 @@ torch::Tensor direction_loss(const std::vector<torch::Tensor>& errors,
   for (size_t i = 0; i < errors.size(); ++i)
     per_source.push_back(masked_mean(
         errors[i], loss_mask(errors[i], valids[i], cfg.automask ? identity[i] : errors[i], cfg)));
-  return mean_of(per_source);
+  return torch::stack(per_source).mean();
 }
 
 }  // namespace
