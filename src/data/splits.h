@@ -1,0 +1,42 @@
+// Split lists (reference.md Sec. 4-5). Two formats are read alike:
+//   "folder frame side"   e.g. "2011_09_26/2011_09_26_drive_0022_sync 473 r" (monodepth2, eigen_zhou)
+//   "one image path"      e.g. "2011_09_26/2011_09_26_drive_0002_sync/image_02/data/0000000069.png"
+// side l = camera 02 (image_02), r = camera 03. Odometry lists ("9 0 l") read as folder "9".
+#pragma once
+
+#include <cstdint>
+#include <set>
+#include <string>
+#include <vector>
+
+namespace geo {
+
+struct SplitEntry {
+  std::string folder;   // drive folder relative to the root, e.g. 2011_09_26/2011_09_26_drive_0022_sync
+  int64_t frame = 0;    // frame index
+  char side = 'l';      // 'l' (camera 02) or 'r' (camera 03)
+  std::string line;     // the line as written (for messages)
+
+  int camera() const { return side == 'r' ? 3 : 2; }
+  std::string date() const;   // first path component of folder ("2011_09_26")
+  std::string drive() const;  // last path component of folder ("2011_09_26_drive_0022_sync")
+  // <root>/<folder>/image_0c/data/%010d.png for frame + offset.
+  std::string image_path(const std::string& root, int64_t offset = 0) const;
+};
+
+// Parses one line in either format; throws std::runtime_error naming `where` on anything else.
+SplitEntry parse_split_line(const std::string& line, const std::string& where);
+// Reads a list file; the message names the file and line of a malformed entry.
+std::vector<SplitEntry> read_split(const std::string& path);
+
+// Drive names such as "2011_09_26_drive_0117" (eigen/test_scenes.txt).
+std::set<std::string> read_scene_list(const std::string& path);
+// "date drive frame" lines (static_frames.txt) as keys "drive_sync_folder frame" -> see static_key.
+std::set<std::string> read_static_frames(const std::string& path);
+std::string static_key(const std::string& drive_folder, int64_t frame);
+
+// Removes entries whose drive is a test scene or whose frame is static; returns how many were removed.
+size_t exclude_entries(std::vector<SplitEntry>& entries, const std::set<std::string>& test_scenes,
+                       const std::set<std::string>& static_frames);
+
+}  // namespace geo

@@ -1,0 +1,31 @@
+// Writes a synthetic world (data/synth.h) in KITTI's on-disk formats (reference.md Sec. 6) under
+// one root, so every reader, the trainer and the evaluator run on it unchanged:
+//   raw/<date>/calib_cam_to_cam.txt, calib_velo_to_cam.txt
+//   raw/<date>/<date>_drive_NNNN_sync/image_02/data/%010d.png, velodyne_points/data/%010d.bin,
+//       proj_depth/groundtruth/image_02/%010d.png (dense depth x 256), poses.txt (camera 02 to
+//       world, KITTI pose format, frame 0 = identity)
+//   raw/splits/eigen_zhou/{train,val}_files.txt ("folder frame l"), raw/splits/eigen/test_files.txt
+//       (image paths), raw/splits/eigen/test_scenes.txt
+//   kitti2015/training/image_2/%06d_10.png, %06d_11.png, flow_occ/, flow_noc/ (16-bit flow PNG),
+//       calib_cam_to_cam/%06d.txt, depth/%06d_10.png (dense depth x 256)
+//   odometry/sequences/09/image_2/%06d.png, calib.txt, times.txt; odometry/poses/09.txt
+#pragma once
+
+#include "data/synth.h"
+
+#include <functional>
+#include <string>
+
+namespace geo {
+
+// The date folder used for synthetic drives.
+inline const char* kSynthDate = "2011_01_01";
+
+// Drive folder name for drive index i ("2011_01_01/2011_01_01_drive_0001_sync").
+std::string synth_drive_folder(int drive);
+
+// Writes everything; `progress(done, total, what)` is called after each rendered frame.
+void write_synth_world(const std::string& root, const SynthOptions& options,
+                       const std::function<void(int64_t, int64_t, const std::string&)>& progress = {});
+
+}  // namespace geo

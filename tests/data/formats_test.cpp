@@ -1,0 +1,148 @@
+// Calibration, split lists, pose files, Velodyne scans and the Eigen-protocol ground truth:
+// hand-made inputs with known answers, malformed inputs with the messages they must give, and the
+// real KITTI excerpts when ../shared/kitti_samples is present.
+#include "core/config.h"
+#include "data/calib.h"
+#include "data/splits.h"
+#include "data/text_io.h"
+#include "data/velodyne_depth.h"
+
+#include <gtest/gtest.h>
+
+#include "test_util.h"
+
+namespace geo {
+namespace {
+
+TEST(Calib, ParsesKeyValuesAndSkipsCalibTime) {
+  const auto kv = parse_key_values("calib_time: 09-Jan-2012 13:57:47\nP_rect_02: 1 2 3 4 5 6 7 8 9 10 11 12\nS_rect_02: 1242 375\n", "x.txt");
+  EXPECT_FALSE(kv.has("calib_time"));
+  const auto P = kv.matrix("P_rect_02", 3, 4);
+  EXPECT_EQ(P[1][2].item<double>(), 7.0);
+  EXPECT_EQ(kv.get("S_rect_02", 2)[0], 1242.0);
+}
+
+TEST(Calib, MalformedInputsNameFileLineAndKey) {
+  GEO_EXPECT_THROW_WITH(parse_key_values("P0: 1 2 x 4\n", "calib.txt"), "calib.txt line 1", "'P0'", "'x' is not a number");
+  const auto kv = parse_key_values("R: 1 2 3\n", "velo.txt");
+  GEO_EXPECT_THROW_WITH(kv.get("T", 3), "velo.txt", "missing calibration entry 'T'");
+  GEO_EXPECT_THROW_WITH(kv.matrix("R", 3, 3), "velo.txt", "'R' has 3 numbers, expected 9");
+  GEO_EXPECT_THROW_WITH(read_key_values("/nonexistent/calib.txt"), "/nonexistent/calib.txt", "cannot open");
+}
+
+TEST(Calib, RawAndOdometryFiles) {
+  const auto dir = test::fresh_dir("calib");
+  test::write_text(dir + "/calib_cam_to_cam.txt",
+                   "calib_time: now\nR_rect_00: 1 0 0 0 1 0 0 0 1\nP_rect_02: 100 0 50 10 0 100 20 0 0 0 1 0\n");
+  test::write_text(dir + "/calib_velo_to_cam.txt", "calib_time: now\nR: 0 -1 0 0 0 -1 1 0 0\nT: 1 2 3\n");
+  const auto c = read_raw_calib(dir, 2);
+  EXPECT_EQ(c.K()[0][0].item<double>(), 100.0);
+  // A point 10 m ahead of the scanner: camera (y, z, x) = (-0, -0, 10) + T = (1, 2, 13).
+  const auto x = c.img_from_velo().matmul(torch::tensor({10.0, 0.0, 0.0, 1.0}, torch::kFloat64));
+  EXPECT_NEAR(x[0].item<double>(), 100 * 1 + 50 * 13 + 10, 1e-9);
+  EXPECT_NEAR(x[2].item<double>(), 13.0, 1e-9);
+  GEO_EXPECT_THROW_WITH(read_raw_calib(dir, 3), "calib_cam_to_cam.txt", "'P_rect_03'");
+  test::write_text(dir + "/calib.txt", "P0: 1 0 0 0 0 1 0 0 0 0 1 0\nP1: 1 0 0 0 0 1 0 0 0 0 1 0\n");
+  GEO_EXPECT_THROW_WITH(read_odometry_calib(dir + "/calib.txt"), "calib.txt", "'P2'");
+}
+
+TEST(Splits, ReadsBothFormatsAndRejectsOthers) {
+  const auto a = parse_split_line("2011_09_26/2011_09_26_drive_0022_sync 473 r", "f");
+  EXPECT_EQ(a.folder, "2011_09_26/2011_09_26_drive_0022_sync");
+  EXPECT_EQ(a.frame, 473);
+  EXPECT_EQ(a.camera(), 3);
+  EXPECT_EQ(a.image_path("/k", -1), "/k/2011_09_26/2011_09_26_drive_0022_sync/image_03/data/0000000472.png");
+  const auto b = parse_split_line("2011_09_26/2011_09_26_drive_0002_sync/image_02/data/0000000069.png", "f");
+  EXPECT_EQ(b.folder, "2011_09_26/2011_09_26_drive_0002_sync");
+  EXPECT_EQ(b.frame, 69);
+  EXPECT_EQ(b.side, 'l');
+  EXPECT_EQ(b.date(), "2011_09_26");
+  EXPECT_EQ(b.drive(), "2011_09_26_drive_0002_sync");
+  GEO_EXPECT_THROW_WITH(parse_split_line("2011_09_26 x l", "list.txt line 4"), "list.txt line 4", "'2011_09_26 x l'");
+  GEO_EXPECT_THROW_WITH(parse_split_line("a 1 q", "list.txt line 2"), "list.txt line 2");
+}
+
+TEST(Splits, ExcludesTestScenesAndStaticFrames) {
+  std::vector<SplitEntry> e = {parse_split_line("d/2011_09_26_drive_0117_sync 5 l", ""),
+                               parse_split_line("d/2011_09_26_drive_0009_sync 386 l", ""),
+                               parse_split_line("d/2011_09_26_drive_0009_sync 387 r", ""),
+                               parse_split_line("d/2011_09_26_drive_0001_sync 3 l", "")};
+  const auto dir = test::fresh_dir("splits");
+  test::write_text(dir + "/static.txt", "2011_09_26 2011_09_26_drive_0009_sync 0000000386\n");
+  EXPECT_EQ(exclude_entries(e, {"2011_09_26_drive_0117"}, read_static_frames(dir + "/static.txt")), 2u);
+  ASSERT_EQ(e.size(), 2u);
+  EXPECT_EQ(e[0].frame, 387);
+  EXPECT_EQ(e[1].frame, 3);
+}
+
+TEST(Splits, ShippedListsParse) {
+  const std::string dir = shipped_config_dir() + "/splits";
+  EXPECT_EQ(read_split(dir + "/eigen/test_files.txt").size(), 697u);
+  EXPECT_EQ(read_split(dir + "/eigen_zhou/train_files.txt").size(), 39810u);
+  EXPECT_EQ(read_split(dir + "/eigen_zhou/val_files.txt").size(), 4424u);
+  EXPECT_EQ(read_scene_list(dir + "/eigen/test_scenes.txt").size(), 28u);
+}
+
+TEST(TextFormats, PoseFileRoundTripAndErrors) {
+  const auto dir = test::fresh_dir("poses");
+  auto poses = torch::eye(4, torch::kFloat64).repeat({3, 1, 1});
+  poses[1][0][3] = 1.5;
+  poses[2][1][2] = -0.25;
+  write_poses(dir + "/p.txt", poses);
+  EXPECT_TRUE(torch::allclose(read_poses(dir + "/p.txt"), poses, 0, 1e-9));
+  test::write_text(dir + "/bad.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1\n");
+  GEO_EXPECT_THROW_WITH(read_poses(dir + "/bad.txt"), "bad.txt line 2", "expected 12 numbers");
+}
+
+TEST(TextFormats, VelodyneRoundTripAndTruncation) {
+  const auto dir = test::fresh_dir("velo");
+  const auto pts = torch::arange(12, torch::kFloat32).reshape({3, 4});
+  write_velodyne(dir + "/a.bin", pts);
+  EXPECT_TRUE(torch::equal(read_velodyne(dir + "/a.bin"), pts));
+  test::write_text(dir + "/b.bin", std::string(20, '\0'));
+  GEO_EXPECT_THROW_WITH(read_velodyne(dir + "/b.bin"), "b.bin", "not a multiple of 16");
+}
+
+TEST(VelodyneDepth, EigenProtocolByHand) {
+  // Identity-like projection: image = (f*y/x + c, ..., x) with the scanner looking along x.
+  const auto P = torch::tensor({0.0, 10.0, 0.0, 0.0, 0.0, 0.0, 10.0, 0.0, 1.0, 0.0, 0.0, 0.0}, torch::kFloat64).view({3, 4});
+  // Points at x = 5 (u = 10*y/5), two on one pixel (nearest kept), one behind, one off the image.
+  const auto pts = torch::tensor({5.0f, 1.0f, 1.0f, 0.f,   // u = 2, v = 2 -> pixel (1,1) with -1
+                                  4.0f, 0.8f, 0.8f, 0.f,   // same pixel, nearer
+                                  -5.0f, 1.0f, 1.0f, 0.f,  // behind
+                                  5.0f, 50.f, 1.0f, 0.f})  // u = 100: outside
+                       .view({4, 4});
+  const auto d = velodyne_depth(pts, P, 4, 5);
+  EXPECT_EQ(d[1][1].item<float>(), 4.0f);
+  EXPECT_EQ((d > 0).sum().item<int64_t>(), 1);
+  VelodyneDepthOptions exact;
+  exact.matlab_offset = false;
+  EXPECT_EQ(velodyne_depth(pts, P, 4, 5, exact)[2][2].item<float>(), 4.0f);
+}
+
+// ---- real KITTI excerpts (skipped when ../shared/kitti_samples is absent) ----
+
+TEST(KittiSamples, CalibrationAndVelodyneGroundTruth) {
+  const auto root = test::kitti_samples();
+  if (root.empty()) GTEST_SKIP() << "../shared/kitti_samples not present";
+  const auto calib = read_raw_calib(root + "/raw/2011_09_26", 2);
+  EXPECT_NEAR(calib.K()[0][0].item<double>(), 721.5377, 1e-4);
+  const auto pts = read_velodyne(root + "/raw/2011_09_26/2011_09_26_drive_0000_sync/velodyne_points/data/0000000000.bin");
+  const auto depth = velodyne_depth(pts, calib.img_from_velo(), 375, 1242);
+  const auto valid = (depth > 3) & (depth < 80);
+  const int64_t n = valid.sum().item<int64_t>();
+  EXPECT_GT(n, 14000);
+  EXPECT_LT(n, 18000);
+}
+
+TEST(KittiSamples, OdometryPoses) {
+  const auto root = test::kitti_samples();
+  if (root.empty()) GTEST_SKIP() << "../shared/kitti_samples not present";
+  const auto poses = read_poses(root + "/odometry/poses/09.txt");
+  EXPECT_EQ(poses.size(0), 1591);
+  EXPECT_TRUE(torch::allclose(poses[0], torch::eye(4, torch::kFloat64), 0, 1e-9));
+  EXPECT_EQ(read_poses(root + "/odometry/poses/10.txt").size(0), 1201);
+}
+
+}  // namespace
+}  // namespace geo

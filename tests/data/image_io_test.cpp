@@ -1,0 +1,67 @@
+// Image, flow and depth PNGs: exact round trips at the formats' resolution and clear errors.
+#include "data/image_io.h"
+#include "geometry/warp.h"
+
+#include <gtest/gtest.h>
+
+#include "test_util.h"
+
+namespace geo {
+namespace {
+
+TEST(ImageIo, ImageRoundTripIsExactIn8Bit) {
+  const auto dir = test::fresh_dir("img");
+  const auto img = torch::randint(0, 256, {3, 5, 7}, torch::kUInt8).to(torch::kFloat32) / 255;
+  write_image(dir + "/a.png", img);
+  EXPECT_TRUE(torch::allclose(read_image(dir + "/a.png"), img, 0, 1e-6));
+  const auto small = read_image_resized(dir + "/a.png", 3, 4);
+  EXPECT_EQ(small.sizes(), (torch::IntArrayRef{3, 3, 4}));
+}
+
+TEST(ImageIo, FlowPngRoundTripAtOneSixtyFourthPixel) {
+  const auto dir = test::fresh_dir("flow");
+  const auto flow = torch::randint(-20000, 20000, {2, 4, 6}).to(torch::kFloat32) / 64;
+  auto valid = torch::ones({1, 4, 6});
+  valid[0][1][2] = 0;
+  write_flow_png(dir + "/f.png", flow, valid);
+  const auto back = read_flow_png(dir + "/f.png");
+  EXPECT_TRUE(torch::equal(back.valid, valid));
+  EXPECT_TRUE(torch::equal(back.flow * valid, flow * valid));
+}
+
+TEST(ImageIo, DepthPngRoundTripAtOneTwoFiftySixthMetre) {
+  const auto dir = test::fresh_dir("depth");
+  const auto depth = torch::randint(0, 65535, {1, 4, 6}).to(torch::kFloat32) / 256;
+  write_depth_png(dir + "/d.png", depth);
+  EXPECT_TRUE(torch::equal(read_depth_png(dir + "/d.png"), depth));
+}
+
+TEST(ImageIo, BadFilesAreNamed) {
+  const auto dir = test::fresh_dir("bad");
+  GEO_EXPECT_THROW_WITH(read_image(dir + "/missing.png"), "missing.png", "not found");
+  test::write_text(dir + "/corrupt.png", "this is not a png");
+  GEO_EXPECT_THROW_WITH(read_image(dir + "/corrupt.png"), "corrupt.png", "cannot decode");
+  write_image(dir + "/rgb.png", torch::zeros({3, 4, 4}));
+  GEO_EXPECT_THROW_WITH(read_flow_png(dir + "/rgb.png"), "rgb.png", "16-bit");
+  GEO_EXPECT_THROW_WITH(read_depth_png(dir + "/rgb.png"), "rgb.png", "16-bit single-channel");
+}
+
+TEST(KittiSamples, Flow2012GroundTruthWarpHalvesTheError) {
+  const auto root = test::kitti_samples();
+  if (root.empty()) GTEST_SKIP() << "../shared/kitti_samples not present";
+  const std::string d = root + "/flow2012/training";
+  const auto a = read_image(d + "/image_0/000157_10.png").unsqueeze(0);
+  const auto b = read_image(d + "/image_0/000157_11.png").unsqueeze(0);
+  const auto gt = read_flow_png(d + "/flow_noc/000157_10.png");
+  const auto valid = gt.valid.unsqueeze(0);
+  const auto warped = warp(b, gt.flow.unsqueeze(0)).image;
+  auto err = [&](const torch::Tensor& x) {
+    return ((x - a).abs().mean(1, true) * valid).sum().item<double>() * 255 / valid.sum().item<double>();
+  };
+  const double before = err(b), after = err(warped);
+  EXPECT_GT(before, 2 * after) << "before " << before << ", after " << after;
+  EXPECT_NEAR(before, 11.7, 1.5);
+}
+
+}  // namespace
+}  // namespace geo

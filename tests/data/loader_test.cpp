@@ -1,0 +1,119 @@
+// The batch stream: determinism and exact resumption, augmentation consistent with the
+// intrinsics, bad-sample policies, and the packed cache round trip.
+#include "data/loader.h"
+#include "data/packed.h"
+
+#include <gtest/gtest.h>
+
+#include "test_util.h"
+
+namespace geo {
+namespace {
+
+// Snippet i: frames filled with a horizontal ramp (value = u / W) plus i / 100, K = identity-like.
+class FakeSource : public SnippetSource {
+ public:
+  explicit FakeSource(size_t n, int bad = -1) : n_(n), bad_(bad) {}
+  size_t size() const override { return n_; }
+  int64_t seq_length() const override { return 3; }
+  std::string id(size_t i) const override { return "fake " + std::to_string(i); }
+  Snippet get(size_t i) const override {
+    if (static_cast<int>(i) == bad_) throw std::runtime_error("fake.png: cannot decode image");
+    auto ramp = torch::arange(16, torch::kFloat32).div(16).view({1, 1, 1, 16}).expand({3, 3, 8, 16});
+    return {(ramp * 0.5 + static_cast<double>(i) / 100).contiguous(),
+            torch::tensor({10.f, 0.f, 0.f, 0.f, 10.f, 0.f, 0.f, 0.f, 1.f}).view({3, 3}), id(i)};
+  }
+
+ private:
+  size_t n_;
+  int bad_;
+};
+
+LoaderOptions options(int workers) {
+  LoaderOptions o;
+  o.batch_size = 3;
+  o.seed = 5;
+  o.workers = workers;
+  o.augment.photometric_prob = 0.5;
+  return o;
+}
+
+TEST(Loader, EveryEpochIsAPermutation) {
+  std::vector<int> seen(7, 0);
+  for (int64_t p = 7; p < 14; ++p) ++seen[sample_at(3, 7, p)];
+  for (int c : seen) EXPECT_EQ(c, 1);
+}
+
+TEST(Loader, SameBatchesWithWorkersAndAfterResume) {
+  auto src = std::make_shared<FakeSource>(10);
+  BatchLoader serial(src, options(0)), threaded(src, options(2));
+  std::vector<Batch> first;
+  for (int k = 0; k < 6; ++k) {
+    auto a = serial.next(), b = threaded.next();
+    EXPECT_EQ(a.index, k);
+    EXPECT_EQ(a.ids, b.ids);
+    EXPECT_TRUE(torch::equal(a.tgt, b.tgt));
+    EXPECT_TRUE(torch::equal(a.K, b.K));
+    first.push_back(a);
+  }
+  BatchLoader resumed(src, options(2), 4);  // as after a restart at batch 4
+  for (int k = 4; k < 6; ++k) {
+    auto b = resumed.next();
+    EXPECT_EQ(b.ids, first[k].ids);
+    EXPECT_TRUE(torch::equal(b.srcs, first[k].srcs));
+  }
+}
+
+TEST(Loader, ScaleCropKeepsIntrinsicsConsistent) {
+  FakeSource src(1);
+  AugmentConfig c;
+  c.photometric_prob = 0;
+  for (uint64_t seed = 0; seed < 5; ++seed) {
+    const auto b = augment(collate({src.get(0)}), c, seed);
+    const double fx = b.K[0][0][0].item<double>(), cx = b.K[0][0][2].item<double>();
+    const double sx = fx / 10.0;
+    EXPECT_GE(sx, 1.0);
+    EXPECT_LE(sx, 1.15);
+    // The ramp encodes the original column u = 32 * value; K maps new column u' to (u' - cx) / sx.
+    for (int u : {3, 8, 12}) {
+      const double original = b.tgt[0][0][4][u].item<double>() * 32;
+      EXPECT_NEAR(original, (u - cx) / sx, 1e-4) << "seed " << seed << " column " << u;
+    }
+  }
+}
+
+TEST(Loader, BadSampleStopsWithItsNameOrIsSkipped) {
+  auto src = std::make_shared<FakeSource>(4, 2);
+  auto o = options(0);
+  o.batch_size = 4;  // every batch contains sample 2
+  BatchLoader stop(src, o);
+  GEO_EXPECT_THROW_WITH(stop.next(), "fake.png");
+  o.skip_bad = true;
+  BatchLoader skip(src, o);
+  const auto b = skip.next();
+  EXPECT_EQ(b.skipped, 1);
+  EXPECT_EQ(b.tgt.size(0), 4);
+}
+
+TEST(Packed, RoundTripAndCorruptionMessages) {
+  const auto dir = test::fresh_dir("packed");
+  FakeSource src(3);
+  PackedWriter w(dir + "/cache", 8, 16, 3);
+  for (size_t i = 0; i < 3; ++i) w.add(src.get(i));
+  w.finish();
+  EXPECT_TRUE(is_packed_cache(dir + "/cache"));
+  PackedSnippets p(dir + "/cache");
+  ASSERT_EQ(p.size(), 3u);
+  for (size_t i = 0; i < 3; ++i) {
+    const auto a = src.get(i), b = p.get(i);
+    EXPECT_EQ(b.id, a.id);
+    EXPECT_LE((a.frames - b.frames).abs().max().item<double>(), 0.5 / 255 + 1e-6);
+    EXPECT_TRUE(torch::equal(a.K, b.K));
+  }
+  std::filesystem::resize_file(dir + "/cache/frames.bin", 100);
+  GEO_EXPECT_THROW_WITH(PackedSnippets(dir + "/cache"), "frames.bin", "wrong size");
+  GEO_EXPECT_THROW_WITH(PackedSnippets(dir + "/none"), "index.txt", "cannot open");
+}
+
+}  // namespace
+}  // namespace geo

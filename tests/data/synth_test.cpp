@@ -1,0 +1,157 @@
+// The synthetic world's ground truth is exact: flow reproduces the next frame, depth + poses give
+// the flow of static points, the LiDAR lands where the depth says; and the KITTI readers read
+// everything the writer writes.
+#include "data/calib.h"
+#include "data/image_io.h"
+#include "data/sequence_dataset.h"
+#include "data/synth_writer.h"
+#include "data/text_io.h"
+#include "data/velodyne_depth.h"
+#include "geometry/camera.h"
+#include "geometry/pose.h"
+#include "geometry/warp.h"
+
+#include <gtest/gtest.h>
+
+#include "test_util.h"
+
+namespace geo {
+namespace {
+
+SynthOptions tiny() {
+  auto o = SynthOptions::preset_named("tiny");
+  o.threads = 2;
+  return o;
+}
+
+torch::Tensor border_mask(int64_t H, int64_t W, int64_t m) {
+  auto mask = torch::zeros({1, 1, H, W});
+  mask.slice(2, m, H - m).slice(3, m, W - m).fill_(1);
+  return mask;
+}
+
+TEST(Synth, SameSeedSameImages) {
+  const auto o = tiny();
+  const SynthScene a(7, 20), b(7, 20), c(8, 20);
+  EXPECT_TRUE(torch::equal(render_frame(a, 3, o).image, render_frame(b, 3, o).image));
+  EXPECT_FALSE(torch::equal(render_frame(a, 3, o).image, render_frame(c, 3, o).image));
+}
+
+TEST(Synth, GroundTruthFlowWarpsNextFrameOntoThisOne) {
+  const auto o = tiny();
+  for (uint64_t seed : {1, 2, 3}) {
+    const SynthScene scene(seed, 30);
+    const auto f0 = render_frame(scene, 10, o), f1 = render_frame(scene, 11, o);
+    const auto gt = render_flow(scene, 10, o);
+    const auto mask = gt.valid_noc.unsqueeze(0) * border_mask(o.height, o.width, 4);
+    ASSERT_GT(mask.sum().item<double>(), 0.5 * o.height * o.width);
+    auto err = [&](const torch::Tensor& img) {
+      return ((img - f0.image.unsqueeze(0)).abs().mean(1, true) * mask).sum().item<double>() /
+             mask.sum().item<double>();
+    };
+    const double warped = err(warp(f1.image.unsqueeze(0), gt.flow.unsqueeze(0)).image);
+    const double unwarped = err(f1.image.unsqueeze(0));
+    EXPECT_LT(warped, 2.0 / 255) << "seed " << seed;
+    EXPECT_GT(unwarped, 3 * warped) << "seed " << seed;
+  }
+}
+
+TEST(Synth, RigidFlowFromDepthAndPosesMatchesStaticFlow) {
+  const auto o = tiny();
+  const SynthScene scene(4, 60);
+  bool saw_mover = false;
+  for (int64_t f : {5, 20, 35}) {
+    const auto f0 = render_frame(scene, f, o);
+    const auto gt = render_flow(scene, f, o);
+    const auto src_from_tgt = inverse_transform(scene.camera(f + 1).matrix().unsqueeze(0))
+                                  .matmul(scene.camera(f).matrix().unsqueeze(0)).to(torch::kFloat32);
+    const auto rigid = rigid_flow(f0.depth.unsqueeze(0), src_from_tgt,
+                                  o.intrinsics.K().to(torch::kFloat32).unsqueeze(0))[0];
+    auto moving = torch::zeros({o.height, o.width}, torch::kBool);
+    for (size_t id = 0; id < scene.boxes().size(); ++id)
+      if (scene.is_moving(static_cast<int>(id))) moving |= f0.object == static_cast<int>(id);
+    const auto valid = gt.valid_occ[0] > 0;
+    const auto diff = (rigid - gt.flow).pow(2).sum(0).sqrt();
+    const auto stat = valid & ~moving;
+    EXPECT_LT(diff.masked_select(stat).max().item<double>(), 0.05) << "frame " << f;
+    const auto mov = valid & moving;
+    if (mov.sum().item<int64_t>() > 20) {
+      saw_mover = true;
+      EXPECT_GT(diff.masked_select(mov).mean().item<double>(), 0.1) << "frame " << f;
+    }
+  }
+  EXPECT_TRUE(saw_mover) << "no moving car in view: the test needs another seed";
+}
+
+TEST(Synth, LidarLandsWhereTheDepthSaysThroughTheCalibration) {
+  const auto o = tiny();
+  const SynthScene scene(5, 20);
+  const auto frame = render_frame(scene, 8, o);
+  const auto pts = render_lidar(scene, 8, o);
+  auto P = torch::zeros({3, 4}, torch::kFloat64);
+  P.slice(1, 0, 3).copy_(o.intrinsics.K());
+  VelodyneDepthOptions exact;
+  exact.matlab_offset = false;
+  exact.depth_is_velo_x = false;  // camera z, to compare with the rendered depth
+  const auto lidar = velodyne_depth(pts, P.matmul(synth_cam_from_velo()), o.height, o.width, exact);
+  const auto both = (lidar > 0) & (frame.depth[0] > 0);
+  ASSERT_GT(both.sum().item<int64_t>(), 300);
+  const auto rel = ((lidar - frame.depth[0]).abs() / frame.depth[0]).masked_select(both);
+  EXPECT_LT(rel.median().item<double>(), 0.01);
+  EXPECT_GT((rel < 0.05).to(torch::kFloat32).mean().item<double>(), 0.9);
+}
+
+TEST(Synth, WrittenWorldReadsBack) {
+  auto o = tiny();
+  o.train_drives = 1;
+  o.test_drives = 1;
+  o.frames_per_drive = 6;
+  o.flow_pairs = 1;
+  o.odometry_frames = 5;
+  const auto root = test::fresh_dir("world");
+  write_synth_world(root, o);
+  const SynthScene scene(1 * 1000003ULL + 0, 6);  // drive 1's seed (synth_writer.cpp)
+  const auto f2 = render_frame(scene, 2, o);
+  const std::string drive = root + "/raw/" + synth_drive_folder(1);
+  EXPECT_LE((read_image(drive + "/image_02/data/0000000002.png") - f2.image).abs().max().item<double>(), 0.5 / 255 + 1e-6);
+  EXPECT_LE((read_depth_png(drive + "/proj_depth/groundtruth/image_02/0000000002.png") - f2.depth).abs().max().item<double>(), 0.5 / 256 + 1e-6);
+  const auto poses = read_poses(drive + "/poses.txt");
+  EXPECT_EQ(poses.size(0), 6);
+  EXPECT_TRUE(torch::allclose(poses[0], torch::eye(4, torch::kFloat64), 0, 1e-12));
+  const auto calib = read_raw_calib(root + "/raw/" + kSynthDate, 2);
+  EXPECT_TRUE(torch::allclose(calib.K(), o.intrinsics.K(), 0, 1e-9));
+  EXPECT_TRUE(torch::allclose(calib.cam_from_velo, synth_cam_from_velo(), 0, 1e-12));
+  EXPECT_EQ(read_velodyne(drive + "/velodyne_points/data/0000000002.bin").size(1), 4);
+  const auto odo = read_odometry_calib(root + "/odometry/sequences/09/calib.txt");
+  EXPECT_TRUE(torch::allclose(odo.P[2], calib.P_rect, 0, 1e-9));
+  EXPECT_EQ(read_poses(root + "/odometry/poses/09.txt").size(0), 5);
+  EXPECT_EQ(read_lines(root + "/odometry/sequences/09/times.txt").size(), 5u);
+  const auto flow = read_flow_png(root + "/kitti2015/training/flow_occ/000000_10.png");
+  EXPECT_EQ(flow.flow.size(2), o.width);
+  EXPECT_GE(flow.valid.sum().item<double>(), read_flow_png(root + "/kitti2015/training/flow_noc/000000_10.png").valid.sum().item<double>());
+  EXPECT_TRUE(read_key_values(root + "/kitti2015/training/calib_cam_to_cam/000000.txt").has("P_rect_02"));
+  // Splits: frames 1..4 (those with both neighbours) of the training and of the test drive.
+  const auto train = read_split(root + "/raw/splits/eigen_zhou/train_files.txt");
+  EXPECT_EQ(train.size(), 4u);
+  EXPECT_EQ(read_split(root + "/raw/splits/eigen/test_files.txt").size(), 4u);
+  EXPECT_EQ(*read_scene_list(root + "/raw/splits/eigen/test_scenes.txt").begin(), "2011_01_01_drive_0002");
+  // The training dataset reads snippets at another size with intrinsics scaled to match.
+  SequenceDatasetOptions so;
+  so.root = root + "/raw";
+  so.height = 32;
+  so.width = 104;
+  SequenceDataset ds(train, so);
+  ASSERT_EQ(ds.size(), 4u);
+  const auto s = ds.get(0);
+  EXPECT_EQ(s.frames.sizes(), (torch::IntArrayRef{3, 3, 32, 104}));
+  EXPECT_NEAR(s.K[0][0].item<double>(), o.intrinsics.fx / 2, 1e-4);
+  EXPECT_NEAR(s.K[1][2].item<double>(), o.intrinsics.cy / 2, 1e-4);
+  // A missing neighbour drops the entry; a corrupt frame names its file.
+  std::filesystem::remove(drive + "/image_02/data/0000000000.png");
+  EXPECT_EQ(SequenceDataset(train, so).dropped(), 1u);
+  test::write_text(drive + "/image_02/data/0000000003.png", "garbage");
+  GEO_EXPECT_THROW_WITH(SequenceDataset(train, so).get(1), "0000000003.png", "cannot decode");
+}
+
+}  // namespace
+}  // namespace geo

@@ -1,0 +1,50 @@
+// Helpers shared by the test suites: fresh temporary folders and the optional KITTI excerpts.
+#pragma once
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <unistd.h>
+
+namespace geo::test {
+
+// A new empty folder under the system temp dir, unique per process and name.
+inline std::string fresh_dir(const std::string& name) {
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("geo_test_" + name + "_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir.string();
+}
+
+inline void write_text(const std::string& path, const std::string& text) {
+  std::filesystem::create_directories(std::filesystem::path(path).parent_path());
+  std::ofstream(path, std::ios::binary) << text;
+}
+
+// ../shared/kitti_samples (GEO_SHARED_DIR set by ctest), or "" when absent.
+inline std::string kitti_samples() {
+  const char* env = std::getenv("GEO_SHARED_DIR");
+  const std::string dir = std::string(env ? env : "../shared") + "/kitti_samples";
+  return std::filesystem::exists(dir + "/README.md") ? dir : "";
+}
+
+}  // namespace geo::test
+
+// Message check for EXPECT_THROW-style tests: runs `stmt`, expects a std::exception whose what()
+// contains every given fragment.
+#define GEO_EXPECT_THROW_WITH(stmt, ...)                                              \
+  do {                                                                                \
+    bool geo_thrown = false;                                                          \
+    try {                                                                             \
+      stmt;                                                                           \
+    } catch (const std::exception& geo_e) {                                           \
+      geo_thrown = true;                                                              \
+      const std::string geo_msg = geo_e.what();                                       \
+      for (const char* geo_f : {__VA_ARGS__})                                         \
+        EXPECT_NE(geo_msg.find(geo_f), std::string::npos)                             \
+            << "message '" << geo_msg << "' lacks '" << geo_f << "'";                 \
+    }                                                                                 \
+    EXPECT_TRUE(geo_thrown) << #stmt " did not throw";                                \
+  } while (0)
