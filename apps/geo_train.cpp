@@ -1,0 +1,48 @@
+// geo_train: trains DepthNet, PoseNet and FlowNet without labels (reference.md Sec. 4).
+//   geo_train --config configs/stage1.yaml [--run-dir DIR] [--set key=value ...] [--device auto|cpu|cuda]
+//   geo_train --config stage2.yaml --init runs/stage1-...      (stage 2 from stage 1's result)
+//   geo_train --resume RUN_DIR
+// A bare config name that is not a file here resolves to the shipped configs/.
+#include <CLI/CLI.hpp>
+#include <spdlog/spdlog.h>
+
+#include <filesystem>
+
+#include "core/config.h"
+#include "core/logging.h"
+#include "train/trainer.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"geo_train: unsupervised training of depth, camera motion and optical flow "
+               "(GeoNet with feature refinement) from monocular video"};
+  std::string config_path, resume_dir;
+  std::vector<std::string> overrides;
+  geo::TrainOptions opts;
+  auto* cfg_opt = app.add_option("--config", config_path,
+                                 "YAML config (stage1.yaml, stage2.yaml, smoke.yaml or a path)");
+  auto* res_opt = app.add_option("--resume", resume_dir, "continue the run in this folder from its latest checkpoint");
+  cfg_opt->excludes(res_opt);
+  app.add_option("--set", overrides, "override a config key, e.g. --set data.root=/data/kitti_raw")->take_all();
+  app.add_option("--run-dir", opts.run_dir, "run folder to create (default: <run.dir>/<run.name>-<time>)");
+  app.add_option("--init", opts.init, "start the first stage from this checkpoint or run folder");
+  app.add_option("--device", opts.device, "auto, cpu or cuda (default: run.device)")
+      ->check(CLI::IsMember({"auto", "cpu", "cuda"}));
+  app.add_option("--stop-after", opts.stop_after, "stop abruptly after N steps without a checkpoint (testing)");
+  CLI11_PARSE(app, argc, argv);
+  try {
+    geo::setup_logging("info");
+    if (config_path.empty() && resume_dir.empty())
+      throw std::runtime_error("give --config FILE (e.g. --config stage1.yaml) or --resume RUN_DIR; see --help");
+    if (!resume_dir.empty()) {
+      if (!overrides.empty()) throw std::runtime_error("--set cannot change a run being resumed");
+      return geo::resume(resume_dir, opts);
+    }
+    const auto config = geo::load_config(geo::resolve_config_path(config_path), overrides);
+    geo::setup_logging(config.logging.level);
+    std::string dir;
+    return geo::train(config, opts, &dir);
+  } catch (const std::exception& e) {
+    spdlog::error("{}", e.what());
+    return 1;
+  }
+}

@@ -1,0 +1,29 @@
+// Resolves the training and validation data of a config (reference.md Sec. 4):
+//   data.format auto   -> a packed cache when <root>/train/index.txt is one (geo_prepare), else KITTI raw
+//   kitti_raw lists    -> data.train_list / data.val_list, else <root>/splits/<split>/{train,val}_files.txt
+//                         (a geo_synth world ships its own), else configs/splits/<split>/...
+//   exclusions         -> test scenes (<root>/splits/eigen/test_scenes.txt or the shipped list) and
+//                         the shipped static_frames.txt
+// Errors name the config key (data.root, data.train_list) and the path.
+#pragma once
+
+#include "core/config.h"
+#include "data/snippets.h"
+
+#include <memory>
+#include <string>
+
+namespace geo {
+
+struct TrainingData {
+  std::shared_ptr<SnippetSource> train, val;  // val may be null (no validation list)
+  std::string format, train_list, val_list;
+  size_t excluded = 0, dropped = 0;            // test-scene/static entries, entries without neighbours
+};
+
+TrainingData open_training_data(const DataConfig& data);
+
+// The first existing of <root>/splits/<split>/<file> and configs/splits/<split>/<file>; "" if none.
+std::string find_split_file(const std::string& root, const std::string& split, const std::string& file);
+
+}  // namespace geo

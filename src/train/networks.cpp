@@ -1,0 +1,133 @@
+#include "train/networks.h"
+
+#include "core/state_io.h"
+
+#include <stdexcept>
+
+namespace geo {
+
+Networks Networks::create(const Config& c, bool with_flow) {
+  Networks n;
+  n.depth = DepthNet(DepthNetOptions::from(c.model));
+  PoseNetOptions po;
+  po.seq_length = c.data.seq_length;
+  n.pose = PoseNet(po);
+  if (with_flow) n.flow = FlowNet(FlowNetOptions::from(c.model));
+  return n;
+}
+
+void Networks::to(const torch::Device& device) {
+  depth->to(device);
+  pose->to(device);
+  if (flow) flow->to(device);
+}
+
+void Networks::set_modes(const StageConfig& s) {
+  depth->train(s.trains("depth"));
+  pose->train(s.trains("pose"));
+  if (flow) flow->train(s.trains("flow"));
+}
+
+std::vector<torch::Tensor> Networks::parameters_of(const StageConfig& s) const {
+  std::vector<torch::Tensor> out;
+  auto add = [&](const torch::nn::Module& m, bool on) {
+    for (const auto& p : m.parameters()) {
+      p.set_requires_grad(on);
+      if (on) out.push_back(p);
+    }
+  };
+  add(*depth, s.trains("depth"));
+  add(*pose, s.trains("pose"));
+  if (flow) add(*flow, s.trains("flow"));
+  return out;
+}
+
+void Networks::save(torch::serialize::OutputArchive& archive) const {
+  auto put = [&](const char* key, const torch::nn::Module& m) {
+    torch::serialize::OutputArchive sub;
+    write_state(m, sub);
+    archive.write(key, sub);
+  };
+  put("depth", *depth);
+  put("pose", *pose);
+  if (flow) put("flow", *flow);
+}
+
+void Networks::load(torch::serialize::InputArchive& archive, const std::string& source,
+                    bool allow_missing_flow) {
+  auto get = [&](const char* key, torch::nn::Module& m) {
+    torch::serialize::InputArchive sub;
+    if (!archive.try_read(key, sub)) return false;
+    read_state(m, sub, source + " [" + key + "]");
+    return true;
+  };
+  if (!get("depth", *depth)) throw std::runtime_error(source + ": no DepthNet in this checkpoint");
+  if (!get("pose", *pose)) throw std::runtime_error(source + ": no PoseNet in this checkpoint");
+  if (flow && !get("flow", *flow) && !allow_missing_flow)
+    throw std::runtime_error(source + ": no FlowNet in this checkpoint");
+}
+
+StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& srcs,
+                          const torch::Tensor& K, const StageConfig& stage, const Config& config) {
+  const int64_t B = tgt.size(0), N = srcs.size(1);
+  std::vector<torch::Tensor> src_list;
+  for (int64_t i = 0; i < N; ++i) src_list.push_back(srcs.select(1, i));
+
+  LossInputs in;
+  in.tgt = tgt;
+  in.srcs = src_list;
+  in.K = K;
+  {
+    // One DepthNet pass over every frame of the snippet (target first, then the sources).
+    std::optional<torch::NoGradGuard> frozen;
+    if (!stage.trains("depth")) frozen.emplace();
+    auto frames = torch::cat({tgt.unsqueeze(1), srcs}, 1).flatten(0, 1);  // [B*(N+1),3,H,W]
+    auto disp = nets.depth->forward(frames).disp;
+    in.src_disp.assign(N, {});
+    for (auto& d : disp) {
+      auto per = d.view({B, N + 1, 1, d.size(2), d.size(3)});
+      in.tgt_disp.push_back(per.select(1, 0));
+      for (int64_t i = 0; i < N; ++i) in.src_disp[i].push_back(per.select(1, i + 1));
+    }
+  }
+  {
+    std::optional<torch::NoGradGuard> frozen;
+    if (!stage.trains("pose")) frozen.emplace();
+    in.poses = nets.pose->forward(tgt, src_list);
+  }
+  StepOutput out;
+  out.tgt_disp = in.tgt_disp;
+  out.rigid = rigid_terms(in, config.loss);
+  if (!stage.uses_flow()) {
+    out.losses = total_loss(out.rigid, nullptr, stage.weights);
+    return out;
+  }
+  TORCH_CHECK(nets.flow, "the stage trains flow but no FlowNet was created");
+  // Both directions of every source in one FlowNet pass: [fwd_0..fwd_N-1, bwd_0..bwd_N-1].
+  std::vector<torch::Tensor> inputs;
+  for (int64_t i = 0; i < N; ++i)
+    inputs.push_back(flow_net_input(tgt, src_list[i], out.rigid.fwd_warp[i][0].detach(),
+                                    out.rigid.fwd_flow[i][0].detach(), out.rigid.fwd_error_norm[i].detach()));
+  for (int64_t i = 0; i < N; ++i)
+    inputs.push_back(flow_net_input(src_list[i], tgt, out.rigid.bwd_warp[i][0].detach(),
+                                    out.rigid.bwd_flow[i][0].detach(), out.rigid.bwd_error_norm[i].detach()));
+  std::optional<torch::NoGradGuard> frozen;
+  if (!stage.trains("flow")) frozen.emplace();
+  auto residual = nets.flow->forward(torch::cat(inputs, 0)).flow;
+  PerSourceScale<torch::Tensor> bwd_full(N);
+  out.fwd_full.assign(N, {});
+  const int64_t S = static_cast<int64_t>(out.rigid.fwd_flow[0].size());
+  for (int64_t s = 0; s < S && s < static_cast<int64_t>(residual.size()); ++s) {
+    auto parts = residual[s].chunk(2 * N, 0);
+    for (int64_t i = 0; i < N; ++i) {
+      out.fwd_full[i].push_back(parts[i] + out.rigid.fwd_flow[i][s]);
+      bwd_full[i].push_back(parts[N + i] + out.rigid.bwd_flow[i][s]);
+    }
+  }
+  frozen.reset();
+  out.flow = flow_terms(out.rigid, out.fwd_full, bwd_full, config.loss);
+  out.losses = total_loss(out.rigid, &*out.flow, stage.weights);
+  return out;
+}
+
+}  // namespace geo
