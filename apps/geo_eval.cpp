@@ -1,0 +1,86 @@
+// geo_eval: the published evaluation protocols (reference.md Sec. 5) on KITTI or a geo_synth world.
+//   geo_eval --split eigen     --data-root <kitti_raw>  --checkpoint <ckpt | run folder>
+//   geo_eval --split kitti2015 --data-root <kitti2015>  --checkpoint <ckpt>
+//   geo_eval --split odometry  --data-root <odometry>   --sequence 09 --checkpoint <ckpt>
+//   geo_eval --split eigen --predictions depths.npy|folder     (precomputed predictions)
+//   geo_eval --compare a.json b.json                           (side-by-side table)
+#include <CLI/CLI.hpp>
+#include <spdlog/spdlog.h>
+
+#include <cstdlib>
+#include <cstdio>
+#include <filesystem>
+
+#include "core/logging.h"
+#include "eval/protocols.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"geo_eval: depth (Eigen split), optical flow (KITTI 2015) and pose (KITTI odometry) metrics"};
+  app.footer(
+      "Data root: --data-root, else $GEO_KITTI_ROOT, else ./data/kitti. For a geo_synth world give its root;\n"
+      "the split's folder (raw/, kitti2015/, odometry/) is found inside.\n"
+      "Model: --checkpoint (a .pt file or a run folder), else the newest run under ./runs (its best.pt).\n"
+      "Predictions (--predictions): eigen = folder of 16-bit PNGs (depth x 256) named %06d.png by line of\n"
+      "the split file, or one float32 .npy [N,H,W]; kitti2015 = folder of KITTI flow PNGs named like the\n"
+      "ground truth (000123_10.png); odometry = one KITTI pose file (3x4 camera-to-world a line, frame 0 first).\n"
+      "Eigen protocol: Velodyne ground truth (pixel = round(x/z) - 1, depth = Velodyne x, nearest point kept),\n"
+      "prediction resized bilinearly, 1e-3 < gt < 80, Garg crop, per-image median scaling, clamp [1e-3, 80].");
+  geo::EvalOptions o;
+  std::string checkpoint, output, device = "auto", runs = "runs";
+  std::vector<std::string> compare;
+  bool no_matlab = false;
+  app.add_option("--split", o.split, "eigen, kitti2015 or odometry")->check(CLI::IsMember({"eigen", "kitti2015", "odometry"}));
+  app.add_option("--data-root", o.data_root, "dataset root (default: $GEO_KITTI_ROOT, else ./data/kitti)");
+  app.add_option("--checkpoint", checkpoint, "checkpoint file or run folder (default: newest run in --runs)");
+  app.add_option("--runs", runs, "where to look for the newest run when --checkpoint is not given");
+  app.add_option("--predictions", o.predictions, "evaluate precomputed predictions instead of a model");
+  app.add_option("--split-file", o.split_file, "subset or order: image paths, 'folder frame side' lines or flow pair paths");
+  app.add_option("--sequence", o.sequence, "odometry sequence (default 09)");
+  app.add_option("--output", output, "write the results as JSON here");
+  app.add_option("--output-poses", o.output_poses, "odometry: write the predicted trajectory (KITTI pose file)");
+  app.add_option("--export-gt", o.export_gt, "eigen: write the ground-truth depth maps (uint16 PNG, depth x 256)");
+  app.add_option("--device", device, "auto, cpu or cuda")->check(CLI::IsMember({"auto", "cpu", "cuda"}));
+  app.add_flag("--exact-pixels", no_matlab, "eigen: project Velodyne points without the reference code's -1 pixel shift");
+  app.add_option("--compare", compare, "print these results JSON files side by side and exit")->expected(1, -1);
+  CLI11_PARSE(app, argc, argv);
+  try {
+    geo::setup_logging("info");
+    if (!compare.empty()) {
+      std::vector<geo::EvalResult> results;
+      for (const auto& f : compare) results.push_back(geo::read_result(f));
+      std::printf("%s", geo::format_results(results, compare).c_str());
+      return 0;
+    }
+    if (o.split.empty()) throw std::runtime_error("--split is required (eigen, kitti2015 or odometry); see --help");
+    o.matlab_offset = !no_matlab;
+    if (o.data_root.empty()) {
+      const char* env = std::getenv("GEO_KITTI_ROOT");
+      o.data_root = env && *env ? env : "data/kitti";
+      if (!std::filesystem::is_directory(o.data_root))
+        throw std::runtime_error("no data root: '" + o.data_root + "' does not exist; give --data-root DIR or set GEO_KITTI_ROOT");
+    }
+    std::unique_ptr<geo::Predictor> predictor;
+    if (o.predictions.empty()) {
+      if (checkpoint.empty()) {
+        checkpoint = geo::latest_run_checkpoint(runs);
+        if (checkpoint.empty())
+          throw std::runtime_error("no model: give --checkpoint FILE|RUN_DIR (no training run found under '" + runs +
+                                   "'), or --predictions PATH");
+      }
+      predictor = std::make_unique<geo::Predictor>(checkpoint, device);
+      spdlog::info("model {} ({}x{}, FlowNet {})", predictor->path(), predictor->width(), predictor->height(),
+                   predictor->has_flow() ? "yes" : "no: rigid flow only");
+    }
+    spdlog::info("evaluating split {} on {}", o.split, geo::split_root(o.split, o.data_root));
+    const auto r = geo::evaluate(o, predictor.get());
+    std::printf("%s", geo::format_results({r}, {o.split}).c_str());
+    if (!output.empty()) {
+      geo::write_file_atomic(output, r.json());
+      spdlog::info("results written to {}", output);
+    }
+    return 0;
+  } catch (const std::exception& e) {
+    spdlog::error("{}", e.what());
+    return 1;
+  }
+}

@@ -1,0 +1,115 @@
+#include "eval/metrics.h"
+
+#include "geometry/checks.h"
+
+namespace geo {
+
+std::map<std::string, double> DepthErrors::as_map() const {
+  return {{"abs_rel", abs_rel}, {"sq_rel", sq_rel}, {"rmse", rmse}, {"rmse_log", rmse_log},
+          {"a1", a1},           {"a2", a2},         {"a3", a3}};
+}
+
+DepthErrors depth_errors(const torch::Tensor& gt_in, const torch::Tensor& pred_in) {
+  TORCH_CHECK(gt_in.dim() == 1 && gt_in.sizes() == pred_in.sizes(),
+              "depth_errors takes two 1-D tensors of equal length, got ", gt_in.sizes(), " and ", pred_in.sizes());
+  DepthErrors e;
+  e.pixels = gt_in.numel();
+  if (e.pixels == 0) return e;
+  const auto gt = gt_in.to(torch::kFloat64), pred = pred_in.to(torch::kFloat64);
+  const auto thresh = torch::max(gt / pred, pred / gt);
+  e.a1 = (thresh < 1.25).to(torch::kFloat64).mean().item<double>();
+  e.a2 = (thresh < 1.25 * 1.25).to(torch::kFloat64).mean().item<double>();
+  e.a3 = (thresh < 1.25 * 1.25 * 1.25).to(torch::kFloat64).mean().item<double>();
+  e.rmse = (gt - pred).pow(2).mean().sqrt().item<double>();
+  e.rmse_log = (gt.log() - pred.log()).pow(2).mean().sqrt().item<double>();
+  e.abs_rel = ((gt - pred).abs() / gt).mean().item<double>();
+  e.sq_rel = ((gt - pred).pow(2) / gt).mean().item<double>();
+  return e;
+}
+
+DepthErrors eigen_image_errors(const torch::Tensor& gt_in, const torch::Tensor& pred_in,
+                               const EigenOptions& o, double* scale) {
+  check_shape(gt_in, "ground-truth depth", {-1, -1});
+  check_shape(pred_in, "predicted depth", {-1, -1});
+  const int64_t H = gt_in.size(0), W = gt_in.size(1);
+  auto gt = gt_in.to(torch::kFloat64);
+  auto pred = pred_in.to(torch::kFloat64);
+  if (pred.size(0) != H || pred.size(1) != W) {
+    namespace F = torch::nn::functional;
+    pred = F::interpolate(pred.view({1, 1, pred.size(0), pred.size(1)}),
+                          F::InterpolateFuncOptions().size(std::vector<int64_t>{H, W}).mode(torch::kBilinear).align_corners(false))
+               .view({H, W});
+  }
+  auto mask = (gt > o.min_depth) & (gt < o.max_depth);
+  if (o.garg_crop) {
+    auto crop = torch::zeros({H, W}, torch::kBool);
+    crop.slice(0, static_cast<int64_t>(0.40810811 * H), static_cast<int64_t>(0.99189189 * H))
+        .slice(1, static_cast<int64_t>(0.03594771 * W), static_cast<int64_t>(0.96405229 * W))
+        .fill_(true);
+    mask &= crop;
+  }
+  auto g = gt.masked_select(mask), p = pred.masked_select(mask);
+  if (g.numel() == 0) return {};
+  double s = 1.0;
+  if (o.median_scaling) s = g.median().item<double>() / p.median().item<double>();
+  if (scale) *scale = s;
+  return depth_errors(g, (p * s).clamp(o.min_depth, o.max_depth));
+}
+
+torch::Tensor resize_flow(const torch::Tensor& flow, int64_t H, int64_t W) {
+  check_shape(flow, "flow", {2, -1, -1});
+  const int64_t h = flow.size(1), w = flow.size(2);
+  if (h == H && w == W) return flow;
+  namespace F = torch::nn::functional;
+  auto r = F::interpolate(flow.unsqueeze(0).to(torch::kFloat32),
+                          F::InterpolateFuncOptions().size(std::vector<int64_t>{H, W}).mode(torch::kBilinear).align_corners(false))[0];
+  auto factor = torch::tensor({static_cast<double>(W) / w, static_cast<double>(H) / h}, r.options()).view({2, 1, 1});
+  return r * factor;
+}
+
+FlowErrors flow_errors(const torch::Tensor& gt, const torch::Tensor& valid_in, const torch::Tensor& pred_in) {
+  check_shape(gt, "ground-truth flow", {2, -1, -1});
+  const auto pred = resize_flow(pred_in, gt.size(1), gt.size(2)).to(torch::kFloat64);
+  const auto valid = valid_in.reshape({gt.size(1), gt.size(2)}) > 0.5;
+  const auto g = gt.to(torch::kFloat64);
+  const auto epe = (pred - g).pow(2).sum(0).sqrt().masked_select(valid);
+  const auto mag = g.pow(2).sum(0).sqrt().masked_select(valid);
+  FlowErrors e;
+  e.pixels = epe.numel();
+  if (e.pixels == 0) return e;
+  e.epe = epe.mean().item<double>();
+  e.fl = ((epe > 3.0) & (epe > 0.05 * mag)).to(torch::kFloat64).mean().item<double>();
+  return e;
+}
+
+double snippet_ate(const torch::Tensor& gt_in, const torch::Tensor& pred_in) {
+  check_shape(gt_in, "gt positions", {-1, 3});
+  check_shape(pred_in, "predicted positions", {gt_in.size(0), 3});
+  const auto gt = gt_in.to(torch::kFloat64);
+  auto pred = pred_in.to(torch::kFloat64);
+  pred = pred + (gt[0] - pred[0]);  // align the first frame
+  const double denom = pred.pow(2).sum().item<double>();
+  const double s = denom > 0 ? (gt * pred).sum().item<double>() / denom : 1.0;
+  return (s * pred - gt).pow(2).sum().sqrt().item<double>() / static_cast<double>(gt.size(0));
+}
+
+double aligned_trajectory_rmse(const torch::Tensor& gt_in, const torch::Tensor& pred_in) {
+  check_shape(gt_in, "gt positions", {-1, 3});
+  check_shape(pred_in, "predicted positions", {gt_in.size(0), 3});
+  const auto gt = gt_in.to(torch::kFloat64), pred = pred_in.to(torch::kFloat64);
+  const auto mu_g = gt.mean(0), mu_p = pred.mean(0);
+  const auto g = gt - mu_g, p = pred - mu_p;
+  const double n = static_cast<double>(gt.size(0));
+  const auto cov = g.t().matmul(p) / n;  // Umeyama 1991: Sigma = 1/n sum (y - mu_y)(x - mu_x)^T
+  auto [U, S, Vh] = torch::linalg_svd(cov, false);
+  auto D = torch::eye(3, torch::kFloat64);
+  if ((torch::det(U) * torch::det(Vh)).item<double>() < 0) D[2][2] = -1;
+  const auto R = U.matmul(D).matmul(Vh);
+  const double var_p = p.pow(2).sum().item<double>() / n;
+  const double s = var_p > 0 ? (S * D.diagonal()).sum().item<double>() / var_p : 1.0;
+  const auto t = mu_g - s * R.matmul(mu_p);
+  const auto aligned = s * pred.matmul(R.t()) + t;
+  return (aligned - gt).pow(2).sum(1).mean().sqrt().item<double>();
+}
+
+}  // namespace geo

@@ -1,0 +1,50 @@
+// Evaluation metrics with the published protocols' conventions (reference.md Sec. 5). LibTorch only.
+#pragma once
+
+#include <torch/torch.h>
+
+#include <map>
+#include <string>
+
+namespace geo {
+
+struct DepthErrors {
+  double abs_rel = 0, sq_rel = 0, rmse = 0, rmse_log = 0, a1 = 0, a2 = 0, a3 = 0;
+  int64_t pixels = 0;
+  std::map<std::string, double> as_map() const;
+};
+
+// Errors over paired valid depths (1-D tensors of equal length, metres, > 0).
+DepthErrors depth_errors(const torch::Tensor& gt, const torch::Tensor& pred);
+
+struct EigenOptions {
+  double min_depth = 1e-3, max_depth = 80;  // mask and clamp (reference.md Sec. 5)
+  bool garg_crop = true;                    // rows [0.408 H, 0.992 H), columns [0.036 W, 0.964 W)
+  bool median_scaling = true;               // monocular: scale by median(gt)/median(pred)
+};
+
+// One image of the Eigen protocol: pred depth [h,w] (any size; resized bilinearly to the ground
+// truth, as GeoNet does), gt [H,W] with 0 = no point. Returns the image's errors (pixels = 0 when
+// nothing is valid) and the median scale used through `scale` when given.
+DepthErrors eigen_image_errors(const torch::Tensor& gt, const torch::Tensor& pred,
+                               const EigenOptions& options = {}, double* scale = nullptr);
+
+struct FlowErrors {
+  double epe = 0;      // mean end-point error over valid pixels
+  double fl = 0;       // fraction of valid pixels with EPE > 3 px and > 5% of |gt|
+  int64_t pixels = 0;
+};
+// pred [2,h,w] (resized to the ground truth with u, v scaled), gt [2,H,W], valid [1,H,W] or [H,W].
+FlowErrors flow_errors(const torch::Tensor& gt, const torch::Tensor& valid, const torch::Tensor& pred);
+
+// Resizes a flow field to height x width, scaling u and v by the size ratios.
+torch::Tensor resize_flow(const torch::Tensor& flow, int64_t height, int64_t width);
+
+// SfMLearner's snippet ATE: the first positions aligned, one least-squares scale
+// s = sum(gt.pred)/sum(pred.pred), ATE = sqrt(sum ||s pred - gt||^2) / N. gt, pred: [N,3].
+double snippet_ate(const torch::Tensor& gt, const torch::Tensor& pred);
+
+// Full-trajectory RMS position error after a similarity (Umeyama Sim(3)) alignment. [N,3] each.
+double aligned_trajectory_rmse(const torch::Tensor& gt, const torch::Tensor& pred);
+
+}  // namespace geo

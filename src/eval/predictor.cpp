@@ -1,0 +1,83 @@
+#include "eval/predictor.h"
+
+#include "geometry/pose.h"
+#include "train/trainer.h"
+
+#include <filesystem>
+
+namespace fs = std::filesystem;
+
+namespace geo {
+namespace {
+
+torch::Device choose(const std::string& name) {
+  if (name != "cpu" && torch::cuda::is_available()) return torch::kCUDA;
+  return torch::kCPU;
+}
+
+}  // namespace
+
+Predictor::Predictor(const std::string& checkpoint, const std::string& device)
+    : path_(resolve_checkpoint(checkpoint)), device_(choose(device)) {
+  torch::serialize::InputArchive a;
+  try {
+    a.load_from(path_);
+  } catch (const c10::Error& e) {
+    throw std::runtime_error("cannot read checkpoint '" + path_ + "' (not a geo checkpoint or truncated)");
+  }
+  c10::IValue yaml;
+  if (!a.try_read("config", yaml) || !yaml.isString())
+    throw std::runtime_error(path_ + ": checkpoint has no config (not written by geo_train?)");
+  config_ = parse_config(yaml.toStringRef(), path_ + " [config]");
+  torch::serialize::InputArchive flow;
+  nets_ = Networks::create(config_, a.try_read("flow", flow));
+  nets_.load(a, path_, false);
+  nets_.to(device_);
+  nets_.depth->eval();
+  nets_.pose->eval();
+  if (nets_.flow) nets_.flow->eval();
+}
+
+torch::Tensor Predictor::depth(const torch::Tensor& image) {
+  torch::NoGradGuard no_grad;
+  return 1.0 / nets_.depth->forward(image.to(device_)).disp[0];
+}
+
+torch::Tensor Predictor::pose(const torch::Tensor& tgt, const std::vector<torch::Tensor>& srcs) {
+  torch::NoGradGuard no_grad;
+  std::vector<torch::Tensor> s;
+  for (const auto& x : srcs) s.push_back(x.to(device_));
+  const auto vec = nets_.pose->forward(tgt.to(device_), s);  // [B,N,6]
+  const int64_t B = vec.size(0), N = vec.size(1);
+  return pose_vec_to_matrix(vec.reshape({B * N, 6})).view({B, N, 4, 4});
+}
+
+torch::Tensor Predictor::flow(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& K) {
+  torch::NoGradGuard no_grad;
+  TORCH_CHECK(config_.data.seq_length == 3, "flow inference needs a 3-frame model, this one has seq_length ",
+              config_.data.seq_length);
+  StageConfig stage;
+  stage.train = has_flow() ? std::vector<std::string>{"depth", "pose", "flow"} : std::vector<std::string>{"depth", "pose"};
+  const auto t = tgt.to(device_), s = src.to(device_);
+  auto out = compute_losses(nets_, t, torch::stack({t, s}, 1), K.to(device_), stage, config_);
+  nets_.depth->eval();  // compute_losses does not change modes; keep it explicit
+  return has_flow() ? out.fwd_full[1][0] : out.rigid.fwd_flow[1][0];
+}
+
+std::string latest_run_checkpoint(const std::string& runs_dir) {
+  if (!fs::is_directory(runs_dir)) return "";
+  std::string best;
+  fs::file_time_type newest{};
+  for (const auto& e : fs::directory_iterator(runs_dir)) {
+    const auto latest = e.path() / "checkpoints" / "latest";
+    if (!fs::exists(latest)) continue;
+    const auto t = fs::last_write_time(latest);
+    if (best.empty() || t > newest) {
+      newest = t;
+      best = e.path().string();
+    }
+  }
+  return best.empty() ? "" : resolve_checkpoint(best);
+}
+
+}  // namespace geo

@@ -1,0 +1,43 @@
+// A trained model loaded from a checkpoint (its config travels inside), for evaluation and
+// inference: depth of an image, relative pose of a snippet, full flow of a pair. Inputs are RGB
+// in [0,1] at the network's size (config data.height x data.width); BatchNorm in eval mode.
+#pragma once
+
+#include "core/config.h"
+#include "train/networks.h"
+
+#include <string>
+
+namespace geo {
+
+class Predictor {
+ public:
+  // `checkpoint`: a .pt file or a run folder (its best, else latest checkpoint).
+  explicit Predictor(const std::string& checkpoint, const std::string& device = "auto");
+  const Config& config() const { return config_; }
+  const std::string& path() const { return path_; }
+  int64_t height() const { return config_.data.height; }
+  int64_t width() const { return config_.data.width; }
+  bool has_flow() const { return static_cast<bool>(nets_.flow); }
+  torch::Device device() const { return device_; }
+
+  // image [B,3,H,W] -> depth [B,1,H,W] in the network's (unknown) scale: 1 / disparity.
+  torch::Tensor depth(const torch::Tensor& image);
+  // tgt [B,3,H,W], srcs N x [B,3,H,W] (N = seq_length - 1) -> [B,N,4,4] src_from_tgt.
+  torch::Tensor pose(const torch::Tensor& tgt, const std::vector<torch::Tensor>& srcs);
+  // Full flow tgt -> src [B,2,H,W] in pixels: rigid flow from depth and pose plus the FlowNet's
+  // residual (rigid flow alone when the checkpoint has no FlowNet). The PoseNet sees the snippet
+  // (tgt, tgt, src) for a 3-frame model: zero motion before the target, the pair after it.
+  torch::Tensor flow(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& K);
+
+ private:
+  Config config_;
+  std::string path_;
+  torch::Device device_;
+  Networks nets_;
+};
+
+// The most recent run's best checkpoint under `runs_dir` (newest folder with checkpoints), or "".
+std::string latest_run_checkpoint(const std::string& runs_dir);
+
+}  // namespace geo

@@ -1,0 +1,336 @@
+#include "eval/protocols.h"
+
+#include "data/calib.h"
+#include "data/image_io.h"
+#include "data/splits.h"
+#include "data/text_io.h"
+#include "data/velodyne_depth.h"
+#include "eval/metrics.h"
+#include "geometry/pose.h"
+#include "train/data_source.h"
+
+#include <spdlog/spdlog.h>
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <sstream>
+
+namespace fs = std::filesystem;
+
+namespace geo {
+namespace {
+
+std::string numbered(const char* fmt, long long i) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, fmt, i);
+  return buf;
+}
+
+void require_file(const std::string& path, const std::string& what) {
+  if (!fs::exists(path)) throw std::runtime_error(what + " not found: '" + path + "'");
+}
+
+// Progress every 10%.
+void progress(size_t i, size_t n, const char* what) {
+  if (n >= 10 && (i + 1) % (n / 10) != 0 && i + 1 != n) return;
+  spdlog::info("  {} {}/{}", what, i + 1, n);
+}
+
+torch::Tensor net_input(const std::string& path, const Predictor& p, int64_t* H = nullptr, int64_t* W = nullptr) {
+  return read_image_resized(path, p.height(), p.width(), H, W).unsqueeze(0);
+}
+
+EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* pred) {
+  const std::string list = o.split_file.empty() ? find_split_file(root, "eigen", "test_files.txt") : o.split_file;
+  if (list.empty()) throw std::runtime_error("no Eigen test list: give --split-file");
+  const auto entries = read_split(list);
+  torch::Tensor npy;
+  if (!o.predictions.empty() && o.predictions.size() > 4 && o.predictions.substr(o.predictions.size() - 4) == ".npy") {
+    npy = read_npy(o.predictions);
+    if (npy.dim() != 3 || npy.size(0) != static_cast<int64_t>(entries.size()))
+      throw std::runtime_error(o.predictions + ": expected [" + std::to_string(entries.size()) +
+                               ",H,W] depths (one per line of " + list + "), got " + c10::str(npy.sizes()));
+  }
+  if (!o.export_gt.empty()) fs::create_directories(o.export_gt);
+  EigenOptions eo;
+  VelodyneDepthOptions vo;
+  vo.matlab_offset = o.matlab_offset;
+  std::vector<double> sums(7, 0.0);
+  int64_t images = 0, pixels = 0;
+  for (size_t i = 0; i < entries.size(); ++i) {
+    const auto& e = entries[i];
+    const std::string image = e.image_path(root);
+    const std::string velo = root + "/" + e.folder + "/velodyne_points/data/" + numbered("%010lld", e.frame) + ".bin";
+    require_file(image, "test image (line " + std::to_string(i + 1) + " of " + list + ")");
+    require_file(velo, "Velodyne scan");
+    const auto calib = read_raw_calib(root + "/" + e.date(), e.camera());
+    int64_t H = 0, W = 0;
+    torch::Tensor depth;
+    if (pred) {
+      depth = pred->depth(net_input(image, *pred, &H, &W))[0][0].cpu();
+    } else {
+      const auto img = read_image(image);
+      H = img.size(1);
+      W = img.size(2);
+      if (npy.defined()) {
+        depth = npy[static_cast<int64_t>(i)];
+      } else {
+        const std::string p = o.predictions + "/" + numbered("%06lld", static_cast<long long>(i)) + ".png";
+        require_file(p, "prediction for line " + std::to_string(i + 1));
+        depth = read_depth_png(p)[0];
+      }
+    }
+    const auto gt = velodyne_depth(read_velodyne(velo), calib.img_from_velo(), H, W, vo);
+    if (!o.export_gt.empty()) write_depth_png(o.export_gt + "/" + numbered("%06lld", static_cast<long long>(i)) + ".png", gt);
+    const auto err = eigen_image_errors(gt, depth.clamp_min(1e-3), eo);
+    if (err.pixels > 0) {
+      const double v[7] = {err.abs_rel, err.sq_rel, err.rmse, err.rmse_log, err.a1, err.a2, err.a3};
+      for (int k = 0; k < 7; ++k) sums[k] += v[k];
+      ++images;
+      pixels += err.pixels;
+    }
+    progress(i, entries.size(), "image");
+  }
+  if (images == 0) throw std::runtime_error("no test image had valid ground-truth pixels");
+  EvalResult r;
+  const char* names[7] = {"abs_rel", "sq_rel", "rmse", "rmse_log", "a1", "a2", "a3"};
+  for (int k = 0; k < 7; ++k) r.metrics.emplace_back(names[k], sums[k] / static_cast<double>(images));
+  r.counts = {{"images", images}, {"pixels", pixels}, {"listed", static_cast<int64_t>(entries.size())}};
+  return r;
+}
+
+torch::Tensor flow_calib_K(const std::string& root, const std::string& name) {
+  for (const auto& dir : {root + "/training/calib_cam_to_cam", root + "/../data_scene_flow_calib/training/calib_cam_to_cam"}) {
+    const std::string p = dir + "/" + name + ".txt";
+    if (fs::exists(p)) return read_key_values(p).matrix("P_rect_02", 3, 4).slice(1, 0, 3);
+  }
+  throw std::runtime_error("calibration for pair " + name + " not found (looked in " + root +
+                           "/training/calib_cam_to_cam/" + name + ".txt)");
+}
+
+EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predictor* pred) {
+  std::vector<std::string> names;
+  if (!o.split_file.empty()) {
+    for (const auto& line : read_lines(o.split_file)) {
+      const auto base = fs::path(line).filename().string();  // 000123_10.png
+      if (base.size() < 10 || base.substr(6) != "_10.png")
+        throw std::runtime_error(o.split_file + ": expected lines like training/image_2/000123_10.png, got '" + line + "'");
+      names.push_back(base.substr(0, 6));
+    }
+  } else {
+    const std::string dir = root + "/training/image_2";
+    if (!fs::is_directory(dir)) throw std::runtime_error("KITTI 2015 images not found: '" + dir + "' (--data-root)");
+    for (const auto& e : fs::directory_iterator(dir)) {
+      const auto f = e.path().filename().string();
+      if (f.size() == 13 && f.substr(6) == "_10.png") names.push_back(f.substr(0, 6));
+    }
+    std::sort(names.begin(), names.end());
+  }
+  if (names.empty()) throw std::runtime_error("no flow pairs to evaluate under " + root);
+  double epe_noc = 0, epe_occ = 0, fl_noc = 0, fl_occ = 0;
+  int64_t px_noc = 0, px_occ = 0;
+  for (size_t i = 0; i < names.size(); ++i) {
+    const std::string t = root + "/training/image_2/" + names[i] + "_10.png";
+    const std::string s = root + "/training/image_2/" + names[i] + "_11.png";
+    const std::string gocc = root + "/training/flow_occ/" + names[i] + "_10.png";
+    const std::string gnoc = root + "/training/flow_noc/" + names[i] + "_10.png";
+    for (const auto* p : {&t, &s, &gocc, &gnoc}) require_file(*p, "pair " + names[i]);
+    torch::Tensor flow;
+    if (pred) {
+      int64_t H = 0, W = 0;
+      const auto a = net_input(t, *pred, &H, &W), b = net_input(s, *pred);
+      auto K = flow_calib_K(root, names[i]).clone();
+      K[0] *= static_cast<double>(pred->width()) / W;
+      K[1] *= static_cast<double>(pred->height()) / H;
+      flow = pred->flow(a, b, K.to(torch::kFloat32).unsqueeze(0))[0].cpu();
+    } else {
+      const std::string p = o.predictions + "/" + names[i] + "_10.png";
+      require_file(p, "flow prediction");
+      flow = read_flow_png(p).flow;
+    }
+    const auto occ = read_flow_png(gocc), noc = read_flow_png(gnoc);
+    const auto eo = flow_errors(occ.flow, occ.valid, flow), en = flow_errors(noc.flow, noc.valid, flow);
+    epe_occ += eo.epe;
+    fl_occ += eo.fl;
+    epe_noc += en.epe;
+    fl_noc += en.fl;
+    px_occ += eo.pixels;
+    px_noc += en.pixels;
+    progress(i, names.size(), "pair");
+  }
+  const double n = static_cast<double>(names.size());
+  EvalResult r;
+  r.metrics = {{"epe_all", epe_occ / n}, {"epe_noc", epe_noc / n}, {"fl_all", fl_occ / n}, {"fl_noc", fl_noc / n}};
+  r.counts = {{"pairs", static_cast<int64_t>(names.size())}, {"pixels_all", px_occ}, {"pixels_noc", px_noc}};
+  return r;
+}
+
+torch::Tensor positions(const torch::Tensor& poses) { return poses.slice(1, 0, 3).select(2, 3); }  // [N,3]
+
+EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predictor* pred) {
+  const std::string seq = root + "/sequences/" + o.sequence, gt_path = root + "/poses/" + o.sequence + ".txt";
+  require_file(gt_path, "ground-truth poses of sequence " + o.sequence);
+  const auto gt = read_poses(gt_path);
+  const int64_t n = gt.size(0);
+  torch::Tensor traj;
+  if (pred) {
+    if (pred->config().data.seq_length != 3)
+      throw std::runtime_error("odometry inference expects a 3-frame PoseNet, this checkpoint has seq_length " +
+                               std::to_string(pred->config().data.seq_length));
+    auto image = [&](int64_t f) {
+      const std::string p = seq + "/image_2/" + numbered("%06lld", static_cast<long long>(f)) + ".png";
+      require_file(p, "odometry image");
+      return net_input(p, *pred);
+    };
+    std::vector<torch::Tensor> frames;
+    for (int64_t f = 0; f < n; ++f) frames.push_back(image(f));
+    std::vector<torch::Tensor> cam_to_world = {torch::eye(4, torch::kFloat64)};
+    for (int64_t j = 0; j + 1 < n; ++j) {  // T_{j+1 <- j} from the snippet (j-1, j, j+1)
+      const auto T = pred->pose(frames[j], {frames[std::max<int64_t>(j - 1, 0)], frames[j + 1]})[0][1].cpu().to(torch::kFloat64);
+      cam_to_world.push_back(cam_to_world.back().matmul(torch::inverse(T)));
+      progress(static_cast<size_t>(j), static_cast<size_t>(n - 1), "frame");
+    }
+    traj = torch::stack(cam_to_world);
+  } else {
+    traj = read_poses(o.predictions);
+    if (traj.size(0) != n)
+      throw std::runtime_error(o.predictions + ": " + std::to_string(traj.size(0)) + " poses, the sequence has " +
+                               std::to_string(n));
+  }
+  if (!o.output_poses.empty()) write_poses(o.output_poses, traj);
+  std::vector<int64_t> centres;
+  if (!o.split_file.empty()) {
+    for (const auto& e : read_split(o.split_file)) centres.push_back(e.frame);
+  } else {
+    for (int64_t i = 0; i < n; ++i) centres.push_back(i);
+  }
+  std::vector<double> ates;
+  for (int64_t c : centres) {
+    if (c < 2 || c + 2 >= n) continue;  // snippets need two neighbours on each side
+    auto rel = [&](const torch::Tensor& P) {
+      return positions(torch::inverse(P[c - 2]).unsqueeze(0).matmul(P.slice(0, c - 2, c + 3)));
+    };
+    ates.push_back(snippet_ate(rel(gt), rel(traj)));
+  }
+  if (ates.empty()) throw std::runtime_error("sequence " + o.sequence + " has no 5-frame snippet");
+  const auto t = torch::tensor(ates, torch::kFloat64);
+  EvalResult r;
+  r.metrics = {{"ate_mean", t.mean().item<double>()},
+               {"ate_std", ates.size() > 1 ? t.std(false).item<double>() : 0.0},
+               {"trajectory_rmse_sim3", aligned_trajectory_rmse(positions(gt), positions(traj))}};
+  r.counts = {{"snippets", static_cast<int64_t>(ates.size())}, {"frames", n}};
+  return r;
+}
+
+}  // namespace
+
+std::string split_root(const std::string& split, const std::string& root) {
+  const std::string sub = split == "eigen" ? "/raw" : split == "kitti2015" ? "/kitti2015" : "/odometry";
+  return fs::is_directory(root + sub) ? root + sub : root;
+}
+
+EvalResult evaluate(const EvalOptions& o, Predictor* pred) {
+  if (!pred && o.predictions.empty()) throw std::runtime_error("nothing to evaluate: give --checkpoint or --predictions");
+  if (!fs::is_directory(o.data_root)) throw std::runtime_error("data root '" + o.data_root + "' is not a directory (--data-root)");
+  const std::string root = split_root(o.split, o.data_root);
+  EvalResult r;
+  if (o.split == "eigen") r = eval_eigen(o, root, pred);
+  else if (o.split == "kitti2015") r = eval_kitti2015(o, root, pred);
+  else if (o.split == "odometry") r = eval_odometry(o, root, pred);
+  else throw std::runtime_error("unknown split '" + o.split + "' (eigen, kitti2015, odometry)");
+  r.split = o.split;
+  r.source = pred ? pred->path() : o.predictions;
+  r.data_root = root;
+  return r;
+}
+
+std::string EvalResult::json() const {
+  std::ostringstream s;
+  s.precision(9);
+  auto q = [](const std::string& x) {
+    std::string out = "\"";
+    for (char c : x) out += (c == '"' || c == '\\') ? std::string("\\") + c : std::string(1, c);
+    return out + "\"";
+  };
+  s << "{\n  \"split\": " << q(split) << ",\n  \"source\": " << q(source) << ",\n  \"data_root\": " << q(data_root)
+    << ",\n  \"metrics\": {";
+  for (size_t i = 0; i < metrics.size(); ++i) s << (i ? ", " : "") << q(metrics[i].first) << ": " << metrics[i].second;
+  s << "},\n  \"counts\": {";
+  for (size_t i = 0; i < counts.size(); ++i) s << (i ? ", " : "") << q(counts[i].first) << ": " << counts[i].second;
+  s << "}\n}\n";
+  return s.str();
+}
+
+EvalResult read_result(const std::string& path) {
+  YAML::Node n;
+  try {
+    n = YAML::LoadFile(path);
+  } catch (const std::exception& e) {
+    throw std::runtime_error("cannot read results '" + path + "': " + e.what());
+  }
+  EvalResult r;
+  r.split = n["split"].as<std::string>("");
+  r.source = n["source"].as<std::string>("");
+  for (const auto& kv : n["metrics"]) r.metrics.emplace_back(kv.first.as<std::string>(), kv.second.as<double>());
+  for (const auto& kv : n["counts"]) r.counts.emplace_back(kv.first.as<std::string>(), kv.second.as<int64_t>());
+  return r;
+}
+
+std::string format_results(const std::vector<EvalResult>& results, const std::vector<std::string>& names) {
+  std::ostringstream s;
+  std::vector<std::string> keys;
+  for (const auto& r : results)
+    for (const auto& m : r.metrics)
+      if (std::find(keys.begin(), keys.end(), m.first) == keys.end()) keys.push_back(m.first);
+  s << fmt::format("{:<22}", "metric");
+  for (const auto& n : names) s << fmt::format(" {:>14}", n.size() > 14 ? n.substr(n.size() - 14) : n);
+  s << "\n";
+  for (const auto& k : keys) {
+    s << fmt::format("{:<22}", k);
+    for (const auto& r : results) {
+      auto it = std::find_if(r.metrics.begin(), r.metrics.end(), [&](const auto& m) { return m.first == k; });
+      s << (it == r.metrics.end() ? fmt::format(" {:>14}", "-") : fmt::format(" {:>14.4f}", it->second));
+    }
+    s << "\n";
+  }
+  for (size_t i = 0; i < results.size(); ++i) {
+    s << names[i] << ":";
+    for (const auto& c : results[i].counts) s << " " << c.first << " " << c.second;
+    s << "\n";
+  }
+  return s.str();
+}
+
+torch::Tensor read_npy(const std::string& path) {
+  const std::string bytes = read_text_file(path);
+  if (bytes.size() < 10 || bytes.compare(0, 6, "\x93NUMPY") != 0)
+    throw std::runtime_error(path + ": not a NumPy .npy file");
+  const int major = static_cast<unsigned char>(bytes[6]);
+  const size_t hlen = major == 1 ? (static_cast<unsigned char>(bytes[8]) | (static_cast<unsigned char>(bytes[9]) << 8))
+                                 : (static_cast<unsigned char>(bytes[8]) | (static_cast<unsigned char>(bytes[9]) << 8) |
+                                    (static_cast<size_t>(static_cast<unsigned char>(bytes[10])) << 16));
+  const size_t start = major == 1 ? 10 : 12;
+  const std::string header = bytes.substr(start, hlen);
+  const bool f4 = header.find("'<f4'") != std::string::npos, f8 = header.find("'<f8'") != std::string::npos;
+  if (!f4 && !f8) throw std::runtime_error(path + ": only little-endian float32/float64 arrays are supported");
+  if (header.find("'fortran_order': True") != std::string::npos)
+    throw std::runtime_error(path + ": Fortran-order arrays are not supported");
+  const auto a = header.find('('), b = header.find(')');
+  std::vector<int64_t> shape;
+  std::istringstream dims(header.substr(a + 1, b - a - 1));
+  std::string tok;
+  while (std::getline(dims, tok, ','))
+    if (!trim(tok).empty()) shape.push_back(std::stoll(trim(tok)));
+  int64_t count = 1;
+  for (auto d : shape) count *= d;
+  const size_t need = static_cast<size_t>(count) * (f4 ? 4 : 8);
+  if (bytes.size() - start - hlen < need) throw std::runtime_error(path + ": truncated array data");
+  auto t = torch::empty(shape, f4 ? torch::kFloat32 : torch::kFloat64);
+  std::memcpy(t.data_ptr(), bytes.data() + start + hlen, need);
+  return t.to(torch::kFloat32);
+}
+
+}  // namespace geo

@@ -1,0 +1,50 @@
+// The evaluation protocols of reference.md Sec. 5 over KITTI-format folders (real KITTI or a
+// geo_synth world), from a checkpoint or from precomputed predictions:
+//   eigen      depth on the Eigen test images, Velodyne ground truth, Garg crop, median scaling, 80 m
+//   kitti2015  flow EPE on flow_noc and flow_occ, Fl-all, over the image_2/%06d_10.png pairs
+//   odometry   pose ATE over 5-frame snippets (SfMLearner formula), and the full trajectory's RMS
+//              error after a Sim(3) alignment; the predicted trajectory as a KITTI pose file
+#pragma once
+
+#include "eval/predictor.h"
+
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace geo {
+
+struct EvalOptions {
+  std::string split;            // eigen | kitti2015 | odometry
+  std::string data_root;        // KITTI raw / KITTI 2015 / odometry root, or a geo_synth world root
+  std::string split_file;       // subset / order; default: the split's standard list or all pairs/frames
+  std::string predictions;      // evaluate these instead of a checkpoint (formats: geo_eval --help)
+  std::string export_gt;        // eigen: write the ground-truth depth maps here (uint16, depth x 256)
+  std::string sequence = "09";  // odometry sequence
+  std::string output_poses;     // odometry: write the predicted trajectory here
+  bool matlab_offset = true;    // eigen: pixel = round(x/z) - 1 as in the reference code
+};
+
+struct EvalResult {
+  std::string split, source, data_root;
+  std::vector<std::pair<std::string, double>> metrics;
+  std::vector<std::pair<std::string, int64_t>> counts;
+  std::string json() const;
+};
+
+// predictor may be null when options.predictions is set. Throws naming the missing/bad file.
+EvalResult evaluate(const EvalOptions& options, Predictor* predictor);
+
+// "<root>/raw", "<root>/kitti2015" or "<root>/odometry" when `root` is a geo_synth world, else root.
+std::string split_root(const std::string& split, const std::string& root);
+
+// One table, one column per result (results of the same split side by side).
+std::string format_results(const std::vector<EvalResult>& results, const std::vector<std::string>& names);
+
+// Reads a results JSON written by EvalResult::json().
+EvalResult read_result(const std::string& path);
+
+// Minimal NumPy .npy reader for float32 / float64 arrays (C order) -> float32 tensor.
+torch::Tensor read_npy(const std::string& path);
+
+}  // namespace geo
