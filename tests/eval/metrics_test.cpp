@@ -1,0 +1,136 @@
+// Metrics against hand-computed values, and the protocols end to end on a synthetic world whose
+// ground truth, given back as "predictions", must score perfectly.
+#include "data/image_io.h"
+#include "data/synth_writer.h"
+#include "data/text_io.h"
+#include "eval/metrics.h"
+#include "eval/protocols.h"
+
+#include <gtest/gtest.h>
+
+#include "test_util.h"
+
+namespace geo {
+namespace {
+
+TEST(DepthMetrics, HandComputed) {
+  const auto gt = torch::tensor({2.0, 4.0}), pred = torch::tensor({1.0, 4.0});
+  const auto e = depth_errors(gt, pred);
+  EXPECT_NEAR(e.abs_rel, (0.5 + 0) / 2, 1e-12);          // |2-1|/2
+  EXPECT_NEAR(e.sq_rel, (1.0 / 2 + 0) / 2, 1e-12);       // 1/2
+  EXPECT_NEAR(e.rmse, std::sqrt(0.5), 1e-12);
+  EXPECT_NEAR(e.rmse_log, std::sqrt(std::pow(std::log(2.0), 2) / 2), 1e-12);
+  EXPECT_NEAR(e.a1, 0.5, 1e-12);  // ratio 2 fails 1.25, 1.5625 and 1.953
+  EXPECT_NEAR(e.a2, 0.5, 1e-12);
+  EXPECT_NEAR(e.a3, 0.5, 1e-12);
+  EXPECT_NEAR(depth_errors(torch::tensor({1.9}), torch::tensor({1.0})).a3, 1.0, 1e-12);
+}
+
+TEST(DepthMetrics, EigenImageMedianScalingAndMask) {
+  auto gt = torch::zeros({100, 100});
+  gt.slice(0, 50, 90).slice(1, 10, 90).fill_(10.0);
+  gt[60][20] = 90.0;  // beyond 80 m: masked out
+  gt[10][20] = 5.0;   // above the Garg crop: masked out
+  const auto pred = torch::full({50, 50}, 2.0);  // another size and scale
+  double scale = 0;
+  const auto e = eigen_image_errors(gt, pred, {}, &scale);
+  EXPECT_NEAR(scale, 5.0, 1e-9);
+  EXPECT_NEAR(e.abs_rel, 0.0, 1e-9);
+  EXPECT_EQ(e.pixels, 40 * 80 - 1);
+}
+
+TEST(FlowMetrics, EpeAndFlOutliers) {
+  auto gt = torch::zeros({2, 2, 2});
+  gt[0].fill_(10.0);
+  auto pred = gt.clone();
+  pred[0][0][0] = 14.0;  // EPE 4 > 3 and > 0.5: outlier
+  pred[1][0][1] = 1.0;   // EPE 1
+  auto valid = torch::ones({1, 2, 2});
+  valid[0][1][1] = 0;
+  const auto e = flow_errors(gt, valid, pred);
+  EXPECT_NEAR(e.epe, (4.0 + 1.0 + 0.0) / 3, 1e-9);
+  EXPECT_NEAR(e.fl, 1.0 / 3, 1e-9);
+  EXPECT_EQ(e.pixels, 3);
+  // A half-size prediction is upsampled with its vectors doubled.
+  const auto half = torch::full({2, 1, 1}, 5.0);
+  EXPECT_NEAR(flow_errors(torch::full({2, 2, 2}, 10.0), torch::ones({2, 2}), half).epe, 0.0, 1e-9);
+}
+
+TEST(PoseMetrics, SnippetAteIsScaleAndOffsetInvariantAndHandComputed) {
+  const auto gt = torch::tensor({0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 2.0, 0.0, 0.0, 3.0, 0.0, 0.0, 4.0}).view({5, 3});
+  EXPECT_NEAR(snippet_ate(gt, gt * 0.5 + 3.0), 0.0, 1e-12);
+  // Zero motion: scale has no effect (0/0 -> 1), error = sqrt(0+1+4+9+16)/5.
+  EXPECT_NEAR(snippet_ate(gt, torch::zeros({5, 3})), std::sqrt(30.0) / 5, 1e-12);
+  // Similarity alignment of a rotated, scaled, shifted trajectory is exact.
+  const auto traj = torch::rand({20, 3}, torch::kFloat64);
+  const auto R = torch::tensor({0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0}, torch::kFloat64).view({3, 3});
+  EXPECT_NEAR(aligned_trajectory_rmse(traj, 2.5 * traj.matmul(R.t()) + 1.0), 0.0, 1e-9);
+}
+
+TEST(Protocols, GroundTruthPredictionsScorePerfectlyOnASyntheticWorld) {
+  auto o = SynthOptions::preset_named("tiny");
+  o.train_drives = 1;
+  o.test_drives = 1;
+  o.frames_per_drive = 6;
+  o.flow_pairs = 2;
+  o.odometry_frames = 8;
+  const auto root = test::fresh_dir("protocols");
+  write_synth_world(root + "/world", o);
+  // Depth: the dense ground truth as predictions, named by line of the test list.
+  const auto tests = read_lines(root + "/world/raw/splits/eigen/test_files.txt");
+  for (size_t i = 0; i < tests.size(); ++i) {
+    const auto d = tests[i].substr(0, tests[i].find("/image_02"));
+    const auto f = tests[i].substr(tests[i].rfind('/') + 1);
+    std::filesystem::create_directories(root + "/depth");
+    std::filesystem::copy_file(root + "/world/raw/" + d + "/proj_depth/groundtruth/image_02/" + f,
+                               root + "/depth/" + std::string(6 - std::to_string(i).size(), '0') + std::to_string(i) + ".png");
+  }
+  EvalOptions e;
+  e.split = "eigen";
+  e.data_root = root + "/world";
+  e.predictions = root + "/depth";
+  e.export_gt = root + "/gt";
+  const auto depth = evaluate(e, nullptr);
+  EXPECT_EQ(depth.counts[0].second, static_cast<int64_t>(tests.size()));
+  // The protocol's ground truth is the Velodyne x (27 cm behind the camera here, as in KITTI) at
+  // round(x/z) - 1, so even the dense camera-z truth scores near, not exactly, zero.
+  EXPECT_LT(depth.metrics[0].second, 0.1) << "abs_rel of the truth";
+  EXPECT_GT(depth.metrics[4].second, 0.95);
+  EXPECT_TRUE(std::filesystem::exists(root + "/gt/000000.png"));
+  e.matlab_offset = false;
+  const double exact = evaluate(e, nullptr).metrics[0].second;
+  EXPECT_LT(exact, depth.metrics[0].second);
+  std::printf("abs_rel of the dense truth: %.4f (reference pixel shift), %.4f (exact pixels)\n", depth.metrics[0].second, exact);
+  // Flow: the ground truth itself.
+  EvalOptions f;
+  f.split = "kitti2015";
+  f.data_root = root + "/world";
+  f.predictions = root + "/world/kitti2015/training/flow_occ";
+  const auto flow = evaluate(f, nullptr);
+  EXPECT_NEAR(flow.metrics[0].second, 0.0, 1e-9);
+  EXPECT_EQ(flow.counts[0].second, 2);
+  test::write_text(root + "/pairs.txt", "training/image_2/000001_10.png\n");
+  f.split_file = root + "/pairs.txt";
+  EXPECT_EQ(evaluate(f, nullptr).counts[0].second, 1);
+  test::write_text(root + "/pairs.txt", "training/image_2/000007_10.png\n");
+  GEO_EXPECT_THROW_WITH(evaluate(f, nullptr), "000007");
+  // Pose: the ground-truth trajectory, and zero motion.
+  EvalOptions p;
+  p.split = "odometry";
+  p.data_root = root + "/world";
+  p.predictions = root + "/world/odometry/poses/09.txt";
+  const auto pose = evaluate(p, nullptr);
+  EXPECT_NEAR(pose.metrics[0].second, 0.0, 1e-6);
+  EXPECT_EQ(pose.counts[0].second, 4);  // centres 2..5 of 8 frames
+  write_poses(root + "/still.txt", torch::eye(4, torch::kFloat64).repeat({8, 1, 1}));
+  p.predictions = root + "/still.txt";
+  EXPECT_GT(evaluate(p, nullptr).metrics[0].second, 0.5);
+  // Results survive a JSON round trip.
+  test::write_text(root + "/r.json", pose.json());
+  const auto back = read_result(root + "/r.json");
+  EXPECT_EQ(back.split, "odometry");
+  EXPECT_NEAR(back.metrics[0].second, pose.metrics[0].second, 1e-9);
+}
+
+}  // namespace
+}  // namespace geo
