@@ -34,6 +34,9 @@ int main(int argc, char** argv) {
   app.add_option("--checkpoint", checkpoint, "checkpoint file or run folder (default: newest run in --runs)");
   app.add_option("--runs", runs, "where to look for the newest run when --checkpoint is not given");
   app.add_option("--predictions", o.predictions, "evaluate precomputed predictions instead of a model");
+  std::string untrained;
+  app.add_option("--untrained", untrained, "evaluate an untrained model of this config (baseline)");
+  app.add_flag("--trivial", o.trivial, "evaluate the trivial baseline: constant depth, zero flow, zero motion");
   app.add_option("--split-file", o.split_file, "subset or order: image paths, 'folder frame side' lines or flow pair paths");
   app.add_option("--sequence", o.sequence, "odometry sequence (default 09)");
   app.add_option("--output", output, "write the results as JSON here");
@@ -60,7 +63,9 @@ int main(int argc, char** argv) {
         throw std::runtime_error("no data root: '" + o.data_root + "' does not exist; give --data-root DIR or set GEO_KITTI_ROOT");
     }
     std::unique_ptr<geo::Predictor> predictor;
-    if (o.predictions.empty()) {
+    if (!untrained.empty()) {
+      predictor = std::make_unique<geo::Predictor>(geo::load_config(geo::resolve_config_path(untrained)), device);
+    } else if (o.predictions.empty() && !o.trivial) {
       if (checkpoint.empty()) {
         checkpoint = geo::latest_run_checkpoint(runs);
         if (checkpoint.empty())
@@ -68,6 +73,8 @@ int main(int argc, char** argv) {
                                    "'), or --predictions PATH");
       }
       predictor = std::make_unique<geo::Predictor>(checkpoint, device);
+    }
+    if (predictor) {
       spdlog::info("model {} ({}x{}, FlowNet {})", predictor->path(), predictor->width(), predictor->height(),
                    predictor->has_flow() ? "yes" : "no: rigid flow only");
     }

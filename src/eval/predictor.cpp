@@ -38,6 +38,17 @@ Predictor::Predictor(const std::string& checkpoint, const std::string& device)
   if (nets_.flow) nets_.flow->eval();
 }
 
+Predictor::Predictor(const Config& config, const std::string& device)
+    : config_(config), path_("untrained (" + config.run.name + ", seed " + std::to_string(config.run.seed) + ")"),
+      device_(choose(device)) {
+  torch::manual_seed(static_cast<uint64_t>(config.run.seed));
+  nets_ = Networks::create(config_, true);
+  nets_.to(device_);
+  nets_.depth->eval();
+  nets_.pose->eval();
+  nets_.flow->eval();
+}
+
 torch::Tensor Predictor::depth(const torch::Tensor& image) {
   torch::NoGradGuard no_grad;
   return 1.0 / nets_.depth->forward(image.to(device_)).disp[0];

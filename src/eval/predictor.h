@@ -14,6 +14,8 @@ class Predictor {
  public:
   // `checkpoint`: a .pt file or a run folder (its best, else latest checkpoint).
   explicit Predictor(const std::string& checkpoint, const std::string& device = "auto");
+  // An untrained model of this config (seeded with run.seed): the "before training" baseline.
+  Predictor(const Config& config, const std::string& device);
   const Config& config() const { return config_; }
   const std::string& path() const { return path_; }
   int64_t height() const { return config_.data.height; }

@@ -75,7 +75,9 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
       const auto img = read_image(image);
       H = img.size(1);
       W = img.size(2);
-      if (npy.defined()) {
+      if (o.trivial) {
+        depth = torch::ones({H, W});  // any constant: median scaling makes it the best constant
+      } else if (npy.defined()) {
         depth = npy[static_cast<int64_t>(i)];
       } else {
         const std::string p = o.predictions + "/" + numbered("%06lld", static_cast<long long>(i)) + ".png";
@@ -146,6 +148,8 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
       K[0] *= static_cast<double>(pred->width()) / W;
       K[1] *= static_cast<double>(pred->height()) / H;
       flow = pred->flow(a, b, K.to(torch::kFloat32).unsqueeze(0))[0].cpu();
+    } else if (o.trivial) {
+      flow = torch::zeros({2, 1, 1});
     } else {
       const std::string p = o.predictions + "/" + names[i] + "_10.png";
       require_file(p, "flow prediction");
@@ -194,6 +198,8 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
       progress(static_cast<size_t>(j), static_cast<size_t>(n - 1), "frame");
     }
     traj = torch::stack(cam_to_world);
+  } else if (o.trivial) {
+    traj = torch::eye(4, torch::kFloat64).repeat({n, 1, 1});
   } else {
     traj = read_poses(o.predictions);
     if (traj.size(0) != n)
@@ -233,7 +239,7 @@ std::string split_root(const std::string& split, const std::string& root) {
 }
 
 EvalResult evaluate(const EvalOptions& o, Predictor* pred) {
-  if (!pred && o.predictions.empty()) throw std::runtime_error("nothing to evaluate: give --checkpoint or --predictions");
+  if (!pred && o.predictions.empty() && !o.trivial) throw std::runtime_error("nothing to evaluate: give --checkpoint or --predictions");
   if (!fs::is_directory(o.data_root)) throw std::runtime_error("data root '" + o.data_root + "' is not a directory (--data-root)");
   const std::string root = split_root(o.split, o.data_root);
   EvalResult r;
@@ -242,7 +248,7 @@ EvalResult evaluate(const EvalOptions& o, Predictor* pred) {
   else if (o.split == "odometry") r = eval_odometry(o, root, pred);
   else throw std::runtime_error("unknown split '" + o.split + "' (eigen, kitti2015, odometry)");
   r.split = o.split;
-  r.source = pred ? pred->path() : o.predictions;
+  r.source = pred ? pred->path() : o.trivial ? "trivial baseline" : o.predictions;
   r.data_root = root;
   return r;
 }

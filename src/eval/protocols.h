@@ -23,6 +23,7 @@ struct EvalOptions {
   std::string sequence = "09";  // odometry sequence
   std::string output_poses;     // odometry: write the predicted trajectory here
   bool matlab_offset = true;    // eigen: pixel = round(x/z) - 1 as in the reference code
+  bool trivial = false;         // evaluate the trivial baseline: constant depth, zero flow, no motion
 };
 
 struct EvalResult {
@@ -32,7 +33,7 @@ struct EvalResult {
   std::string json() const;
 };
 
-// predictor may be null when options.predictions is set. Throws naming the missing/bad file.
+// predictor may be null when options.predictions or options.trivial is set. Throws naming the missing/bad file.
 EvalResult evaluate(const EvalOptions& options, Predictor* predictor);
 
 // "<root>/raw", "<root>/kitti2015" or "<root>/odometry" when `root` is a geo_synth world, else root.

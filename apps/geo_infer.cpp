@@ -1,0 +1,118 @@
+// geo_infer: what a trained model sees, for an image, a folder of frames or a video.
+//   geo_infer --checkpoint runs/x --input frame.png|frames/|clip.mp4 --output out/
+// Writes per frame <name>-disp.png (colour-mapped disparity) and <name>-depth.png (uint16, depth x
+// 256 in the network's scale, which monocular training leaves unknown); for consecutive frames also
+// <name>-flow.png (colour wheel, full flow to the next frame) and trajectory.txt (KITTI pose file,
+// camera-to-world, chained from the PoseNet's relative poses).
+#include <CLI/CLI.hpp>
+#include <spdlog/spdlog.h>
+
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include <algorithm>
+#include <filesystem>
+
+#include "core/logging.h"
+#include "data/image_io.h"
+#include "data/text_io.h"
+#include "eval/predictor.h"
+
+namespace fs = std::filesystem;
+
+int main(int argc, char** argv) {
+  CLI::App app{"geo_infer: depth, optical flow and camera trajectory of images, frame folders or videos"};
+  std::string checkpoint, input, output, device = "auto";
+  std::vector<double> intrinsics;
+  int64_t max_frames = 0;
+  app.add_option("--checkpoint", checkpoint, "checkpoint file or run folder")->required();
+  app.add_option("--input", input, "an image, a folder of frames (sorted by name) or a video file")->required();
+  app.add_option("--output", output, "output folder (created)")->required();
+  app.add_option("--device", device, "auto, cpu or cuda")->check(CLI::IsMember({"auto", "cpu", "cuda"}));
+  app.add_option("--intrinsics", intrinsics,
+                 "fx fy cx cy of the input images in pixels (default: KITTI-like 0.58 W, 1.92 H, W/2, H/2)")
+      ->expected(4);
+  app.add_option("--max-frames", max_frames, "stop after this many frames (0 = all)");
+  CLI11_PARSE(app, argc, argv);
+  try {
+    geo::setup_logging("info");
+    geo::Predictor model(checkpoint, device);
+    const int64_t h = model.height(), w = model.width();
+    // Frames as (name, image [1,3,h,w]) in order; the original size is kept for the intrinsics.
+    std::vector<std::pair<std::string, torch::Tensor>> frames;
+    int64_t H0 = 0, W0 = 0;
+    auto add_file = [&](const fs::path& p) {
+      frames.emplace_back(p.stem().string(), geo::read_image_resized(p.string(), h, w, &H0, &W0).unsqueeze(0));
+    };
+    if (fs::is_directory(input)) {
+      std::vector<fs::path> files;
+      for (const auto& e : fs::directory_iterator(input)) {
+        auto ext = e.path().extension().string();
+        std::transform(ext.begin(), ext.end(), ext.begin(), ::tolower);
+        if (ext == ".png" || ext == ".jpg" || ext == ".jpeg") files.push_back(e.path());
+      }
+      std::sort(files.begin(), files.end());
+      if (files.empty()) throw std::runtime_error("no .png/.jpg images in '" + input + "'");
+      for (const auto& f : files) {
+        if (max_frames > 0 && static_cast<int64_t>(frames.size()) >= max_frames) break;
+        add_file(f);
+      }
+    } else if (!fs::exists(input)) {
+      throw std::runtime_error("input '" + input + "' does not exist");
+    } else {
+      const auto ext = fs::path(input).extension().string();
+      if (ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".PNG" || ext == ".JPG") {
+        add_file(input);
+      } else {
+        cv::VideoCapture cap(input);
+        if (!cap.isOpened()) throw std::runtime_error("cannot open '" + input + "' as an image or a video");
+        cv::Mat bgr;
+        while (cap.read(bgr) && (max_frames <= 0 || static_cast<int64_t>(frames.size()) < max_frames)) {
+          H0 = bgr.rows;
+          W0 = bgr.cols;
+          cv::Mat rgb, small;
+          cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
+          cv::resize(rgb, small, cv::Size(static_cast<int>(w), static_cast<int>(h)), 0, 0, cv::INTER_AREA);
+          auto t = torch::from_blob(small.data, {small.rows, small.cols, 3}, torch::kUInt8)
+                       .permute({2, 0, 1}).to(torch::kFloat32).div(255).unsqueeze(0).contiguous();
+          char name[32];
+          std::snprintf(name, sizeof name, "%06zu", frames.size());
+          frames.emplace_back(name, t);
+        }
+        if (frames.empty()) throw std::runtime_error("video '" + input + "' has no readable frames");
+      }
+    }
+    fs::create_directories(output);
+    spdlog::info("{} frame(s) from {} at {}x{} -> {}", frames.size(), input, w, h, output);
+    auto K = torch::tensor({0.58 * w, 0.0, 0.5 * w, 0.0, 1.92 * h, 0.5 * h, 0.0, 0.0, 1.0}).view({1, 3, 3});
+    if (intrinsics.size() == 4) {
+      const double sx = static_cast<double>(w) / W0, sy = static_cast<double>(h) / H0;
+      K = torch::tensor({intrinsics[0] * sx, 0.0, intrinsics[2] * sx, 0.0, intrinsics[1] * sy, intrinsics[3] * sy,
+                         0.0, 0.0, 1.0}).view({1, 3, 3});
+    }
+    K = K.to(torch::kFloat32);
+    std::vector<torch::Tensor> trajectory = {torch::eye(4, torch::kFloat64)};
+    for (size_t i = 0; i < frames.size(); ++i) {
+      const auto& [name, img] = frames[i];
+      const auto depth = model.depth(img)[0].cpu();
+      geo::write_image(output + "/" + name + "-disp.png", geo::colorize_disparity(1.0 / depth));
+      geo::write_depth_png(output + "/" + name + "-depth.png", depth);
+      if (i + 1 < frames.size()) {
+        const auto& next = frames[i + 1].second;
+        if (model.config().data.seq_length == 3) {
+          geo::write_image(output + "/" + name + "-flow.png", geo::colorize_flow(model.flow(img, next, K)[0].cpu()));
+          const auto T = model.pose(img, {i > 0 ? frames[i - 1].second : img, next})[0][1].cpu().to(torch::kFloat64);
+          trajectory.push_back(trajectory.back().matmul(torch::inverse(T)));
+        }
+      }
+      if ((i + 1) % 10 == 0 || i + 1 == frames.size()) spdlog::info("  {}/{} frames", i + 1, frames.size());
+    }
+    if (trajectory.size() == frames.size() && frames.size() > 1)
+      geo::write_poses(output + "/trajectory.txt", torch::stack(trajectory));
+    spdlog::info("done: {}/*-disp.png, *-depth.png{}", output, frames.size() > 1 ? ", *-flow.png, trajectory.txt" : "");
+    return 0;
+  } catch (const std::exception& e) {
+    spdlog::error("{}", e.what());
+    return 1;
+  }
+}
