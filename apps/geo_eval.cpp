@@ -50,8 +50,12 @@ int main(int argc, char** argv) {
     geo::setup_logging("info");
     if (!compare.empty()) {
       std::vector<geo::EvalResult> results;
-      for (const auto& f : compare) results.push_back(geo::read_result(f));
-      std::printf("%s", geo::format_results(results, compare).c_str());
+      std::vector<std::string> names;  // columns named by file stem: trained.json -> trained
+      for (const auto& f : compare) {
+        results.push_back(geo::read_result(f));
+        names.push_back(std::filesystem::path(f).stem().string());
+      }
+      std::printf("%s", geo::format_results(results, names).c_str());
       return 0;
     }
     if (o.split.empty()) throw std::runtime_error("--split is required (eigen, kitti2015 or odometry); see --help");
