@@ -13,7 +13,7 @@
 
 #include <gtest/gtest.h>
 
-#include "test_util.h"
+#include "synth_world.h"
 
 namespace geo {
 namespace {
@@ -102,14 +102,8 @@ TEST(Synth, LidarLandsWhereTheDepthSaysThroughTheCalibration) {
 }
 
 TEST(Synth, WrittenWorldReadsBack) {
-  auto o = tiny();
-  o.train_drives = 1;
-  o.test_drives = 1;
-  o.frames_per_drive = 6;
-  o.flow_pairs = 1;
-  o.odometry_frames = 5;
-  const auto root = test::fresh_dir("world");
-  write_synth_world(root, o);
+  const auto o = tiny();
+  const auto root = test::write_small_world("world", 6, 1, 5);
   const SynthScene scene(1 * 1000003ULL + 0, 6);  // drive 1's seed (synth_writer.cpp)
   const auto f2 = render_frame(scene, 2, o);
   const std::string drive = root + "/raw/" + synth_drive_folder(1);

@@ -8,7 +8,7 @@
 
 #include <gtest/gtest.h>
 
-#include "test_util.h"
+#include "synth_world.h"
 
 namespace geo {
 namespace {
@@ -68,14 +68,8 @@ TEST(PoseMetrics, SnippetAteIsScaleAndOffsetInvariantAndHandComputed) {
 }
 
 TEST(Protocols, GroundTruthPredictionsScorePerfectlyOnASyntheticWorld) {
-  auto o = SynthOptions::preset_named("tiny");
-  o.train_drives = 1;
-  o.test_drives = 1;
-  o.frames_per_drive = 6;
-  o.flow_pairs = 2;
-  o.odometry_frames = 8;
   const auto root = test::fresh_dir("protocols");
-  write_synth_world(root + "/world", o);
+  std::filesystem::rename(test::write_small_world("protocols_world", 6, 2, 8), root + "/world");
   // Depth: the dense ground truth as predictions, named by line of the test list.
   const auto tests = read_lines(root + "/world/raw/splits/eigen/test_files.txt");
   for (size_t i = 0; i < tests.size(); ++i) {

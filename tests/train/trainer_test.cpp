@@ -6,24 +6,14 @@
 
 #include <gtest/gtest.h>
 
-#include "test_util.h"
+#include "synth_world.h"
 
 namespace geo {
 namespace {
 
 // One tiny world for the whole suite.
 const std::string& world() {
-  static const std::string root = [] {
-    auto o = SynthOptions::preset_named("tiny");
-    o.train_drives = 1;
-    o.test_drives = 1;
-    o.frames_per_drive = 10;
-    o.flow_pairs = 0;
-    o.odometry_frames = 5;
-    const auto dir = test::fresh_dir("trainer_world");
-    write_synth_world(dir, o);
-    return dir + "/raw";
-  }();
+  static const std::string root = test::write_small_world("trainer_world", 10, 0, 5) + "/raw";
   return root;
 }
 

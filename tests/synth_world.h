@@ -1,0 +1,23 @@
+// A small geo_synth world for tests: one training and one test drive of `frames` frames, a few
+// flow pairs and a short odometry sequence, at the tiny preset's 64x208.
+#pragma once
+
+#include "data/synth_writer.h"
+#include "test_util.h"
+
+namespace geo::test {
+
+inline std::string write_small_world(const std::string& name, int64_t frames, int flow_pairs,
+                                     int64_t odometry_frames) {
+  auto o = SynthOptions::preset_named("tiny");
+  o.train_drives = 1;
+  o.test_drives = 1;
+  o.frames_per_drive = frames;
+  o.flow_pairs = flow_pairs;
+  o.odometry_frames = odometry_frames;
+  const auto dir = fresh_dir(name);
+  write_synth_world(dir, o);
+  return dir;
+}
+
+}  // namespace geo::test
