@@ -1,139 +1,342 @@
-// geo_bench: parameter counts and inference timings of the paper's networks.
-//   geo_bench --summary                      parameter counts, FR on and off
-//   geo_bench [--config FILE] [--device cpu|cuda] [--batch N] [--json FILE]
-// Timings: median of --iters runs after --warmup runs (>= 10 warm-ups by default: fresh memory is
-// slow to touch on these machines), inference mode, BatchNorm in eval mode.
+// geo_bench: what geo costs, measured.
+//   geo_bench --summary                       parameter counts and FLOPs, FR on and off
+//   geo_bench [--config FILE] [--device cpu|cuda] [--batch 1,4] [--fr both|on|off]
+//             [--data-root DIR] [--json FILE]
+// (a) one training step of each stage of the config (forward, losses, backward, Adam), median of
+//     --train-iters after --train-warmup; (b) inference of the DepthNet, PoseNet and FlowNet
+//     separately and of the whole pipeline (depth + pose + rigid flow + residual flow of one pair),
+//     median of --iters after --warmup, at each --batch; (c) the data loader's samples/s on
+//     --data-root (a packed cache, or KITTI raw / a geo_synth world in the OpenCV build).
+// Peak memory: the process's peak resident set on CPU (reset before each measurement through
+// /proc/self/clear_refs), the caching allocator's peak on CUDA. FLOPs: as counted by LibTorch's
+// profiler (convolutions, matrix products, elementwise add/mul) for one forward pass.
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
+#include <torch/csrc/autograd/profiler_legacy.h>
 #include <torch/torch.h>
 
 #include <algorithm>
 #include <chrono>
 #include <fstream>
+#include <functional>
+#include <sstream>
 #include <thread>
 
 #include "core/config.h"
 #include "core/logging.h"
-#include "models/depth_net.h"
-#include "models/flow_net.h"
-#include "models/pose_net.h"
+#include "core/runtime.h"
+#include "core/state_io.h"
+#include "data/loader.h"
+#include "data/packed.h"
+#include "geometry/camera.h"
+#include "train/networks.h"
+#ifdef GEO_BENCH_PNG
+#include "train/data_source.h"
+#endif
+#ifdef GEO_BENCH_CUDA_STATS
+#include <c10/cuda/CUDACachingAllocator.h>
+#endif
 
 namespace {
 
 struct Row {
+  std::string section;  // params | infer | train | loader
   std::string name;
-  std::string fr;
+  std::string fr;       // on | off | -
+  int64_t batch = 0;
   int64_t params = 0;
-  double ms = -1;  // < 0: not timed
+  double ms = -1;       // median per call; < 0: not timed
+  double per_sample_ms = -1;
+  double samples_per_s = -1;
+  double peak_mb = -1;
+  double gflops = -1;   // one forward pass
 };
 
-template <class Fn> double median_ms(Fn&& fn, int warmup, int iters, const torch::Device& device) {
-  auto sync = [&] {
-    if (device.is_cuda()) torch::cuda::synchronize();
-  };
+class Memory {
+ public:
+  explicit Memory(const torch::Device& d) : device_(d) {}
+  void reset() const {
+#ifdef GEO_BENCH_CUDA_STATS
+    if (device_.is_cuda()) {
+      c10::cuda::CUDACachingAllocator::resetPeakStats(device_.index() < 0 ? 0 : device_.index());
+      return;
+    }
+#endif
+    std::ofstream("/proc/self/clear_refs") << "5";  // resets VmHWM (Linux >= 4.0)
+  }
+  double peak_mb() const {
+#ifdef GEO_BENCH_CUDA_STATS
+    if (device_.is_cuda()) {
+      const auto stats = c10::cuda::CUDACachingAllocator::getDeviceStats(device_.index() < 0 ? 0 : device_.index());
+      return static_cast<double>(stats.allocated_bytes[0].peak) / (1 << 20);  // [0]: aggregate
+    }
+#endif
+    if (device_.is_cuda()) return -1;
+    std::ifstream in("/proc/self/status");
+    std::string line;
+    while (std::getline(in, line))
+      if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
+    return -1;
+  }
+
+ private:
+  torch::Device device_;
+};
+
+void sync(const torch::Device& device) {
+  if (device.is_cuda()) torch::cuda::synchronize();
+}
+
+// Median milliseconds of `iters` calls after `warmup` calls; fills ms and peak_mb of `row`.
+void time_into(Row& row, const std::function<void()>& fn, int warmup, int iters, const torch::Device& device) {
+  const Memory mem(device);
+  mem.reset();
   for (int i = 0; i < warmup; ++i) fn();
-  sync();
+  sync(device);
   std::vector<double> times;
   for (int i = 0; i < iters; ++i) {
     const auto t0 = std::chrono::steady_clock::now();
     fn();
-    sync();
+    sync(device);
     times.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
   }
   std::sort(times.begin(), times.end());
-  return times[times.size() / 2];
+  row.ms = times[times.size() / 2];
+  row.per_sample_ms = row.ms / static_cast<double>(row.batch);
+  row.samples_per_s = 1000.0 / row.per_sample_ms;
+  row.peak_mb = mem.peak_mb();
+}
+
+// FLOPs of one call as LibTorch's profiler counts them.
+double gflops_of(const std::function<void()>& fn) {
+  namespace prof = torch::autograd::profiler;
+  prof::enableProfilerLegacy(torch::profiler::impl::ProfilerConfig(torch::profiler::impl::ProfilerState::CPU,
+                                                                   /*report_input_shapes=*/true, false, false,
+                                                                   /*with_flops=*/true));
+  fn();
+  const auto lists = prof::disableProfilerLegacy();
+  uint64_t flops = 0;
+  for (const auto& list : lists)
+    for (auto e : list) flops += e.flops();
+  return static_cast<double>(flops) / 1e9;
+}
+
+// KITTI-like intrinsics at the network's size (fx = 0.58 W, fy = 1.92 H, centre).
+torch::Tensor intrinsics(int64_t B, int64_t H, int64_t W, const torch::Device& device) {
+  auto K = torch::tensor({0.58 * W, 0.0, 0.5 * W, 0.0, 1.92 * H, 0.5 * H, 0.0, 0.0, 1.0}, torch::kFloat32);
+  return K.view({1, 3, 3}).expand({B, 3, 3}).contiguous().to(device);
+}
+
+std::string fmt_num(double v, const char* spec = "{:.1f}") { return v < 0 ? "-" : fmt::format(spec, v); }
+
+std::string json_num(double v) { return v < 0 ? "null" : fmt::format("{:.4f}", v); }
+
+std::vector<geo::StageConfig> stages_to_time(const geo::Config& config, bool config_given) {
+  if (config_given) return config.stages;
+  geo::StageConfig s1;  // the paper's schedule: stage 1 depth + pose, stage 2 all three jointly
+  geo::StageConfig s2;
+  s2.name = "stage2";
+  s2.train = {"depth", "pose", "flow"};
+  return {s1, s2};
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"geo_bench: parameter counts and inference timings of DepthNet, PoseNet and FlowNet"};
-  std::string config_path, device_name = "cpu", json_path;
-  bool summary = false;
-  int batch = 1, warmup = 10, iters = 5, threads = 0;
-  app.add_option("--config", config_path, "YAML config (model and data size); default: the paper's settings");
+  CLI::App app{"geo_bench: parameter counts, FLOPs, inference and training-step timings, loader throughput"};
+  std::string config_path, device_name = "cpu", json_path, fr_mode = "both", data_root;
+  std::vector<int> batches = {1, 4};
+  bool summary = false, no_infer = false, no_train = false, no_fold = false;
+  int warmup = 10, iters = 5, train_warmup = 2, train_iters = 5, threads = 0, train_batch = 0, loader_batches = 20;
+  app.add_option("--config", config_path,
+                 "YAML config (model, data size, stages); default: the paper's settings and its two stages");
   app.add_option("--device", device_name, "cpu or cuda")->check(CLI::IsMember({"cpu", "cuda"}));
-  app.add_option("--batch", batch, "batch size for the timings")->check(CLI::PositiveNumber);
-  app.add_option("--warmup", warmup, "untimed runs before timing")->check(CLI::NonNegativeNumber);
-  app.add_option("--iters", iters, "timed runs (the median is reported)")->check(CLI::PositiveNumber);
+  app.add_option("--batch", batches, "inference batch sizes, e.g. 1,4")->delimiter(',')->check(CLI::PositiveNumber);
+  app.add_option("--train-batch", train_batch, "training batch size (default: each stage's batch_size)");
+  app.add_option("--fr", fr_mode, "feature refinement: both, on or off")->check(CLI::IsMember({"both", "on", "off"}));
+  app.add_option("--warmup", warmup, "untimed inference runs before timing (fresh memory is slow to touch)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--iters", iters, "timed inference runs (the median is reported)")->check(CLI::PositiveNumber);
+  app.add_option("--train-warmup", train_warmup, "untimed training steps")->check(CLI::NonNegativeNumber);
+  app.add_option("--train-iters", train_iters, "timed training steps (median)")->check(CLI::PositiveNumber);
   app.add_option("--threads", threads, "intra-op threads (0 = all cores)")->check(CLI::NonNegativeNumber);
-  app.add_option("--json", json_path, "also write the results as JSON to this file");
-  app.add_flag("--summary", summary, "only print parameter counts (FR on and off), no timings");
+  app.add_option("--data-root", data_root, "also time the loader on this data (packed cache; PNG data in the OpenCV build)");
+  app.add_option("--loader-batches", loader_batches, "batches timed for the loader")->check(CLI::PositiveNumber);
+  app.add_flag("--no-infer", no_infer, "skip the inference timings");
+  app.add_flag("--no-train", no_train, "skip the training-step timings");
+  app.add_flag("--no-fold", no_fold, "inference with BatchNorm as separate layers (default: folded into the convolutions)");
+  app.add_option("--json", json_path, "also write every row as JSON to this file");
+  app.add_flag("--summary", summary, "only parameter counts and FLOPs, no timings");
   CLI11_PARSE(app, argc, argv);
+  geo::keep_freed_memory();
 
   try {
     geo::setup_logging("info");
-    const geo::Config config = config_path.empty()
-                                   ? geo::parse_config("", "<defaults>")
-                                   : geo::load_config(geo::resolve_config_path(config_path));
+    const geo::Config config = config_path.empty() ? geo::parse_config("", "<defaults>")
+                                                   : geo::load_config(geo::resolve_config_path(config_path));
     if (device_name == "cuda" && !torch::cuda::is_available())
-      throw std::runtime_error("--device cuda: CUDA is not available in this build/machine");
+      throw std::runtime_error("--device cuda: CUDA is not available in this build/machine (use --device cpu)");
     const torch::Device device(device_name == "cuda" ? torch::kCUDA : torch::kCPU);
+    if (device.is_cuda()) at::globalContext().setBenchmarkCuDNN(true);  // fixed shapes: autotune once
     const int nthreads = threads > 0 ? threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
     torch::set_num_threads(nthreads);
-    const int64_t H = config.data.height, W = config.data.width;
-    spdlog::info("geo_bench: LibTorch {}, device {}, {} threads, input {}x{}, batch {}", TORCH_VERSION,
-                 device.str(), nthreads, H, W, batch);
+    const int64_t H = config.data.height, W = config.data.width, N = config.data.seq_length - 1;
+    spdlog::info("geo_bench: LibTorch {}, device {}, {} threads, {}x{}, {}-frame snippets, encoder ResNet-{}",
+                 TORCH_VERSION, device.str(), nthreads, H, W, N + 1, config.model.encoder_depth);
 
+    std::vector<bool> frs;
+    if (fr_mode != "off") frs.push_back(true);
+    if (fr_mode != "on") frs.push_back(false);
     std::vector<Row> rows;
-    torch::manual_seed(0);
-    for (bool fr : {true, false}) {
-      geo::ModelConfig m = config.model;
-      m.use_fr = fr;
-      geo::DepthNet depth(geo::DepthNetOptions::from(m));
-      geo::PoseNetOptions po;
-      po.seq_length = config.data.seq_length;
-      geo::PoseNet pose(po);
-      geo::FlowNet flow(geo::FlowNetOptions::from(m));
+
+    // Parameter counts and FLOPs (batch 1).
+    for (bool fr : frs) {
+      geo::Config c = config;
+      c.model.use_fr = fr;
+      torch::manual_seed(0);
+      auto nets = geo::Networks::create(c, true);
+      nets.prepare_inference(false);
+      torch::InferenceMode guard;
+      const auto img = torch::rand({1, 3, H, W});
+      std::vector<torch::Tensor> srcs(N, img);
+      const auto flow_in = torch::rand({1, 12, H, W});
+      const auto K = intrinsics(1, H, W, torch::kCPU);
       const std::string tag = fr ? "on" : "off";
-      Row d{"DepthNet", tag, geo::count_parameters(*depth)}, p{"PoseNet", "-", geo::count_parameters(*pose)},
-          f{"FlowNet", tag, geo::count_parameters(*flow)};
-      if (!summary) {
-        for (torch::nn::Module* net : {static_cast<torch::nn::Module*>(depth.get()),
-                                       static_cast<torch::nn::Module*>(pose.get()),
-                                       static_cast<torch::nn::Module*>(flow.get())}) {
-          net->to(device);
-          net->eval();
-        }
-        torch::InferenceMode guard;
-        const auto img = torch::rand({batch, 3, H, W}, device);
-        std::vector<torch::Tensor> srcs(config.data.seq_length - 1, img);
-        const auto flow_in = torch::rand({batch, 12, H, W}, device);
-        spdlog::info("timing FR {} ...", tag);
-        d.ms = median_ms([&] { depth(img); }, warmup, iters, device);
-        if (fr) p.ms = median_ms([&] { pose(img, srcs); }, warmup, iters, device);
-        f.ms = median_ms([&] { flow(flow_in); }, warmup, iters, device);
-      }
+      Row d{"params", "DepthNet", tag, 1, geo::count_parameters(*nets.depth)};
+      d.gflops = gflops_of([&] { nets.depth(img); });
       rows.push_back(d);
-      if (fr) rows.push_back(p);
+      if (fr) {
+        Row p{"params", "PoseNet", "-", 1, geo::count_parameters(*nets.pose)};
+        p.gflops = gflops_of([&] { nets.pose(img, srcs); });
+        rows.push_back(p);
+      }
+      Row f{"params", "FlowNet", tag, 1, geo::count_parameters(*nets.flow)};
+      f.gflops = gflops_of([&] { nets.flow(flow_in); });
       rows.push_back(f);
+      Row all{"params", "pipeline", tag, 1, d.params + geo::count_parameters(*nets.pose) + f.params};
+      all.gflops = gflops_of([&] { geo::predict_pair(nets, img, img, K, config.loss.ssim_alpha); });
+      rows.push_back(all);
     }
 
-    std::printf("\n%-10s %-4s %14s %12s\n", "network", "FR", "parameters", "ms/batch");
-    for (const auto& r : rows) {
-      std::printf("%-10s %-4s %14lld %12s\n", r.name.c_str(), r.fr.c_str(), static_cast<long long>(r.params),
-                  r.ms < 0 ? "-" : fmt::format("{:.1f}", r.ms).c_str());
+    if (!summary && !no_infer) {
+      for (bool fr : frs) {
+        geo::Config c = config;
+        c.model.use_fr = fr;
+        torch::manual_seed(0);
+        auto nets = geo::Networks::create(c, true);
+        nets.to(device);
+        nets.prepare_inference(!no_fold);
+        torch::InferenceMode guard;
+        const std::string tag = fr ? "on" : "off";
+        for (int b : batches) {
+          spdlog::info("inference, FR {}, batch {} ...", tag, b);
+          const auto img = torch::rand({b, 3, H, W}, device), img2 = torch::rand({b, 3, H, W}, device);
+          std::vector<torch::Tensor> srcs(N, img2);
+          const auto flow_in = torch::rand({b, 12, H, W}, device);
+          const auto K = intrinsics(b, H, W, device);
+          Row d{"infer", "DepthNet", tag, b}, p{"infer", "PoseNet", "-", b}, f{"infer", "FlowNet", tag, b},
+              all{"infer", "pipeline", tag, b};
+          time_into(d, [&] { nets.depth(img); }, warmup, iters, device);
+          if (fr || frs.size() == 1) time_into(p, [&] { nets.pose(img, srcs); }, warmup, iters, device);
+          time_into(f, [&] { nets.flow(flow_in); }, warmup, iters, device);
+          time_into(all, [&] { geo::predict_pair(nets, img, img2, K, c.loss.ssim_alpha); }, warmup, iters, device);
+          rows.push_back(d);
+          if (p.ms >= 0) rows.push_back(p);
+          rows.push_back(f);
+          rows.push_back(all);
+        }
+      }
     }
-    std::printf("\nFR adds %lld parameters to the DepthNet and %lld to the FlowNet.\n",
-                static_cast<long long>(rows[0].params - rows[3].params),
-                static_cast<long long>(rows[2].params - rows[4].params));
-    if (!summary) {
-      std::printf("FR inference overhead: DepthNet %+.1f ms, FlowNet %+.1f ms (batch %d, %s).\n",
-                  rows[0].ms - rows[3].ms, rows[2].ms - rows[4].ms, batch, device.str().c_str());
+
+    if (!summary && !no_train) {
+      for (const auto& stage : stages_to_time(config, !config_path.empty())) {
+        for (bool fr : frs) {
+          geo::Config c = config;
+          c.model.use_fr = fr;
+          torch::manual_seed(0);
+          auto nets = geo::Networks::create(c, stage.uses_flow());
+          nets.to(device);
+          nets.set_modes(stage);
+          torch::optim::Adam adam(nets.parameters_of(stage), torch::optim::AdamOptions(stage.learning_rate)
+                                                                  .betas({c.optimizer.beta1, c.optimizer.beta2}));
+          const int64_t b = train_batch > 0 ? train_batch : stage.batch_size;
+          const auto tgt = torch::rand({b, 3, H, W}, device), srcs = torch::rand({b, N, 3, H, W}, device);
+          const auto K = intrinsics(b, H, W, device);
+          Row r{"train", stage.name + " step", fr ? "on" : "off", b};
+          spdlog::info("training step {} [{}], FR {}, batch {} ...", stage.name, fmt::join(stage.train, ","), r.fr, b);
+          time_into(r, [&] {
+            adam.zero_grad();
+            auto out = geo::compute_losses(nets, tgt, srcs, K, stage, c);
+            out.losses.total.backward();
+            adam.step();
+          }, train_warmup, train_iters, device);
+          rows.push_back(r);
+        }
+      }
+    }
+
+    if (!summary && !data_root.empty()) {
+      geo::DataConfig d = config.data;
+      d.root = data_root;
+      std::shared_ptr<const geo::SnippetSource> source;
+      std::string kind = "packed";
+#ifdef GEO_BENCH_PNG
+      auto data = geo::open_training_data(d);
+      source = data.train;
+      kind = data.format;
+#else
+      if (!geo::is_packed_cache(data_root + "/train"))
+        throw std::runtime_error("--data-root " + data_root +
+                                 ": this build has no OpenCV; give a packed cache (geo_prepare --out)");
+      source = std::make_shared<geo::PackedSnippets>(data_root + "/train");
+#endif
+      geo::LoaderOptions lo;
+      lo.batch_size = train_batch > 0 ? train_batch : config.stages.front().batch_size;
+      lo.workers = d.num_workers;
+      lo.augment = d.augment;
+      spdlog::info("loader on {} ({}), batch {}, {} worker(s) ...", data_root, kind, lo.batch_size, lo.workers);
+      Row r{"loader", "loader (" + kind + ")", "-", lo.batch_size};
+      const Memory mem(torch::kCPU);
+      mem.reset();
+      r.samples_per_s = geo::measure_throughput(source, lo, loader_batches);
+      r.per_sample_ms = 1000.0 / r.samples_per_s;
+      r.ms = r.per_sample_ms * static_cast<double>(r.batch);
+      r.peak_mb = mem.peak_mb();
+      rows.push_back(r);
+    }
+
+    std::printf("\n%-7s %-22s %-3s %5s %12s %11s %10s %10s %9s %8s\n", "section", "what", "FR", "batch",
+                "parameters", "GFLOPs", "ms/call", "ms/sample", "samples/s", "peak MB");
+    for (const auto& r : rows) {
+      std::printf("%-7s %-22s %-3s %5lld %12s %11s %10s %10s %9s %8s\n", r.section.c_str(), r.name.c_str(),
+                  r.fr.c_str(), static_cast<long long>(r.batch), r.params > 0 ? std::to_string(r.params).c_str() : "-",
+                  fmt_num(r.gflops, "{:.2f}").c_str(), fmt_num(r.ms).c_str(), fmt_num(r.per_sample_ms).c_str(),
+                  fmt_num(r.samples_per_s).c_str(), fmt_num(r.peak_mb, "{:.0f}").c_str());
+    }
+    // FR overhead: the same row with FR on minus FR off.
+    for (const auto& on : rows) {
+      if (on.fr != "on" || on.ms < 0) continue;
+      for (const auto& off : rows)
+        if (off.fr == "off" && off.section == on.section && off.name == on.name && off.batch == on.batch)
+          std::printf("FR overhead, %s %s, batch %lld: %+.1f ms (%+.0f%%)\n", on.section.c_str(), on.name.c_str(),
+                      static_cast<long long>(on.batch), on.ms - off.ms, 100.0 * (on.ms / off.ms - 1.0));
     }
     if (!json_path.empty()) {
-      std::string json = "{\n  \"libtorch\": \"" + std::string(TORCH_VERSION) + "\",\n  \"device\": \"" +
-                         device.str() + "\",\n  \"threads\": " + std::to_string(nthreads) +
-                         ",\n  \"height\": " + std::to_string(H) + ",\n  \"width\": " + std::to_string(W) +
-                         ",\n  \"batch\": " + std::to_string(batch) + ",\n  \"networks\": [\n";
+      std::ostringstream js;
+      js << "{\n  \"libtorch\": \"" << TORCH_VERSION << "\",\n  \"device\": \"" << device.str()
+         << "\",\n  \"threads\": " << nthreads << ",\n  \"height\": " << H << ",\n  \"width\": " << W
+         << ",\n  \"bn_folded\": " << (no_fold ? "false" : "true") << ",\n  \"rows\": [\n";
       for (size_t i = 0; i < rows.size(); ++i) {
         const auto& r = rows[i];
-        json += fmt::format("    {{\"name\": \"{}\", \"fr\": \"{}\", \"parameters\": {}, \"ms\": {}}}{}\n", r.name,
-                            r.fr, r.params, r.ms < 0 ? "null" : fmt::format("{:.3f}", r.ms),
-                            i + 1 < rows.size() ? "," : "");
+        js << fmt::format("    {{\"section\": \"{}\", \"what\": \"{}\", \"fr\": \"{}\", \"batch\": {}, "
+                          "\"parameters\": {}, \"gflops\": {}, \"ms\": {}, \"ms_per_sample\": {}, "
+                          "\"samples_per_s\": {}, \"peak_mb\": {}}}{}\n",
+                          r.section, r.name, r.fr, r.batch, r.params, json_num(r.gflops), json_num(r.ms),
+                          json_num(r.per_sample_ms), json_num(r.samples_per_s), json_num(r.peak_mb),
+                          i + 1 < rows.size() ? "," : "");
       }
-      json += "  ]\n}\n";
-      geo::write_file_atomic(json_path, json);
+      js << "  ]\n}\n";
+      geo::write_file_atomic(json_path, js.str());
       spdlog::info("wrote {}", json_path);
     }
   } catch (const std::exception& e) {

@@ -12,6 +12,7 @@
 #include <filesystem>
 
 #include "core/logging.h"
+#include "core/runtime.h"
 #include "eval/protocols.h"
 
 int main(int argc, char** argv) {
@@ -46,6 +47,7 @@ int main(int argc, char** argv) {
   app.add_flag("--exact-pixels", no_matlab, "eigen: project Velodyne points without the reference code's -1 pixel shift");
   app.add_option("--compare", compare, "print these results JSON files side by side and exit")->expected(1, -1);
   CLI11_PARSE(app, argc, argv);
+  geo::keep_freed_memory();
   try {
     geo::setup_logging("info");
     if (!compare.empty()) {

@@ -14,6 +14,7 @@
 #include <filesystem>
 
 #include "core/logging.h"
+#include "core/runtime.h"
 #include "data/image_io.h"
 #include "data/text_io.h"
 #include "eval/predictor.h"
@@ -34,6 +35,7 @@ int main(int argc, char** argv) {
       ->expected(4);
   app.add_option("--max-frames", max_frames, "stop after this many frames (0 = all)");
   CLI11_PARSE(app, argc, argv);
+  geo::keep_freed_memory();
   try {
     geo::setup_logging("info");
     geo::Predictor model(checkpoint, device);

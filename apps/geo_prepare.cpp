@@ -6,11 +6,11 @@
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
-#include <chrono>
 #include <filesystem>
 
 #include "core/config.h"
 #include "core/logging.h"
+#include "core/runtime.h"
 #include "data/loader.h"
 #include "data/packed.h"
 #include "train/data_source.h"
@@ -28,6 +28,7 @@ int main(int argc, char** argv) {
   app.add_option("--batches", batches, "batches to time with --throughput")->check(CLI::PositiveNumber);
   app.add_option("--batch-size", batch_size, "batch size for --throughput (default: the first stage's)");
   CLI11_PARSE(app, argc, argv);
+  geo::keep_freed_memory();
   try {
     geo::setup_logging("info");
     const auto cfg = geo::load_config(geo::resolve_config_path(config_path), overrides);
@@ -39,13 +40,8 @@ int main(int argc, char** argv) {
       lo.batch_size = batch_size > 0 ? batch_size : cfg.stages.front().batch_size;
       lo.workers = cfg.data.num_workers;
       lo.augment = cfg.data.augment;
-      geo::BatchLoader loader(data.train, lo);
-      loader.next();  // warm-up: first batch includes thread start and file cache
-      const auto t0 = std::chrono::steady_clock::now();
-      for (int i = 0; i < batches; ++i) loader.next();
-      const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       spdlog::info("loader: {:.1f} samples/s ({} batches of {}, {}x{}, {} worker(s), augmentation {})",
-                   batches * lo.batch_size / s, batches, lo.batch_size, cfg.data.width, cfg.data.height,
+                   geo::measure_throughput(data.train, lo, batches), batches, lo.batch_size, cfg.data.width, cfg.data.height,
                    lo.workers, cfg.data.augment.enabled ? "on" : "off");
       return 0;
     }

@@ -9,6 +9,7 @@
 #include <filesystem>
 
 #include "core/logging.h"
+#include "core/runtime.h"
 #include "data/synth_writer.h"
 
 int main(int argc, char** argv) {
@@ -32,6 +33,7 @@ int main(int argc, char** argv) {
   app.add_option("--threads", threads, "render threads (0 = all cores)")->check(CLI::NonNegativeNumber);
   app.add_flag("--force", force, "write into a non-empty --out");
   CLI11_PARSE(app, argc, argv);
+  geo::keep_freed_memory();
   try {
     geo::setup_logging("info");
     auto o = geo::SynthOptions::preset_named(preset);

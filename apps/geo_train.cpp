@@ -10,6 +10,7 @@
 
 #include "core/config.h"
 #include "core/logging.h"
+#include "core/runtime.h"
 #include "train/trainer.h"
 
 int main(int argc, char** argv) {
@@ -29,6 +30,7 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"auto", "cpu", "cuda"}));
   app.add_option("--stop-after", opts.stop_after, "stop abruptly after N steps without a checkpoint (testing)");
   CLI11_PARSE(app, argc, argv);
+  geo::keep_freed_memory();
   try {
     geo::setup_logging("info");
     if (config_path.empty() && resume_dir.empty())

@@ -1,5 +1,7 @@
 #include "data/loader.h"
 
+#include <chrono>
+
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -152,6 +154,16 @@ Batch BatchLoader::next() {
   lock.unlock();
   cv_.notify_all();
   return b;
+}
+
+double measure_throughput(std::shared_ptr<const SnippetSource> source, const LoaderOptions& options, int batches) {
+  TORCH_CHECK(batches > 0, "measure_throughput: batches must be > 0");
+  BatchLoader loader(std::move(source), options);
+  loader.next();
+  const auto t0 = std::chrono::steady_clock::now();
+  for (int i = 0; i < batches; ++i) loader.next();
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return batches * static_cast<double>(options.batch_size) / s;
 }
 
 }  // namespace geo

@@ -73,4 +73,8 @@ class BatchLoader {
   std::vector<std::thread> threads_;
 };
 
+// Loader throughput in samples/s: `batches` batches timed after one warm-up batch (thread start,
+// file cache). Used by geo_prepare --throughput and geo_bench.
+double measure_throughput(std::shared_ptr<const SnippetSource> source, const LoaderOptions& options, int batches);
+
 }  // namespace geo

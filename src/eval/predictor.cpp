@@ -33,9 +33,7 @@ Predictor::Predictor(const std::string& checkpoint, const std::string& device)
   nets_ = Networks::create(config_, a.try_read("flow", flow));
   nets_.load(a, path_, false);
   nets_.to(device_);
-  nets_.depth->eval();
-  nets_.pose->eval();
-  if (nets_.flow) nets_.flow->eval();
+  nets_.prepare_inference();
 }
 
 Predictor::Predictor(const Config& config, const std::string& device)
@@ -44,9 +42,7 @@ Predictor::Predictor(const Config& config, const std::string& device)
   torch::manual_seed(static_cast<uint64_t>(config.run.seed));
   nets_ = Networks::create(config_, true);
   nets_.to(device_);
-  nets_.depth->eval();
-  nets_.pose->eval();
-  nets_.flow->eval();
+  nets_.prepare_inference();
 }
 
 torch::Tensor Predictor::depth(const torch::Tensor& image) {
@@ -65,14 +61,7 @@ torch::Tensor Predictor::pose(const torch::Tensor& tgt, const std::vector<torch:
 
 torch::Tensor Predictor::flow(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& K) {
   torch::NoGradGuard no_grad;
-  TORCH_CHECK(config_.data.seq_length == 3, "flow inference needs a 3-frame model, this one has seq_length ",
-              config_.data.seq_length);
-  StageConfig stage;
-  stage.train = has_flow() ? std::vector<std::string>{"depth", "pose", "flow"} : std::vector<std::string>{"depth", "pose"};
-  const auto t = tgt.to(device_), s = src.to(device_);
-  auto out = compute_losses(nets_, t, torch::stack({t, s}, 1), K.to(device_), stage, config_);
-  nets_.depth->eval();  // compute_losses does not change modes; keep it explicit
-  return has_flow() ? out.fwd_full[1][0] : out.rigid.fwd_flow[1][0];
+  return predict_pair(nets_, tgt.to(device_), src.to(device_), K.to(device_), config_.loss.ssim_alpha).flow;
 }
 
 std::string latest_run_checkpoint(const std::string& runs_dir) {

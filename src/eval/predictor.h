@@ -1,6 +1,6 @@
 // A trained model loaded from a checkpoint (its config travels inside), for evaluation and
 // inference: depth of an image, relative pose of a snippet, full flow of a pair. Inputs are RGB
-// in [0,1] at the network's size (config data.height x data.width); BatchNorm in eval mode.
+// in [0,1] at the network's size (config data.height x data.width); BatchNorm folded into the convolutions (eval mode).
 #pragma once
 
 #include "core/config.h"

@@ -1,6 +1,10 @@
 #include "train/networks.h"
 
 #include "core/state_io.h"
+#include "geometry/camera.h"
+#include "geometry/pose.h"
+#include "geometry/warp.h"
+#include "losses/photometric.h"
 
 #include <stdexcept>
 
@@ -67,6 +71,15 @@ void Networks::load(torch::serialize::InputArchive& archive, const std::string& 
     throw std::runtime_error(source + ": no FlowNet in this checkpoint");
 }
 
+void Networks::prepare_inference(bool fold) {
+  for (torch::nn::Module* m : {static_cast<torch::nn::Module*>(depth.get()), static_cast<torch::nn::Module*>(pose.get()),
+                               static_cast<torch::nn::Module*>(flow.get())}) {
+    if (!m) continue;
+    m->eval();
+    if (fold) fold_batchnorm(*m);
+  }
+}
+
 StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& srcs,
                           const torch::Tensor& K, const StageConfig& stage, const Config& config) {
   const int64_t B = tgt.size(0), N = srcs.size(1);
@@ -128,6 +141,26 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
   out.flow = flow_terms(out.rigid, out.fwd_full, bwd_full, config.loss);
   out.losses = total_loss(out.rigid, &*out.flow, stage.weights);
   return out;
+}
+
+PairPrediction predict_pair(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& src,
+                            const torch::Tensor& K, double ssim_alpha) {
+  TORCH_CHECK(tgt.dim() == 4 && tgt.size(1) == 3 && src.sizes() == tgt.sizes(), "predict_pair: tgt ",
+              tgt.sizes(), " and src ", src.sizes(), " must both be [B,3,H,W]");
+  const int64_t L = nets.pose->options.seq_length, before = (L - 1) / 2;
+  std::vector<torch::Tensor> snippet;  // sources in time order around the target
+  for (int64_t i = 0; i < L - 1; ++i) snippet.push_back(i < before ? tgt : src);
+  PairPrediction p;
+  p.disp = nets.depth->forward(tgt).disp[0];
+  p.src_from_tgt = pose_vec_to_matrix(nets.pose->forward(tgt, snippet).select(1, before));
+  p.rigid_flow = rigid_flow(1.0 / p.disp, p.src_from_tgt, K);
+  p.flow = p.rigid_flow;
+  if (nets.flow) {
+    const auto warped = warp(src, p.rigid_flow).image;
+    const auto error = photometric_error_channels(warped, tgt, ssim_alpha).norm(2, 1, true);
+    p.flow = p.rigid_flow + nets.flow->forward(flow_net_input(tgt, src, warped, p.rigid_flow, error)).flow[0];
+  }
+  return p;
 }
 
 }  // namespace geo

@@ -27,6 +27,10 @@ struct Networks {
   // Trainable networks in train mode; frozen ones in eval mode (BatchNorm statistics fixed, GeoNet).
   void set_modes(const StageConfig& stage);
   std::vector<torch::Tensor> parameters_of(const StageConfig& stage) const;
+  // Inference: every network in eval mode and, with `fold`, BatchNorm folded into the convolutions
+  // (ConvBnImpl::fold_batchnorm; same outputs up to rounding, fewer passes over memory). Call after
+  // loading and moving to the device; folded networks refuse to train.
+  void prepare_inference(bool fold = true);
   // Checkpoint I/O: one nested archive per network ("depth", "pose", "flow"). Loading is strict per
   // network; a network absent from the archive is an error unless `allow_missing_flow` and it is flow.
   void save(torch::serialize::OutputArchive& archive) const;
@@ -46,5 +50,19 @@ struct StepOutput {
 // joint stage 2 the flow losses also train depth and pose.
 StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& srcs,
                           const torch::Tensor& K, const StageConfig& stage, const Config& config);
+
+// Inference of one pair, without losses (what geo_eval, geo_infer and geo_bench's pipeline run):
+// DepthNet on the target only, the PoseNet on the snippet (tgt, tgt, src) for a 3-frame model
+// (zero motion before the target, the pair after it; a 5-frame model sees (tgt, tgt, tgt, src, src)),
+// the rigid flow tgt -> src at full resolution, and, when a FlowNet exists, its residual added.
+// tgt, src [B,3,H,W], K [B,3,3] on the networks' device; call under NoGradGuard/InferenceMode.
+struct PairPrediction {
+  torch::Tensor disp;          // [B,1,H,W] target disparity
+  torch::Tensor src_from_tgt;  // [B,4,4]
+  torch::Tensor rigid_flow;    // [B,2,H,W]
+  torch::Tensor flow;          // [B,2,H,W] full flow (= rigid_flow without a FlowNet)
+};
+PairPrediction predict_pair(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& src,
+                            const torch::Tensor& K, double ssim_alpha);
 
 }  // namespace geo

@@ -1,0 +1,77 @@
+// Inference/training shortcuts of the building blocks give the same values as the plain layers.
+#include <gtest/gtest.h>
+#include <torch/torch.h>
+
+#include "models/depth_net.h"
+#include "models/layers.h"
+
+namespace geo {
+namespace {
+
+torch::Tensor nearest_x2(const torch::Tensor& x) { return upsample2(x, "nearest"); }
+
+TEST(Layers, Conv3x3OfUpsampledEqualsConvOfUpsampledImage) {
+  torch::manual_seed(3);
+  for (auto hw : std::vector<std::pair<int64_t, int64_t>>{{1, 1}, {2, 7}, {5, 4}}) {
+    const auto x = torch::randn({2, 3, hw.first, hw.second}, torch::kFloat64).requires_grad_();
+    const auto w = torch::randn({4, 3, 3, 3}, torch::kFloat64).requires_grad_();
+    const auto b = torch::randn({4}, torch::kFloat64).requires_grad_();
+    const auto ref = torch::conv2d(nearest_x2(x), w, b, 1, 1);
+    const auto got = conv3x3_of_upsampled(x, w, b);
+    ASSERT_EQ(got.sizes(), ref.sizes());
+    EXPECT_LT((got - ref).abs().max().item<double>(), 1e-12) << hw.first << "x" << hw.second;
+    // Same gradients for x, w and b.
+    const auto g = torch::randn_like(ref);
+    const auto gr = torch::autograd::grad({ref}, {x, w, b}, {g});
+    const auto gg = torch::autograd::grad({got}, {x, w, b}, {g});
+    for (int i = 0; i < 3; ++i) EXPECT_LT((gr[i] - gg[i]).abs().max().item<double>(), 1e-11) << i;
+  }
+  // Without bias.
+  const auto x = torch::randn({1, 2, 3, 3}, torch::kFloat64), w = torch::randn({5, 2, 3, 3}, torch::kFloat64);
+  EXPECT_LT((conv3x3_of_upsampled(x, w, {}) - torch::conv2d(nearest_x2(x), w, {}, 1, 1)).abs().max().item<double>(),
+            1e-12);
+  EXPECT_THROW(conv3x3_of_upsampled(x, torch::randn({5, 3, 3, 3}, torch::kFloat64), {}), c10::Error);
+}
+
+TEST(Layers, FoldedBatchNormGivesTheSameOutputAndRefusesToTrain) {
+  torch::manual_seed(4);
+  ConvBn cb(3, 6, 3, 2);
+  {
+    torch::NoGradGuard no_grad;  // non-trivial statistics and affine
+    cb->bn->running_mean.uniform_(-1, 1);
+    cb->bn->running_var.uniform_(0.5, 2);
+    cb->bn->weight.uniform_(0.5, 1.5);
+    cb->bn->bias.uniform_(-1, 1);
+  }
+  cb->eval();
+  const auto x = torch::randn({2, 3, 9, 11});
+  const auto ref = cb(x).detach();
+  EXPECT_FALSE(cb->folded());
+  EXPECT_EQ(fold_batchnorm(*cb), 1);
+  EXPECT_TRUE(cb->folded());
+  EXPECT_LT((cb(x) - ref).abs().max().item<double>(), 1e-5);
+  cb->train();
+  EXPECT_THROW(cb(x), c10::Error);
+  ConvBn up(3, 4, 3);
+  up->eval();
+  const auto before = up->forward_upsampled(x).detach();
+  fold_batchnorm(*up);
+  EXPECT_LT((up->forward_upsampled(x) - before).abs().max().item<double>(), 1e-5);
+  EXPECT_LT((before - up(nearest_x2(x))).abs().max().item<double>(), 1e-5);
+}
+
+TEST(Layers, FoldedDepthNetMatchesTheUnfoldedOne) {
+  torch::manual_seed(5);
+  DepthNetOptions o;
+  o.encoder_depth = 18;
+  DepthNet net(o);
+  net->eval();
+  const auto x = torch::rand({1, 3, 64, 96});
+  torch::NoGradGuard no_grad;
+  const auto ref = net(x).disp[0].clone();
+  fold_batchnorm(*net);
+  EXPECT_LT((net(x).disp[0] - ref).abs().max().item<double>(), 1e-4);
+}
+
+}  // namespace
+}  // namespace geo
