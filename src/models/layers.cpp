@@ -23,7 +23,7 @@ torch::Tensor ConvBnImpl::forward(const torch::Tensor& x) {
   } else {
     y = bn(conv(x));
   }
-  return relu ? torch::relu_(y) : y;
+  return relu ? torch::relu(y) : y;
 }
 
 torch::Tensor ConvBnImpl::forward_upsampled(const torch::Tensor& x) {
@@ -38,7 +38,7 @@ torch::Tensor ConvBnImpl::forward_upsampled(const torch::Tensor& x) {
   } else {
     y = bn(conv3x3_of_upsampled(x, conv->weight, conv->bias));
   }
-  return relu ? torch::relu_(y) : y;
+  return relu ? torch::relu(y) : y;
 }
 
 torch::Tensor conv3x3_of_upsampled(const torch::Tensor& x, const torch::Tensor& weight, const torch::Tensor& bias) {
