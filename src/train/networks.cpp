@@ -72,12 +72,13 @@ void Networks::load(torch::serialize::InputArchive& archive, const std::string& 
 }
 
 void Networks::prepare_inference(bool fold) {
-  for (torch::nn::Module* m : {static_cast<torch::nn::Module*>(depth.get()), static_cast<torch::nn::Module*>(pose.get()),
-                               static_cast<torch::nn::Module*>(flow.get())}) {
-    if (!m) continue;
-    m->eval();
-    if (fold) fold_batchnorm(*m);
-  }
+  auto prepare = [fold](torch::nn::Module& m) {
+    m.eval();
+    if (fold) fold_batchnorm(m);
+  };
+  prepare(*depth);
+  prepare(*pose);
+  if (flow) prepare(*flow);  // null for checkpoints without a FlowNet
 }
 
 StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& srcs,
