@@ -131,6 +131,17 @@ std::string fmt_num(double v, const char* spec = "{:.1f}") { return v < 0 ? "-" 
 
 std::string json_num(double v) { return v < 0 ? "null" : fmt::format("{:.4f}", v); }
 
+// The config with FR switched on or off, and its networks freshly initialised (seed 0) on `device`.
+std::pair<geo::Config, geo::Networks> networks_with_fr(const geo::Config& config, bool fr, bool with_flow,
+                                                       const torch::Device& device) {
+  geo::Config c = config;
+  c.model.use_fr = fr;
+  torch::manual_seed(0);
+  auto nets = geo::Networks::create(c, with_flow);
+  nets.to(device);
+  return {c, nets};
+}
+
 std::vector<geo::StageConfig> stages_to_time(const geo::Config& config, bool config_given) {
   if (config_given) return config.stages;
   geo::StageConfig s1;  // the paper's schedule: stage 1 depth + pose, stage 2 all three jointly
@@ -191,10 +202,9 @@ int main(int argc, char** argv) {
 
     // Parameter counts and FLOPs (batch 1).
     for (bool fr : frs) {
-      geo::Config c = config;
-      c.model.use_fr = fr;
-      torch::manual_seed(0);
-      auto nets = geo::Networks::create(c, true);
+      auto made = networks_with_fr(config, fr, true, torch::kCPU);
+      const geo::Config& c = made.first;
+      geo::Networks& nets = made.second;
       nets.prepare_inference(false);
       torch::InferenceMode guard;
       const auto img = torch::rand({1, 3, H, W});
@@ -214,17 +224,15 @@ int main(int argc, char** argv) {
       f.gflops = gflops_of([&] { nets.flow(flow_in); });
       rows.push_back(f);
       Row all{"params", "pipeline", tag, 1, d.params + geo::count_parameters(*nets.pose) + f.params};
-      all.gflops = gflops_of([&] { geo::predict_pair(nets, img, img, K, config.loss.ssim_alpha); });
+      all.gflops = gflops_of([&] { geo::predict_pair(nets, img, img, K, c.loss.ssim_alpha); });
       rows.push_back(all);
     }
 
     if (!summary && !no_infer) {
       for (bool fr : frs) {
-        geo::Config c = config;
-        c.model.use_fr = fr;
-        torch::manual_seed(0);
-        auto nets = geo::Networks::create(c, true);
-        nets.to(device);
+        auto made = networks_with_fr(config, fr, true, device);
+        const geo::Config& c = made.first;
+        geo::Networks& nets = made.second;
         nets.prepare_inference(!no_fold);
         torch::InferenceMode guard;
         const std::string tag = fr ? "on" : "off";
@@ -251,11 +259,9 @@ int main(int argc, char** argv) {
     if (!summary && !no_train) {
       for (const auto& stage : stages_to_time(config, !config_path.empty())) {
         for (bool fr : frs) {
-          geo::Config c = config;
-          c.model.use_fr = fr;
-          torch::manual_seed(0);
-          auto nets = geo::Networks::create(c, stage.uses_flow());
-          nets.to(device);
+          auto made = networks_with_fr(config, fr, stage.uses_flow(), device);
+          const geo::Config& c = made.first;
+          geo::Networks& nets = made.second;
           nets.set_modes(stage);
           torch::optim::Adam adam(nets.parameters_of(stage), torch::optim::AdamOptions(stage.learning_rate)
                                                                   .betas({c.optimizer.beta1, c.optimizer.beta2}));
