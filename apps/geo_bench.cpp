@@ -11,14 +11,17 @@
 // /proc/self/clear_refs), the caching allocator's peak on CUDA. FLOPs: as counted by LibTorch's
 // profiler (convolutions, matrix products, elementwise add/mul) for one forward pass.
 #include <CLI/CLI.hpp>
+#include <spdlog/fmt/chrono.h>
 #include <spdlog/spdlog.h>
 #include <torch/csrc/autograd/profiler_legacy.h>
 #include <torch/torch.h>
 
 #include <algorithm>
 #include <chrono>
+#include <ctime>
 #include <fstream>
 #include <functional>
+#include <map>
 #include <sstream>
 #include <thread>
 
@@ -127,6 +130,55 @@ torch::Tensor intrinsics(int64_t B, int64_t H, int64_t W, const torch::Device& d
   return K.view({1, 3, 3}).expand({B, 3, 3}).contiguous().to(device);
 }
 
+// Runs `fn` once under LibTorch's profiler and prints the `top` operators by self time (time in the
+// operator minus the operators it called), with call counts and inclusive time: where a step goes.
+// With `by_shape`, operators are told apart by their input shapes too.
+void print_profile(const std::string& title, const std::function<void()>& fn, int top, bool by_shape) {
+  namespace prof = torch::autograd::profiler;
+  prof::enableProfilerLegacy(torch::profiler::impl::ProfilerConfig(torch::profiler::impl::ProfilerState::CPU,
+                                                                   /*report_input_shapes=*/by_shape, false, false, false));
+  fn();
+  const auto lists = prof::disableProfilerLegacy();
+  struct Stat { double self_us = 0, total_us = 0; int64_t calls = 0; };
+  std::map<std::string, Stat> stats;
+  double all_us = 0;
+  for (const auto& list : lists) {  // one list per thread; ranges nest within a thread
+    struct Open { const prof::LegacyEvent* e; double child_us; };
+    std::vector<Open> stack;
+    for (const auto& e : list) {
+      if (e.kind() == prof::EventKind::PushRange) {
+        stack.push_back({&e, 0.0});
+      } else if (e.kind() == prof::EventKind::PopRange && !stack.empty()) {
+        const Open open = stack.back();
+        stack.pop_back();
+        const double us = open.e->cpuElapsedUs(e);
+        std::string key = open.e->name();
+        if (by_shape) {
+          std::vector<std::string> dims;
+          for (const auto& shape : open.e->shapes())
+            if (!shape.empty()) dims.push_back(fmt::format("{}", fmt::join(shape, "x")));
+          key += " " + fmt::format("{}", fmt::join(dims, ","));
+        }
+        auto& st = stats[key];
+        st.total_us += us;
+        st.self_us += us - open.child_us;
+        st.calls += 1;
+        if (!stack.empty()) stack.back().child_us += us; else all_us += us;
+      }
+    }
+  }
+  std::vector<std::pair<std::string, Stat>> sorted(stats.begin(), stats.end());
+  std::sort(sorted.begin(), sorted.end(), [](const auto& a, const auto& b) { return a.second.self_us > b.second.self_us; });
+  const int width = by_shape ? 90 : 52;
+  std::printf("\nprofile: %s (one call, %.0f ms in operators)\n%-*s %7s %10s %10s %6s\n", title.c_str(), all_us / 1e3,
+              width, "operator", "calls", "self ms", "total ms", "self%");
+  for (int i = 0; i < top && i < static_cast<int>(sorted.size()); ++i) {
+    const auto& [name, st] = sorted[i];
+    std::printf("%-*s %7lld %10.1f %10.1f %5.1f%%\n", width, name.substr(0, width).c_str(), static_cast<long long>(st.calls),
+                st.self_us / 1e3, st.total_us / 1e3, 100.0 * st.self_us / std::max(all_us, 1.0));
+  }
+}
+
 std::string fmt_num(double v, const char* spec = "{:.1f}") { return v < 0 ? "-" : fmt::format(spec, v); }
 
 std::string json_num(double v) { return v < 0 ? "null" : fmt::format("{:.4f}", v); }
@@ -151,6 +203,49 @@ std::vector<geo::StageConfig> stages_to_time(const geo::Config& config, bool con
   return {s1, s2};
 }
 
+// "AMD EPYC 7B13 (2 cores)": the processor as /proc/cpuinfo names it.
+std::string cpu_description() {
+  std::ifstream in("/proc/cpuinfo");
+  std::string line, model = "unknown CPU";
+  while (std::getline(in, line))
+    if (line.rfind("model name", 0) == 0) {
+      model = line.substr(line.find(':') + 2);
+      break;
+    }
+  return fmt::format("{} ({} logical cores)", model, std::thread::hardware_concurrency());
+}
+
+// FR-on minus FR-off of the same row: "+12.3 ms (+4%)"; empty when there is no pair.
+std::vector<std::string> fr_overheads(const std::vector<Row>& rows) {
+  std::vector<std::string> out;
+  for (const auto& on : rows) {
+    if (on.fr != "on" || on.ms < 0) continue;
+    for (const auto& off : rows)
+      if (off.fr == "off" && off.section == on.section && off.name == on.name && off.batch == on.batch)
+        out.push_back(fmt::format("{} {}, batch {}: {:+.1f} ms ({:+.0f}%)", on.section, on.name, on.batch,
+                                  on.ms - off.ms, 100.0 * (on.ms / off.ms - 1.0)));
+  }
+  return out;
+}
+
+std::string markdown_table(const std::vector<Row>& rows, const std::string& machine, const std::string& command) {
+  std::string md = fmt::format("Machine: {}; LibTorch {}; {}.\nCommand: `{}`\n\n", machine, TORCH_VERSION,
+                               fmt::format("{:%Y-%m-%d}", fmt::localtime(std::time(nullptr))), command);
+  md += "| section | what | FR | batch | parameters | GFLOPs | ms/call | ms/sample | samples/s | peak MB |\n"
+        "|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const auto& r : rows)
+    md += fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n", r.section, r.name, r.fr, r.batch,
+                      r.params > 0 ? std::to_string(r.params) : "-", fmt_num(r.gflops, "{:.2f}"),
+                      fmt_num(r.ms), fmt_num(r.per_sample_ms), fmt_num(r.samples_per_s),
+                      fmt_num(r.peak_mb, "{:.0f}"));
+  const auto overheads = fr_overheads(rows);
+  if (!overheads.empty()) {
+    md += "\nFR overhead (FR on minus FR off):\n\n";
+    for (const auto& o : overheads) md += "- " + o + "\n";
+  }
+  return md;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -158,7 +253,9 @@ int main(int argc, char** argv) {
   std::string config_path, device_name = "cpu", json_path, fr_mode = "both", data_root;
   std::vector<int> batches = {1, 4};
   bool summary = false, no_infer = false, no_train = false, no_fold = false;
-  int warmup = 10, iters = 5, train_warmup = 2, train_iters = 5, threads = 0, train_batch = 0, loader_batches = 20;
+  int warmup = 10, iters = 5, train_warmup = 2, train_iters = 5, threads = 0, train_batch = 0, loader_batches = 20,
+      profile_top = 0;
+  bool profile_shapes = false;
   app.add_option("--config", config_path,
                  "YAML config (model, data size, stages); default: the paper's settings and its two stages");
   app.add_option("--device", device_name, "cpu or cuda")->check(CLI::IsMember({"cpu", "cuda"}));
@@ -177,6 +274,13 @@ int main(int argc, char** argv) {
   app.add_flag("--no-train", no_train, "skip the training-step timings");
   app.add_flag("--no-fold", no_fold, "inference with BatchNorm as separate layers (default: folded into the convolutions)");
   app.add_option("--json", json_path, "also write every row as JSON to this file");
+  std::string markdown_path;
+  app.add_option("--markdown", markdown_path,
+                 "also write the table as markdown (machine, LibTorch version and command in its header)");
+  app.add_option("--profile", profile_top,
+                 "after timing, profile one more call of each inference/training row and print its N most costly "
+                 "operators (self time)")->check(CLI::NonNegativeNumber);
+  app.add_flag("--profile-shapes", profile_shapes, "--profile tells operators apart by input shapes too");
   app.add_flag("--summary", summary, "only parameter counts and FLOPs, no timings");
   CLI11_PARSE(app, argc, argv);
   geo::keep_freed_memory();
@@ -248,6 +352,12 @@ int main(int argc, char** argv) {
           if (fr || frs.size() == 1) time_into(p, [&] { nets.pose(img, srcs); }, warmup, iters, device);
           time_into(f, [&] { nets.flow(flow_in); }, warmup, iters, device);
           time_into(all, [&] { geo::predict_pair(nets, img, img2, K, c.loss.ssim_alpha); }, warmup, iters, device);
+          if (profile_top > 0) {
+            const std::string what = fmt::format("FR {}, batch {}", tag, b);
+            print_profile("DepthNet inference, " + what, [&] { nets.depth(img); }, profile_top, profile_shapes);
+            print_profile("pipeline inference, " + what,
+                          [&] { geo::predict_pair(nets, img, img2, K, c.loss.ssim_alpha); }, profile_top, profile_shapes);
+          }
           rows.push_back(d);
           if (p.ms >= 0) rows.push_back(p);
           rows.push_back(f);
@@ -270,13 +380,15 @@ int main(int argc, char** argv) {
           const auto K = intrinsics(b, H, W, device);
           Row r{"train", stage.name + " step", fr ? "on" : "off", b};
           spdlog::info("training step {} [{}], FR {}, batch {} ...", stage.name, fmt::join(stage.train, ","), r.fr, b);
-          time_into(r, [&] {
+          const auto step = [&] {
             adam.zero_grad();
             auto out = geo::compute_losses(nets, tgt, srcs, K, stage, c);
             out.losses.total.backward();
             adam.step();
-          }, train_warmup, train_iters, device);
+          };
+          time_into(r, step, train_warmup, train_iters, device);
           rows.push_back(r);
+          if (profile_top > 0) print_profile(fmt::format("{}, FR {}, batch {}", r.name, r.fr, b), step, profile_top, profile_shapes);
         }
       }
     }
@@ -319,13 +431,15 @@ int main(int argc, char** argv) {
                   fmt_num(r.gflops, "{:.2f}").c_str(), fmt_num(r.ms).c_str(), fmt_num(r.per_sample_ms).c_str(),
                   fmt_num(r.samples_per_s).c_str(), fmt_num(r.peak_mb, "{:.0f}").c_str());
     }
-    // FR overhead: the same row with FR on minus FR off.
-    for (const auto& on : rows) {
-      if (on.fr != "on" || on.ms < 0) continue;
-      for (const auto& off : rows)
-        if (off.fr == "off" && off.section == on.section && off.name == on.name && off.batch == on.batch)
-          std::printf("FR overhead, %s %s, batch %lld: %+.1f ms (%+.0f%%)\n", on.section.c_str(), on.name.c_str(),
-                      static_cast<long long>(on.batch), on.ms - off.ms, 100.0 * (on.ms / off.ms - 1.0));
+    for (const auto& o : fr_overheads(rows)) std::printf("FR overhead, %s\n", o.c_str());
+    if (!markdown_path.empty()) {
+      std::vector<std::string> args(argv, argv + argc);
+      args[0] = "geo_bench";
+      std::string machine = cpu_description();
+      if (device.is_cuda()) machine += ", CUDA device " + std::to_string(device.index() < 0 ? 0 : device.index());
+      machine += fmt::format(", {} threads", nthreads);
+      geo::write_file_atomic(markdown_path, markdown_table(rows, machine, fmt::format("{}", fmt::join(args, " "))));
+      spdlog::info("wrote {}", markdown_path);
     }
     if (!json_path.empty()) {
       std::ostringstream js;

@@ -35,6 +35,12 @@ torch::Tensor photometric_error(const torch::Tensor& x, const torch::Tensor& y, 
   return photometric_error_channels(x, y, alpha).mean(1, /*keepdim=*/true);
 }
 
+torch::Tensor channel_l2_norm(const torch::Tensor& x) {
+  TORCH_CHECK(x.dim() == 4, "x must be [B,C,H,W], got ", x.sizes());
+  torch::NoGradGuard no_grad;
+  return x.square().sum(1, /*keepdim=*/true).sqrt_();
+}
+
 std::vector<torch::Tensor> image_pyramid(const torch::Tensor& image, int num_scales) {
   TORCH_CHECK(image.dim() == 4, "image must be [B,C,H,W], got ", image.sizes());
   const int64_t f = int64_t{1} << (num_scales - 1);

@@ -20,6 +20,10 @@ torch::Tensor photometric_error_channels(const torch::Tensor& x, const torch::Te
 //   alpha * clip((1 - SSIM) / 2, 0, 1) + (1 - alpha) * |x - y|   (alpha = 0.85 in the paper).
 torch::Tensor photometric_error(const torch::Tensor& x, const torch::Tensor& y, double alpha);
 
+// L2 norm over the channels [B,C,H,W] -> [B,1,H,W], without gradient (the FlowNet's input
+// "L2 norm of the rigid error"; a plain sum of squares: at::norm over 3 channels is slow).
+torch::Tensor channel_l2_norm(const torch::Tensor& x);
+
 // [image, image/2, ...]: each level the 2x2 mean of the previous (area resize, GeoNet).
 // Sides must be divisible by 2^(num_scales-1).
 std::vector<torch::Tensor> image_pyramid(const torch::Tensor& image, int num_scales);

@@ -95,9 +95,9 @@ RigidTerms rigid_terms(const LossInputs& in, const LossConfig& cfg) {
       const auto bwd_channels = photometric_error_channels(bw.image, src, cfg.ssim_alpha);
       out.fwd_error[i][s] = fwd_channels.mean(1, true);
       out.bwd_error[i][s] = bwd_channels.mean(1, true);
-      if (s == 0) {
-        out.fwd_error_norm.push_back(fwd_channels.norm(2, 1, true));
-        out.bwd_error_norm.push_back(bwd_channels.norm(2, 1, true));
+      if (s == 0) {  // FlowNet input (used without gradient)
+        out.fwd_error_norm.push_back(channel_l2_norm(fwd_channels));
+        out.bwd_error_norm.push_back(channel_l2_norm(bwd_channels));
       }
       fe.push_back(out.fwd_error[i][s]);
       fv.push_back(fw.valid);

@@ -35,7 +35,7 @@ struct RigidTerms {
   PerSourceScale<torch::Tensor> fwd_error;  // photometric error maps [B,1,h,w]
   PerSourceScale<torch::Tensor> bwd_error;
   std::vector<torch::Tensor> fwd_error_norm;  // N: full-scale L2 norm over colour channels of the
-  std::vector<torch::Tensor> bwd_error_norm;  //    per-channel error [B,1,H,W] (FlowNet input)
+  std::vector<torch::Tensor> bwd_error_norm;  //    per-channel error [B,1,H,W] (FlowNet input; no gradient)
   torch::Tensor rigid;        // L_br: sum over scales of (fwd + bwd) masked means, mean over sources
   torch::Tensor disp_smooth;  // L_ds: sum over scales of smoothness / 2^s over all frames
 };

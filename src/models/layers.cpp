@@ -1,6 +1,6 @@
 #include "models/layers.h"
 
-#include <array>
+#include <torch/autograd.h>
 
 namespace geo {
 
@@ -13,17 +13,23 @@ ConvBnImpl::ConvBnImpl(int64_t in, int64_t out, int64_t kernel, int64_t stride, 
   bn = register_module("bn", torch::nn::BatchNorm2d(out));
 }
 
-torch::Tensor ConvBnImpl::forward(const torch::Tensor& x) {
+torch::Tensor ConvBnImpl::conv_bn_relu(const torch::Tensor& x, const ConvFn& conv_fn) {
   torch::Tensor y;
   if (folded()) {
     TORCH_CHECK(!is_training(), "ConvBn: BatchNorm was folded for inference; this module cannot train");
-    const auto& o = conv->options;
-    const auto k = *o.kernel_size();
-    y = torch::conv2d(x, folded_weight_, folded_bias_, o.stride(), {k[0] / 2, k[1] / 2});  // as constructed
+    y = conv_fn(x, folded_weight_, folded_bias_);
   } else {
-    y = bn(conv(x));
+    y = bn(conv_fn(x, conv->weight, conv->bias));
   }
   return relu ? torch::relu(y) : y;
+}
+
+torch::Tensor ConvBnImpl::forward(const torch::Tensor& x) {
+  const auto& o = conv->options;
+  const auto k = *o.kernel_size();
+  return conv_bn_relu(x, [&](const torch::Tensor& in, const torch::Tensor& w, const torch::Tensor& b) {
+    return torch::conv2d(in, w, b, o.stride(), {k[0] / 2, k[1] / 2}, {1, 1});  // padding as constructed
+  });
 }
 
 torch::Tensor ConvBnImpl::forward_upsampled(const torch::Tensor& x) {
@@ -31,43 +37,84 @@ torch::Tensor ConvBnImpl::forward_upsampled(const torch::Tensor& x) {
   TORCH_CHECK((*o.kernel_size())[0] == 3 && (*o.kernel_size())[1] == 3 && (*o.stride())[0] == 1 &&
                   (*o.stride())[1] == 1,
               "forward_upsampled needs a 3x3 stride-1 ConvBn");
-  torch::Tensor y;
-  if (folded()) {
-    TORCH_CHECK(!is_training(), "ConvBn: BatchNorm was folded for inference; this module cannot train");
-    y = conv3x3_of_upsampled(x, folded_weight_, folded_bias_);
-  } else {
-    y = bn(conv3x3_of_upsampled(x, conv->weight, conv->bias));
-  }
-  return relu ? torch::relu(y) : y;
+  if (x.size(2) * x.size(3) < kMinSubpixelArea) return forward(upsample2(x, "nearest"));
+  return conv_bn_relu(x, conv3x3_of_upsampled);
 }
+
+namespace {
+
+// [16, 9]: row (a, b, u, v) = phase (a, b), tap (u, v) of the 2x2 phase kernel; column (k, l) = tap
+// of the 3x3 kernel. Along one dim, phase 0 has taps (w0, w1 + w2), phase 1 (w0 + w1, w2).
+torch::Tensor phase_matrix(const torch::TensorOptions& options) {
+  static const float P[2][2][3] = {{{1, 0, 0}, {0, 1, 1}}, {{1, 1, 0}, {0, 0, 1}}};
+  auto m = torch::zeros({16, 9}, torch::kFloat32);
+  auto acc = m.accessor<float, 2>();
+  for (int a = 0; a < 2; ++a)
+    for (int b = 0; b < 2; ++b)
+      for (int u = 0; u < 2; ++u)
+        for (int v = 0; v < 2; ++v)
+          for (int k = 0; k < 3; ++k)
+            for (int l = 0; l < 3; ++l) acc[((a * 2 + b) * 2 + u) * 2 + v][k * 3 + l] = P[a][u][k] * P[b][v][l];
+  return m.to(options);
+}
+
+// y [B,2,2,Co,h+1,w+1] (phase (a, b) of output pixel (2i+a, 2j+b) at y[:, a, b, :, i+a, j+b])
+// -> [B,Co,2h,2w]. Written as one autograd node: its backward copies the four windows into one
+// gradient buffer (slicing y with select/narrow instead costs a zero-filled y-sized buffer and an
+// addition per phase in the backward pass).
+struct InterleavePhases : torch::autograd::Function<InterleavePhases> {
+  static void copy_windows(const torch::Tensor& phases, const torch::Tensor& image6, int64_t h, int64_t w,
+                           bool to_image) {
+    for (int64_t a = 0; a < 2; ++a)
+      for (int64_t b = 0; b < 2; ++b) {
+        auto window = phases.select(1, a).select(1, b).narrow(2, a, h).narrow(3, b, w);
+        auto pixels = image6.select(5, b).select(3, a);
+        if (to_image) pixels.copy_(window); else window.copy_(pixels);
+      }
+  }
+  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& y) {
+    const int64_t B = y.size(0), Co = y.size(3), h = y.size(4) - 1, w = y.size(5) - 1;
+    ctx->saved_data["shape"] = y.sizes().vec();
+    auto out = torch::empty({B, Co, h, 2, w, 2}, y.options());
+    copy_windows(y, out, h, w, /*to_image=*/true);
+    return out.view({B, Co, 2 * h, 2 * w});
+  }
+  static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
+                                                 torch::autograd::variable_list grads) {
+    const auto shape = ctx->saved_data["shape"].toIntVector();
+    const int64_t B = shape[0], Co = shape[3], h = shape[4] - 1, w = shape[5] - 1;
+    const auto g = grads[0].contiguous().view({B, Co, h, 2, w, 2});
+    auto gy = torch::empty(shape, g.options());
+    copy_windows(gy, g, h, w, /*to_image=*/false);
+    for (int64_t a = 0; a < 2; ++a)  // the row and column each phase does not use
+      for (int64_t b = 0; b < 2; ++b) {
+        auto p = gy.select(1, a).select(1, b);
+        p.select(2, a == 0 ? h : 0).zero_();
+        p.select(3, b == 0 ? w : 0).zero_();
+      }
+    return {gy};
+  }
+};
+
+}  // namespace
 
 torch::Tensor conv3x3_of_upsampled(const torch::Tensor& x, const torch::Tensor& weight, const torch::Tensor& bias) {
   TORCH_CHECK(x.dim() == 4 && weight.dim() == 4 && weight.size(2) == 3 && weight.size(3) == 3 &&
                   weight.size(1) == x.size(1),
               "conv3x3_of_upsampled: x ", x.sizes(), " and weight ", weight.sizes(), " do not match");
-  // Phase kernels along one spatial dim: phase 0 taps (w0, w1 + w2) at offsets (-1, 0),
-  // phase 1 taps (w0 + w1, w2) at offsets (0, +1).
-  auto phases = [](const torch::Tensor& w, int64_t dim) {
-    const auto w0 = w.select(dim, 0), w1 = w.select(dim, 1), w2 = w.select(dim, 2);
-    return std::array<torch::Tensor, 2>{torch::stack({w0, w1 + w2}, dim), torch::stack({w0 + w1, w2}, dim)};
-  };
-  const auto rows = phases(weight, 2);
-  std::vector<torch::Tensor> kernels;  // phase p = 2a + b
-  for (int a = 0; a < 2; ++a) {
-    const auto cols = phases(rows[a], 3);
-    kernels.push_back(cols[0]);
-    kernels.push_back(cols[1]);
-  }
-  const int64_t B = x.size(0), Co = weight.size(0), h = x.size(2), w = x.size(3);
+  const int64_t B = x.size(0), Co = weight.size(0), Ci = weight.size(1), h = x.size(2), w = x.size(3);
+  // The four 2x2 phase kernels as one matrix product (backward: one small GEMM, not a
+  // zero-filled weight-sized buffer per selected tap): [Co*Ci, 9] x [9, 16] -> [4*Co, Ci, 2, 2].
+  const auto kernels = weight.reshape({Co * Ci, 9})
+                           .matmul(phase_matrix(weight.options()).t())
+                           .view({Co, Ci, 4, 2, 2})
+                           .permute({2, 0, 1, 3, 4})
+                           .reshape({4 * Co, Ci, 2, 2});
   const auto b4 = bias.defined() ? bias.repeat({4}) : bias;
   // With padding 1 a 2x2 kernel gives (h+1)x(w+1) outputs; output r reads input rows r-1, r.
   // Phase a = 0 needs rows (i-1, i): r = i; phase a = 1 needs (i, i+1): r = i + 1.
-  const auto y = torch::conv2d(x, torch::cat(kernels, 0), b4, 1, 1).view({B, 2, 2, Co, h + 1, w + 1});
-  auto out = torch::empty({B, Co, h, 2, w, 2}, y.options());
-  for (int64_t a = 0; a < 2; ++a)
-    for (int64_t b = 0; b < 2; ++b)
-      out.select(5, b).select(3, a).copy_(y.select(1, a).select(1, b).narrow(2, a, h).narrow(3, b, w));
-  return out.view({B, Co, 2 * h, 2 * w});
+  const auto y = torch::conv2d(x, kernels, b4, {1, 1}, {1, 1}, {1, 1}).view({B, 2, 2, Co, h + 1, w + 1});
+  return InterleavePhases::apply(y);
 }
 
 void ConvBnImpl::fold_batchnorm() {

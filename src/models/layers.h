@@ -3,6 +3,7 @@
 
 #include <torch/torch.h>
 
+#include <functional>
 #include <string>
 
 namespace geo {
@@ -14,7 +15,10 @@ struct ConvBnImpl : torch::nn::Module {
   torch::Tensor forward(const torch::Tensor& x);
   // forward(nearest_upsample_x2(x)) for a 3x3 stride-1 ConvBn (GeoNet's upconv), computed at x's
   // resolution: see conv3x3_of_upsampled. Same values up to rounding, 2.25x fewer multiply-adds.
+  // Below kMinSubpixelArea input pixels (the 2x7 bottleneck of a 128x416 image) the four phase
+  // kernels (16/9 of the weights) cost more memory traffic than they save: plain upsample + conv.
   torch::Tensor forward_upsampled(const torch::Tensor& x);
+  static constexpr int64_t kMinSubpixelArea = 32;
   // Inference only: folds BatchNorm's running statistics and affine into one convolution with a
   // bias (w' = w·γ/√(σ²+ε), b' = β − μ·γ/√(σ²+ε)), so forward is a single conv (+ ReLU). The folded
   // tensors are not registered: fold after loading weights and moving to the device; a folded
@@ -26,6 +30,9 @@ struct ConvBnImpl : torch::nn::Module {
   bool relu;
 
  private:
+  using ConvFn = std::function<torch::Tensor(const torch::Tensor&, const torch::Tensor&, const torch::Tensor&)>;
+  // conv_fn(x, weight, bias) -> BatchNorm -> ReLU, or the folded conv -> ReLU.
+  torch::Tensor conv_bn_relu(const torch::Tensor& x, const ConvFn& conv_fn);
   torch::Tensor folded_weight_, folded_bias_;
 };
 TORCH_MODULE(ConvBn);

@@ -158,7 +158,7 @@ PairPrediction predict_pair(Networks& nets, const torch::Tensor& tgt, const torc
   p.flow = p.rigid_flow;
   if (nets.flow) {
     const auto warped = warp(src, p.rigid_flow).image;
-    const auto error = photometric_error_channels(warped, tgt, ssim_alpha).norm(2, 1, true);
+    const auto error = channel_l2_norm(photometric_error_channels(warped, tgt, ssim_alpha));
     p.flow = p.rigid_flow + nets.flow->forward(flow_net_input(tgt, src, warped, p.rigid_flow, error)).flow[0];
   }
   return p;

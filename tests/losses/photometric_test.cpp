@@ -64,6 +64,16 @@ TEST(Photometric, MaskedMeanAveragesOnlyMaskedPixels) {
   EXPECT_THROW(geo::masked_mean(v, torch::ones({1, 2, 2, 2})), c10::Error);
 }
 
+TEST(Photometric, ChannelL2NormIsHandComputedAndCarriesNoGradient) {
+  // Pixel 0: (3, 4, 0) -> 5; pixel 1: (0, 0, 0) -> 0 (no NaN at zero).
+  const auto x = torch::tensor({3., 0., 4., 0., 0., 0.}, kDouble).view({1, 3, 1, 2}).requires_grad_();
+  const auto n = geo::channel_l2_norm(x);
+  ASSERT_EQ(n.sizes(), (std::vector<int64_t>{1, 1, 1, 2}));
+  EXPECT_DOUBLE_EQ(n[0][0][0][0].item<double>(), 5.0);
+  EXPECT_DOUBLE_EQ(n[0][0][0][1].item<double>(), 0.0);
+  EXPECT_FALSE(n.requires_grad());
+}
+
 TEST(Photometric, MismatchedShapesThrow) {
   EXPECT_THROW(geo::ssim(torch::zeros({1, 3, 4, 4}), torch::zeros({1, 3, 4, 5})), c10::Error);
 }

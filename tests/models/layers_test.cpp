@@ -58,6 +58,10 @@ TEST(Layers, FoldedBatchNormGivesTheSameOutputAndRefusesToTrain) {
   fold_batchnorm(*up);
   EXPECT_LT((up->forward_upsampled(x) - before).abs().max().item<double>(), 1e-5);
   EXPECT_LT((before - up(nearest_x2(x))).abs().max().item<double>(), 1e-5);
+  // Below kMinSubpixelArea pixels forward_upsampled takes the plain path: same contract.
+  const auto small = torch::randn({2, 3, 2, 7});
+  ASSERT_LT(small.size(2) * small.size(3), ConvBnImpl::kMinSubpixelArea);
+  EXPECT_LT((up->forward_upsampled(small) - up(nearest_x2(small))).abs().max().item<double>(), 1e-5);
 }
 
 TEST(Layers, FoldedDepthNetMatchesTheUnfoldedOne) {
