@@ -11,8 +11,8 @@ void check_flow_pair(const torch::Tensor& fw, const torch::Tensor& bw, const cha
   check_shape(fw, "flow_fw", {-1, 2, -1, -1});
   check_shape(bw, bw_name, {fw.size(0), 2, fw.size(2), fw.size(3)});
 }
-// GeoNet's L2_norm: || |x| + 1e-10 ||_2 over the channel axis (keeps the gradient finite at 0).
-torch::Tensor l2_norm(const torch::Tensor& x) { return (x.abs() + 1e-10).norm(2, 1, true); }
+// GeoNet's L2_norm: || |x| + 1e-10 ||_2 over the channel axis (used here without gradient).
+torch::Tensor l2_norm(const torch::Tensor& x) { return channel_l2_norm(x.abs() + 1e-10); }
 }  // namespace
 
 torch::Tensor backward_at_forward(const torch::Tensor& flow_fw, const torch::Tensor& flow_bw) {

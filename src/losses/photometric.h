@@ -14,7 +14,11 @@ torch::Tensor ssim(const torch::Tensor& x, const torch::Tensor& y);
 
 // Per-pixel, per-channel photometric error [B,C,H,W]:
 //   alpha * clip((1 - SSIM) / 2, 0, 1) + (1 - alpha) * |x - y|   (GeoNet's image_similarity).
+// On CPU (float32/float64) one fused pass per image plane with a hand-written backward; elsewhere
+// photometric_error_channels_reference. Both agree to rounding (tests/losses).
 torch::Tensor photometric_error_channels(const torch::Tensor& x, const torch::Tensor& y, double alpha);
+// The same composed of tensor operations (ssim() above, clamp, abs), gradients by autograd.
+torch::Tensor photometric_error_channels_reference(const torch::Tensor& x, const torch::Tensor& y, double alpha);
 
 // Per-pixel photometric error, mean over channels -> [B,1,H,W]:
 //   alpha * clip((1 - SSIM) / 2, 0, 1) + (1 - alpha) * |x - y|   (alpha = 0.85 in the paper).

@@ -74,7 +74,44 @@ TEST(Photometric, ChannelL2NormIsHandComputedAndCarriesNoGradient) {
   EXPECT_FALSE(n.requires_grad());
 }
 
+// The fused CPU kernel against the same error composed of tensor ops (autograd's gradients), at
+// sizes with 1-pixel sides and borders, with inputs where the clamp is active and with equal pixels.
+TEST(Photometric, FusedKernelMatchesTheComposedOperationsInValueAndGradient) {
+  torch::manual_seed(11);
+  for (auto hw : std::vector<std::pair<int64_t, int64_t>>{{1, 1}, {1, 5}, {4, 1}, {3, 4}, {7, 9}}) {
+    auto x = torch::rand({2, 3, hw.first, hw.second}, kDouble);
+    auto y = torch::rand({2, 3, hw.first, hw.second}, kDouble);
+    y[0][0] = x[0][0];        // equal plane: |x - y| = 0, SSIM = 1
+    y[1][2] = 1 - x[1][2];    // anti-correlated plane: negative SSIM
+    x.requires_grad_();
+    y.requires_grad_();
+    for (double alpha : {0.0, 0.85, 1.0}) {
+      const auto ref = geo::photometric_error_channels_reference(x, y, alpha);
+      const auto got = geo::photometric_error_channels(x, y, alpha);
+      ASSERT_EQ(got.sizes(), ref.sizes());
+      EXPECT_LT((got - ref).abs().max().item<double>(), 1e-12) << hw.first << "x" << hw.second << " a=" << alpha;
+      const auto g = torch::randn_like(ref);
+      const auto gr = torch::autograd::grad({ref}, {x, y}, {g});
+      const auto gg = torch::autograd::grad({got}, {x, y}, {g});
+      for (int i = 0; i < 2; ++i)
+        EXPECT_LT((gr[i] - gg[i]).abs().max().item<double>(), 1e-10) << hw.first << "x" << hw.second << " input " << i;
+    }
+  }
+  // float32 agrees with the float64 reference to float rounding; non-contiguous input is accepted.
+  const auto x = torch::rand({1, 3, 6, 8}, kDouble), y = torch::rand({1, 3, 6, 8}, kDouble);
+  const auto xf = x.to(torch::kFloat32).transpose(2, 3).contiguous().transpose(2, 3);
+  ASSERT_FALSE(xf.is_contiguous());
+  const auto got = geo::photometric_error_channels(xf, y.to(torch::kFloat32), 0.85).to(kDouble);
+  EXPECT_LT((got - geo::photometric_error_channels_reference(x, y, 0.85)).abs().max().item<double>(), 1e-5);
+  // Only the input that needs a gradient gets one (the target image does not).
+  const auto w = x.clone().requires_grad_();
+  const auto gw = torch::autograd::grad({geo::photometric_error_channels(w, y, 0.85).sum()}, {w});
+  EXPECT_TRUE(gw[0].defined());
+}
+
 TEST(Photometric, MismatchedShapesThrow) {
+  EXPECT_THROW(geo::photometric_error_channels(torch::zeros({1, 3, 4, 4}), torch::zeros({1, 3, 4, 5}), 0.85),
+               c10::Error);
   EXPECT_THROW(geo::ssim(torch::zeros({1, 3, 4, 4}), torch::zeros({1, 3, 4, 5})), c10::Error);
 }
 
