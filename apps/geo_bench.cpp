@@ -17,6 +17,9 @@
 #include <torch/torch.h>
 
 #include <algorithm>
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
 #include <chrono>
 #include <ctime>
 #include <fstream>
@@ -65,6 +68,9 @@ class Memory {
       return;
     }
 #endif
+#ifdef __GLIBC__
+    malloc_trim(0);  // hand back what the process keeps for reuse (core/runtime.h), so the peak is this row's
+#endif
     std::ofstream("/proc/self/clear_refs") << "5";  // resets VmHWM (Linux >= 4.0)
   }
   double peak_mb() const {
@@ -90,24 +96,34 @@ void sync(const torch::Device& device) {
   if (device.is_cuda()) torch::cuda::synchronize();
 }
 
-// Median milliseconds of `iters` calls after `warmup` calls; fills ms and peak_mb of `row`.
-void time_into(Row& row, const std::function<void()>& fn, int warmup, int iters, const torch::Device& device) {
+// Times several calls side by side: each is warmed up `warmup` times (its peak memory taken over
+// its warm-up), then the calls take turns for `iters` rounds, so a machine that slows down or
+// speeds up affects all of them alike (FR on vs off is a difference of a few percent). Fills ms
+// (median), per-sample figures and peak_mb of each row.
+void time_side_by_side(const std::vector<std::pair<Row*, std::function<void()>>>& calls, int warmup, int iters,
+                       const torch::Device& device) {
   const Memory mem(device);
-  mem.reset();
-  for (int i = 0; i < warmup; ++i) fn();
-  sync(device);
-  std::vector<double> times;
-  for (int i = 0; i < iters; ++i) {
-    const auto t0 = std::chrono::steady_clock::now();
-    fn();
+  for (const auto& [row, fn] : calls) {
+    mem.reset();
+    for (int i = 0; i < std::max(warmup, 1); ++i) fn();
     sync(device);
-    times.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    row->peak_mb = mem.peak_mb();
   }
-  std::sort(times.begin(), times.end());
-  row.ms = times[times.size() / 2];
-  row.per_sample_ms = row.ms / static_cast<double>(row.batch);
-  row.samples_per_s = 1000.0 / row.per_sample_ms;
-  row.peak_mb = mem.peak_mb();
+  std::vector<std::vector<double>> times(calls.size());
+  for (int i = 0; i < iters; ++i)
+    for (size_t c = 0; c < calls.size(); ++c) {
+      const auto t0 = std::chrono::steady_clock::now();
+      calls[c].second();
+      sync(device);
+      times[c].push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    }
+  for (size_t c = 0; c < calls.size(); ++c) {
+    Row& row = *calls[c].first;
+    std::sort(times[c].begin(), times[c].end());
+    row.ms = times[c][times[c].size() / 2];
+    row.per_sample_ms = row.ms / static_cast<double>(row.batch);
+    row.samples_per_s = 1000.0 / row.per_sample_ms;
+  }
 }
 
 // FLOPs of one call as LibTorch's profiler counts them.
@@ -333,62 +349,84 @@ int main(int argc, char** argv) {
     }
 
     if (!summary && !no_infer) {
+      std::vector<std::pair<geo::Config, geo::Networks>> made;
       for (bool fr : frs) {
-        auto made = networks_with_fr(config, fr, true, device);
-        const geo::Config& c = made.first;
-        geo::Networks& nets = made.second;
-        nets.prepare_inference(!no_fold);
-        torch::InferenceMode guard;
-        const std::string tag = fr ? "on" : "off";
-        for (int b : batches) {
-          spdlog::info("inference, FR {}, batch {} ...", tag, b);
-          const auto img = torch::rand({b, 3, H, W}, device), img2 = torch::rand({b, 3, H, W}, device);
-          std::vector<torch::Tensor> srcs(N, img2);
-          const auto flow_in = torch::rand({b, 12, H, W}, device);
-          const auto K = intrinsics(b, H, W, device);
-          Row d{"infer", "DepthNet", tag, b}, p{"infer", "PoseNet", "-", b}, f{"infer", "FlowNet", tag, b},
-              all{"infer", "pipeline", tag, b};
-          time_into(d, [&] { nets.depth(img); }, warmup, iters, device);
-          if (fr || frs.size() == 1) time_into(p, [&] { nets.pose(img, srcs); }, warmup, iters, device);
-          time_into(f, [&] { nets.flow(flow_in); }, warmup, iters, device);
-          time_into(all, [&] { geo::predict_pair(nets, img, img2, K, c.loss.ssim_alpha); }, warmup, iters, device);
-          if (profile_top > 0) {
-            const std::string what = fmt::format("FR {}, batch {}", tag, b);
-            print_profile("DepthNet inference, " + what, [&] { nets.depth(img); }, profile_top, profile_shapes);
-            print_profile("pipeline inference, " + what,
-                          [&] { geo::predict_pair(nets, img, img2, K, c.loss.ssim_alpha); }, profile_top, profile_shapes);
+        made.push_back(networks_with_fr(config, fr, true, device));
+        made.back().second.prepare_inference(!no_fold);
+      }
+      torch::InferenceMode guard;
+      for (int b : batches) {
+        spdlog::info("inference, FR {}, batch {} ...", fr_mode, b);
+        const auto img = torch::rand({b, 3, H, W}, device), img2 = torch::rand({b, 3, H, W}, device);
+        std::vector<torch::Tensor> srcs(N, img2);
+        const auto flow_in = torch::rand({b, 12, H, W}, device);
+        const auto K = intrinsics(b, H, W, device);
+        std::vector<Row> batch_rows;
+        batch_rows.reserve(4 * frs.size());
+        std::vector<std::pair<Row*, std::function<void()>>> calls;
+        // One kind of call at a time (DepthNet, PoseNet, ...), its FR variants side by side.
+        for (const std::string& what : {"DepthNet", "PoseNet", "FlowNet", "pipeline"}) {
+          calls.clear();
+          for (size_t k = 0; k < frs.size(); ++k) {
+            const bool pose = what == "PoseNet";
+            if (pose && k > 0) continue;  // no FR in the PoseNet: once
+            geo::Networks& nets = made[k].second;
+            const double alpha = made[k].first.loss.ssim_alpha;
+            batch_rows.push_back(Row{"infer", what, pose ? "-" : (frs[k] ? "on" : "off"), b});
+            std::function<void()> fn;
+            if (what == "DepthNet") fn = [&nets, &img] { nets.depth(img); };
+            if (pose) fn = [&nets, &img, &srcs] { nets.pose(img, srcs); };
+            if (what == "FlowNet") fn = [&nets, &flow_in] { nets.flow(flow_in); };
+            if (what == "pipeline") fn = [&nets, &img, &img2, &K, alpha] { geo::predict_pair(nets, img, img2, K, alpha); };
+            calls.emplace_back(&batch_rows.back(), fn);
+            if (profile_top > 0 && (what == "DepthNet" || what == "pipeline"))
+              print_profile(fmt::format("{} inference, FR {}, batch {}", what, batch_rows.back().fr, b), fn,
+                            profile_top, profile_shapes);
           }
-          rows.push_back(d);
-          if (p.ms >= 0) rows.push_back(p);
-          rows.push_back(f);
-          rows.push_back(all);
+          time_side_by_side(calls, warmup, iters, device);
         }
+        rows.insert(rows.end(), batch_rows.begin(), batch_rows.end());
       }
     }
 
     if (!summary && !no_train) {
       for (const auto& stage : stages_to_time(config, !config_path.empty())) {
+        const int64_t b = train_batch > 0 ? train_batch : stage.batch_size;
+        const auto tgt = torch::rand({b, 3, H, W}, device), srcs = torch::rand({b, N, 3, H, W}, device);
+        const auto K = intrinsics(b, H, W, device);
+        struct Trainee {
+          geo::Config config;
+          geo::Networks nets;
+          std::unique_ptr<torch::optim::Adam> adam;
+          Row row;
+        };
+        std::vector<Trainee> trainees;
+        trainees.reserve(frs.size());
         for (bool fr : frs) {
           auto made = networks_with_fr(config, fr, stage.uses_flow(), device);
-          const geo::Config& c = made.first;
-          geo::Networks& nets = made.second;
-          nets.set_modes(stage);
-          torch::optim::Adam adam(nets.parameters_of(stage), torch::optim::AdamOptions(stage.learning_rate)
-                                                                  .betas({c.optimizer.beta1, c.optimizer.beta2}));
-          const int64_t b = train_batch > 0 ? train_batch : stage.batch_size;
-          const auto tgt = torch::rand({b, 3, H, W}, device), srcs = torch::rand({b, N, 3, H, W}, device);
-          const auto K = intrinsics(b, H, W, device);
-          Row r{"train", stage.name + " step", fr ? "on" : "off", b};
-          spdlog::info("training step {} [{}], FR {}, batch {} ...", stage.name, fmt::join(stage.train, ","), r.fr, b);
-          const auto step = [&] {
-            adam.zero_grad();
-            auto out = geo::compute_losses(nets, tgt, srcs, K, stage, c);
+          Trainee t{made.first, made.second, nullptr, Row{"train", stage.name + " step", fr ? "on" : "off", b}};
+          t.nets.set_modes(stage);
+          t.adam = std::make_unique<torch::optim::Adam>(
+              t.nets.parameters_of(stage),
+              torch::optim::AdamOptions(stage.learning_rate).betas({t.config.optimizer.beta1, t.config.optimizer.beta2}));
+          trainees.push_back(std::move(t));
+        }
+        spdlog::info("training step {} [{}], FR {}, batch {} ...", stage.name, fmt::join(stage.train, ","), fr_mode, b);
+        std::vector<std::pair<Row*, std::function<void()>>> calls;
+        for (auto& t : trainees) {
+          calls.emplace_back(&t.row, [&t, &tgt, &srcs, &K, &stage] {
+            t.adam->zero_grad();
+            auto out = geo::compute_losses(t.nets, tgt, srcs, K, stage, t.config);
             out.losses.total.backward();
-            adam.step();
-          };
-          time_into(r, step, train_warmup, train_iters, device);
-          rows.push_back(r);
-          if (profile_top > 0) print_profile(fmt::format("{}, FR {}, batch {}", r.name, r.fr, b), step, profile_top, profile_shapes);
+            t.adam->step();
+          });
+        }
+        time_side_by_side(calls, train_warmup, train_iters, device);
+        for (size_t k = 0; k < trainees.size(); ++k) {
+          rows.push_back(trainees[k].row);
+          if (profile_top > 0)
+            print_profile(fmt::format("{}, FR {}, batch {}", trainees[k].row.name, trainees[k].row.fr, b),
+                          calls[k].second, profile_top, profile_shapes);
         }
       }
     }

@@ -11,7 +11,6 @@ PACKAGES=(
   libtorch-dev libopencv-dev libyaml-cpp-dev libcli11-dev libspdlog-dev
   libgtest-dev libgmock-dev
   libopenblas0-pthread  # without it Debian's LibTorch uses the reference BLAS: 17-25x slower matmuls
-  libjemalloc2          # caching allocator; see README "Speed"
   cmake g++ make ccache
 )
 
