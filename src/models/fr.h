@@ -4,6 +4,8 @@
 
 #include <torch/torch.h>
 
+#include <utility>
+
 namespace geo {
 
 struct FeatureRefinementOptions {
@@ -31,5 +33,12 @@ struct FeatureRefinementImpl : torch::nn::Module {
   torch::nn::BatchNorm2d spatial_bn{nullptr};
 };
 TORCH_MODULE(FeatureRefinement);
+
+// (max, mean) of x [B,C,H,W] over the channels -> [B,1,H,W] each, or over the image -> [B,C,1,1]
+// each: FR's pooling. On CPU one fused pass (and one backward pass) instead of amax and mean;
+// same values and gradients as x.amax(...) and x.mean(...), ties in the max sharing its gradient
+// evenly (tests/models/fr_test.cpp).
+std::pair<torch::Tensor, torch::Tensor> max_mean_over_channels(const torch::Tensor& x);
+std::pair<torch::Tensor, torch::Tensor> max_mean_over_space(const torch::Tensor& x);
 
 }  // namespace geo
