@@ -34,8 +34,8 @@ TEST(Learning, ShortTrainingBeatsUntrainedAndTrivialBaselines) {
 model: {encoder_depth: 18}
 data: {height: 64, width: 208, num_workers: 1, augment: {enabled: false}}
 stages:
-  - {name: stage1, iterations: 200, train: [depth, pose], batch_size: 4, learning_rate: 5.0e-4}
-logging: {interval: 50, summary_interval: 0, checkpoint_interval: 200, val_interval: 0}
+  - {name: stage1, iterations: 300, train: [depth, pose], batch_size: 4, learning_rate: 5.0e-4}
+logging: {interval: 50, summary_interval: 0, checkpoint_interval: 300, val_interval: 0}
 run: {seed: 1, threads: 2}
 )";
   const auto cfg = parse_config(yaml, "learning.yaml", {"data.root=" + root + "/world/raw"});
