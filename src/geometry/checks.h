@@ -24,4 +24,10 @@ inline void check_shape(const torch::Tensor& t, const char* name,
               t.sizes());
 }
 
+// Whether the hand-written CPU kernels (fused photometric error, FR pooling) take `t`: a CPU
+// float32/float64 tensor; anything else goes through the composed tensor operations.
+inline bool fused_cpu_kernel_applies(const torch::Tensor& t) {
+  return t.device().is_cpu() && (t.scalar_type() == torch::kFloat32 || t.scalar_type() == torch::kFloat64);
+}
+
 }  // namespace geo

@@ -192,8 +192,8 @@ torch::Tensor photometric_error_channels(const torch::Tensor& x, const torch::Te
   TORCH_CHECK(alpha >= 0 && alpha <= 1, "alpha must be in [0,1], got ", alpha);
   TORCH_CHECK(x.dim() == 4, "x must be [B,C,H,W], got ", x.sizes());
   TORCH_CHECK(x.sizes() == y.sizes(), "x ", x.sizes(), " and y ", y.sizes(), " must match");
-  const bool fused = x.device().is_cpu() && y.device().is_cpu() && x.scalar_type() == y.scalar_type() &&
-                     (x.scalar_type() == torch::kFloat32 || x.scalar_type() == torch::kFloat64);
+  const bool fused =
+      fused_cpu_kernel_applies(x) && fused_cpu_kernel_applies(y) && x.scalar_type() == y.scalar_type();
   return fused ? FusedPhotometric::apply(x, y, alpha) : photometric_error_channels_reference(x, y, alpha);
 }
 

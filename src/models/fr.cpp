@@ -1,5 +1,7 @@
 #include "models/fr.h"
 
+#include "geometry/checks.h"
+
 #include <ATen/Dispatch.h>
 #include <ATen/Parallel.h>
 #include <torch/autograd.h>
@@ -11,6 +13,12 @@
 namespace geo {
 
 namespace {
+
+// max(a, b) that keeps a NaN, as amax does.
+template <typename T>
+T nan_max(T a, T b) {
+  return (b > a || std::isnan(b)) ? b : a;
+}
 
 // x viewed as [outer, len, inner] -> max and mean over `len`, each [outer, inner], in one pass.
 // Backward as amax's (and TensorFlow's reduce_max, which CBAM/GeoNet code uses): the gradient of
@@ -37,17 +45,17 @@ struct MaxMeanPool : torch::autograd::Function<MaxMeanPool> {
             int64_t l = 0;
             for (; l + K <= len; l += K)
               for (int k = 0; k < K; ++k) {
-                mk[k] = (xo[l + k] > mk[k] || std::isnan(xo[l + k])) ? xo[l + k] : mk[k];
+                mk[k] = nan_max(mk[k], xo[l + k]);
                 sk[k] += xo[l + k];
               }
             for (; l < len; ++l) {
-              mk[0] = (xo[l] > mk[0] || std::isnan(xo[l])) ? xo[l] : mk[0];
+              mk[0] = nan_max(mk[0], xo[l]);
               sk[0] += xo[l];
             }
             scalar_t best = mk[0];
             double sum = 0;
             for (int k = 0; k < K; ++k) {
-              best = (mk[k] > best || std::isnan(mk[k])) ? mk[k] : best;
+              best = nan_max(best, mk[k]);
               sum += sk[k];
             }
             *m = best;
@@ -59,7 +67,7 @@ struct MaxMeanPool : torch::autograd::Function<MaxMeanPool> {
           for (int64_t l = 1; l < len; ++l) {
             const scalar_t* r = xo + l * inner;
             for (int64_t i = 0; i < inner; ++i) {
-              m[i] = (r[i] > m[i] || std::isnan(r[i])) ? r[i] : m[i];  // NaN propagates, as amax
+              m[i] = nan_max(m[i], r[i]);
               s[i] += r[i];
             }
           }
@@ -115,15 +123,11 @@ struct MaxMeanPool : torch::autograd::Function<MaxMeanPool> {
   }
 };
 
-bool fused_on(const torch::Tensor& x) {
-  return x.device().is_cpu() && (x.scalar_type() == torch::kFloat32 || x.scalar_type() == torch::kFloat64);
-}
-
 }  // namespace
 
 std::pair<torch::Tensor, torch::Tensor> max_mean_over_channels(const torch::Tensor& x) {
   TORCH_CHECK(x.dim() == 4, "x must be [B,C,H,W], got ", x.sizes());
-  if (!fused_on(x)) return {x.amax(1, true), x.mean(1, true)};
+  if (!fused_cpu_kernel_applies(x)) return {x.amax(1, true), x.mean(1, true)};
   const int64_t B = x.size(0), C = x.size(1), H = x.size(2), W = x.size(3);
   const auto r = MaxMeanPool::apply(x, C, H * W);
   return {r[0].view({B, 1, H, W}), r[1].view({B, 1, H, W})};
@@ -131,7 +135,7 @@ std::pair<torch::Tensor, torch::Tensor> max_mean_over_channels(const torch::Tens
 
 std::pair<torch::Tensor, torch::Tensor> max_mean_over_space(const torch::Tensor& x) {
   TORCH_CHECK(x.dim() == 4, "x must be [B,C,H,W], got ", x.sizes());
-  if (!fused_on(x)) return {x.amax({2, 3}, true), x.mean({2, 3}, true)};
+  if (!fused_cpu_kernel_applies(x)) return {x.amax({2, 3}, true), x.mean({2, 3}, true)};
   const int64_t B = x.size(0), C = x.size(1);
   const auto r = MaxMeanPool::apply(x, x.size(2) * x.size(3), 1);
   return {r[0].view({B, C, 1, 1}), r[1].view({B, C, 1, 1})};
