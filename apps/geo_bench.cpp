@@ -36,6 +36,7 @@
 #include "data/packed.h"
 #include "geometry/camera.h"
 #include "train/networks.h"
+#include "train/train_step.h"
 #ifdef GEO_BENCH_PNG
 #include "train/data_source.h"
 #endif
@@ -274,7 +275,7 @@ int main(int argc, char** argv) {
   bool profile_shapes = false;
   app.add_option("--config", config_path,
                  "YAML config (model, data size, stages); default: the paper's settings and its two stages");
-  app.add_option("--device", device_name, "cpu or cuda")->check(CLI::IsMember({"cpu", "cuda"}));
+  app.add_option("--device", device_name, "cpu (default), cuda, cuda:N or auto; cuda without CUDA is an error");
   app.add_option("--batch", batches, "inference batch sizes, e.g. 1,4")->delimiter(',')->check(CLI::PositiveNumber);
   app.add_option("--train-batch", train_batch, "training batch size (default: each stage's batch_size)");
   app.add_option("--fr", fr_mode, "feature refinement: both, on or off")->check(CLI::IsMember({"both", "on", "off"}));
@@ -305,9 +306,7 @@ int main(int argc, char** argv) {
     geo::setup_logging("info");
     const geo::Config config = config_path.empty() ? geo::parse_config("", "<defaults>")
                                                    : geo::load_config(geo::resolve_config_path(config_path));
-    if (device_name == "cuda" && !torch::cuda::is_available())
-      throw std::runtime_error("--device cuda: CUDA is not available in this build/machine (use --device cpu)");
-    const torch::Device device(device_name == "cuda" ? torch::kCUDA : torch::kCPU);
+    const torch::Device device = geo::select_device(device_name);
     if (device.is_cuda()) at::globalContext().setBenchmarkCuDNN(true);  // fixed shapes: autotune once
     const int nthreads = threads > 0 ? threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
     torch::set_num_threads(nthreads);
@@ -344,7 +343,7 @@ int main(int argc, char** argv) {
       f.gflops = gflops_of([&] { nets.flow(flow_in); });
       rows.push_back(f);
       Row all{"params", "pipeline", tag, 1, d.params + geo::count_parameters(*nets.pose) + f.params};
-      all.gflops = gflops_of([&] { geo::predict_pair(nets, img, img, K, c.loss.ssim_alpha); });
+      all.gflops = gflops_of([&] { geo::predict_pair(nets, img, img, K, c.loss); });
       rows.push_back(all);
     }
 
@@ -365,19 +364,19 @@ int main(int argc, char** argv) {
         batch_rows.reserve(4 * frs.size());
         std::vector<std::pair<Row*, std::function<void()>>> calls;
         // One kind of call at a time (DepthNet, PoseNet, ...), its FR variants side by side.
-        for (const std::string& what : {"DepthNet", "PoseNet", "FlowNet", "pipeline"}) {
+        for (const std::string what : {"DepthNet", "PoseNet", "FlowNet", "pipeline"}) {
           calls.clear();
           for (size_t k = 0; k < frs.size(); ++k) {
             const bool pose = what == "PoseNet";
             if (pose && k > 0) continue;  // no FR in the PoseNet: once
             geo::Networks& nets = made[k].second;
-            const double alpha = made[k].first.loss.ssim_alpha;
+            const geo::LossConfig& loss = made[k].first.loss;
             batch_rows.push_back(Row{"infer", what, pose ? "-" : (frs[k] ? "on" : "off"), b});
             std::function<void()> fn;
             if (what == "DepthNet") fn = [&nets, &img] { nets.depth(img); };
             if (pose) fn = [&nets, &img, &srcs] { nets.pose(img, srcs); };
             if (what == "FlowNet") fn = [&nets, &flow_in] { nets.flow(flow_in); };
-            if (what == "pipeline") fn = [&nets, &img, &img2, &K, alpha] { geo::predict_pair(nets, img, img2, K, alpha); };
+            if (what == "pipeline") fn = [&nets, &img, &img2, &K, &loss] { geo::predict_pair(nets, img, img2, K, loss); };
             calls.emplace_back(&batch_rows.back(), fn);
             if (profile_top > 0 && (what == "DepthNet" || what == "pipeline"))
               print_profile(fmt::format("{} inference, FR {}, batch {}", what, batch_rows.back().fr, b), fn,
@@ -394,38 +393,33 @@ int main(int argc, char** argv) {
         const int64_t b = train_batch > 0 ? train_batch : stage.batch_size;
         const auto tgt = torch::rand({b, 3, H, W}, device), srcs = torch::rand({b, N, 3, H, W}, device);
         const auto K = intrinsics(b, H, W, device);
-        struct Trainee {
+        struct Trainee {  // held by pointer: the TrainStep refers to the config and networks
           geo::Config config;
           geo::Networks nets;
-          std::unique_ptr<torch::optim::Adam> adam;
+          std::unique_ptr<geo::TrainStep> step;
           Row row;
         };
-        std::vector<Trainee> trainees;
-        trainees.reserve(frs.size());
+        std::vector<std::unique_ptr<Trainee>> trainees;
         for (bool fr : frs) {
           auto made = networks_with_fr(config, fr, stage.uses_flow(), device);
-          Trainee t{made.first, made.second, nullptr, Row{"train", stage.name + " step", fr ? "on" : "off", b}};
-          t.nets.set_modes(stage);
-          t.adam = std::make_unique<torch::optim::Adam>(
-              t.nets.parameters_of(stage),
-              torch::optim::AdamOptions(stage.learning_rate).betas({t.config.optimizer.beta1, t.config.optimizer.beta2}));
+          auto t = std::make_unique<Trainee>(
+              Trainee{made.first, made.second, nullptr, Row{"train", stage.name + " step", fr ? "on" : "off", b}});
+          t->step = std::make_unique<geo::TrainStep>(t->nets, t->config, stage);
           trainees.push_back(std::move(t));
         }
         spdlog::info("training step {} [{}], FR {}, batch {} ...", stage.name, fmt::join(stage.train, ","), fr_mode, b);
         std::vector<std::pair<Row*, std::function<void()>>> calls;
         for (auto& t : trainees) {
-          calls.emplace_back(&t.row, [&t, &tgt, &srcs, &K, &stage] {
-            t.adam->zero_grad();
-            auto out = geo::compute_losses(t.nets, tgt, srcs, K, stage, t.config);
-            out.losses.total.backward();
-            t.adam->step();
+          // The trainer's own step (loss, backward, finiteness check, clipping, Adam).
+          calls.emplace_back(&t->row, [&t, &tgt, &srcs, &K, &stage] {
+            t->step->run(tgt, srcs, K, stage.learning_rate);
           });
         }
         time_side_by_side(calls, train_warmup, train_iters, device);
         for (size_t k = 0; k < trainees.size(); ++k) {
-          rows.push_back(trainees[k].row);
+          rows.push_back(trainees[k]->row);
           if (profile_top > 0)
-            print_profile(fmt::format("{}, FR {}, batch {}", trainees[k].row.name, trainees[k].row.fr, b),
+            print_profile(fmt::format("{}, FR {}, batch {}", trainees[k]->row.name, trainees[k]->row.fr, b),
                           calls[k].second, profile_top, profile_shapes);
         }
       }

@@ -26,9 +26,8 @@ int main(int argc, char** argv) {
   app.add_option("--set", overrides, "override a config key, e.g. --set data.root=/data/kitti_raw")->take_all();
   app.add_option("--run-dir", opts.run_dir, "run folder to create (default: <run.dir>/<run.name>-<time>)");
   app.add_option("--init", opts.init, "start the first stage from this checkpoint or run folder");
-  app.add_option("--device", opts.device, "auto, cpu or cuda (default: run.device)")
-      ->check(CLI::IsMember({"auto", "cpu", "cuda"}));
-  app.add_option("--stop-after", opts.stop_after, "stop abruptly after N steps without a checkpoint (testing)");
+  app.add_option("--device", opts.device,
+                 "auto (CUDA when available), cpu, cuda or cuda:N (an error without CUDA); default: run.device");
   CLI11_PARSE(app, argc, argv);
   geo::keep_freed_memory();
   try {

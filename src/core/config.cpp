@@ -186,6 +186,11 @@ struct EmitVisitor {
     for (auto& item : v) out << item;
     out << YAML::EndSeq;
   }
+  void emit(std::vector<double>& v) {
+    out << YAML::Flow << YAML::BeginSeq;
+    for (double item : v) out << format_double(item);
+    out << YAML::EndSeq;
+  }
   template <class T> void emit(T& s) {
     out << YAML::BeginMap;
     s.fields(*this);
@@ -334,6 +339,8 @@ void ModelConfig::validate(Checker& c) const {
   c.require(one_of(upsample, {"nearest", "bilinear"}), "upsample", upsample,
             "must be nearest or bilinear");
   c.require(num_scales >= 1 && num_scales <= 4, "num_scales", num_scales, "must be in 1..4");
+  c.require(bn_eps > 0, "bn_eps", bn_eps, "must be > 0");
+  c.require(bn_momentum > 0 && bn_momentum <= 1, "bn_momentum", bn_momentum, "must be in (0, 1]");
 }
 
 void AugmentConfig::validate(Checker& c) const {
@@ -370,6 +377,15 @@ void LossConfig::validate(Checker& c) const {
   c.require(occ_alpha2 >= 0, "occ_alpha2", occ_alpha2, "must be >= 0");
   c.require(consistency_a >= 0, "consistency_a", consistency_a, "must be >= 0");
   c.require(consistency_b >= 0, "consistency_b", consistency_b, "must be >= 0");
+  const bool range_ok = image_range.size() == 2 &&
+                        ((image_range[0] == -1.0 && image_range[1] == 1.0) ||
+                         (image_range[0] == 0.0 && image_range[1] == 1.0));
+  std::string shown = "[";
+  for (size_t i = 0; i < image_range.size(); ++i) shown += (i ? ", " : "") + format_double(image_range[i]);
+  c.require(range_ok, "image_range", shown + "]", "must be [-1, 1] (GeoNet) or [0, 1]");
+  c.require(one_of(sampler, {"zeros", "border"}), "sampler", sampler, "must be zeros (GeoNet) or border");
+  c.require(one_of(flow_mask, {"occlusion", "consistency"}), "flow_mask", flow_mask,
+            "must be occlusion (paper eq. 13) or consistency (GeoNet)");
 }
 
 void LossWeights::validate(Checker& c) const {

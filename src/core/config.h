@@ -30,6 +30,12 @@ struct ModelConfig {
   bool fr_spatial_bn = false;        // BatchNorm after the 7x7 spatial conv (CBAM's code; optional)
   std::string upsample = "nearest";  // decoder upsampling: nearest (GeoNet) or bilinear
   int num_scales = 4;                // disparity / flow outputs at full, 1/2, 1/4, 1/8 (GeoNet)
+  // BatchNorm of every conv+BN layer. GeoNet uses TF-slim's batch_norm: epsilon 1e-3, decay 0.999
+  // (= momentum 0.001 in PyTorch's convention) and scale=False (no learned gamma). LibTorch's
+  // defaults are eps 1e-5, momentum 0.1, learned gamma.
+  double bn_eps = 1e-3;              // GeoNet (slim); LibTorch: 1e-5
+  double bn_momentum = 0.001;        // GeoNet (slim decay 0.999); LibTorch: 0.1
+  bool bn_scale = false;             // learn gamma: GeoNet false (slim scale=False); LibTorch true
 
   template <class V> void fields(V& v) {
     v("encoder_depth", encoder_depth);
@@ -40,6 +46,9 @@ struct ModelConfig {
     v("fr_spatial_bn", fr_spatial_bn);
     v("upsample", upsample);
     v("num_scales", num_scales);
+    v("bn_eps", bn_eps);
+    v("bn_momentum", bn_momentum);
+    v("bn_scale", bn_scale);
   }
   void validate(Checker& c) const;
 };
@@ -102,7 +111,18 @@ struct LossConfig {
   double consistency_a = 3.0;        // geometric consistency bound a (eq. 15, GeoNet alpha)
   double consistency_b = 0.05;       // geometric consistency bound b (eq. 15, GeoNet beta)
   bool consistency_scale_factor = true;  // GeoNet multiplies the difference norm by 2^s
-  bool mask_out_of_view = false;     // drop samples that leave the image (GeoNet clamps: false)
+  // Range the images are mapped to before the photometric error, the smoothness edge weights and
+  // the FlowNet's error channel: GeoNet computes them on its [-1,1] network input (so its L1 term
+  // is twice the [0,1] one and its edge weights are exp(-2|grad I|) in [0,1] units); [0, 1] as
+  // monodepth2.
+  std::vector<double> image_range = {-1.0, 1.0};
+  // Out-of-view samples of every warp: zeros (GeoNet's bilinear_sampler returns 0 outside
+  // [0,W-1)x[0,H-1)) or border (clamped to the edge pixels).
+  std::string sampler = "zeros";
+  bool mask_out_of_view = false;     // drop samples that leave the image from L_br and L_fr (off: GeoNet)
+  // Mask of the flow reconstruction L_fr: occlusion (paper eq. 13, alpha1/alpha2) or consistency
+  // (GeoNet: the eq. 15 mask, consistency_a/consistency_b).
+  std::string flow_mask = "occlusion";
   bool min_reprojection = false;     // per-pixel minimum over sources (monodepth2; off)
   bool automask = false;             // auto-mask static pixels (monodepth2; off)
 
@@ -113,7 +133,10 @@ struct LossConfig {
     v("consistency_a", consistency_a);
     v("consistency_b", consistency_b);
     v("consistency_scale_factor", consistency_scale_factor);
+    v("image_range", image_range);
+    v("sampler", sampler);
     v("mask_out_of_view", mask_out_of_view);
+    v("flow_mask", flow_mask);
     v("min_reprojection", min_reprojection);
     v("automask", automask);
   }

@@ -1,7 +1,16 @@
 // Process-wide settings every geo program applies at start-up.
 #pragma once
 
+#include <torch/types.h>
+
+#include <string>
+
 namespace geo {
+
+// The one device policy of every geo program: "auto" = the first CUDA device when CUDA is
+// available, else the CPU; "cpu"; "cuda" or "cuda:N" = that GPU, and an error (naming the value and
+// what this build/machine has) when CUDA is not available. Anything else is an error.
+torch::Device select_device(const std::string& name);
 
 // Keeps freed memory in the process for reuse instead of returning it to the OS (glibc: no
 // mmap for large blocks, no heap trimming). A training step allocates gigabytes of activations

@@ -23,15 +23,20 @@ cv::Mat read_raw(const std::string& path, int flags) {
 }
 
 // Encodes in memory, then writes atomically (a crash never leaves half a PNG).
+std::string encode(const cv::Mat& m, const std::string& ext, const std::string& what) {
+  std::vector<uchar> buf;
+  if (!cv::imencode(ext, m, buf)) throw std::runtime_error(what + ": cannot encode image");
+  return std::string(buf.begin(), buf.end());
+}
+
 void write_raw(const std::string& path, const cv::Mat& m) {
   const auto dot = path.rfind('.');
   const std::string ext = dot == std::string::npos ? ".png" : path.substr(dot);
-  std::vector<uchar> buf;
-  if (!cv::imencode(ext, m, buf)) throw std::runtime_error(path + ": cannot encode image");
+  const std::string bytes = encode(m, ext, path);
   std::filesystem::create_directories(std::filesystem::path(path).parent_path().empty()
                                           ? "."
                                           : std::filesystem::path(path).parent_path());
-  write_file_atomic(path, std::string(buf.begin(), buf.end()));
+  write_file_atomic(path, bytes);
 }
 
 torch::Tensor mat_to_tensor(const cv::Mat& bgr_any, const std::string& path) {
@@ -83,6 +88,8 @@ torch::Tensor read_image_resized(const std::string& path, int64_t height, int64_
 void write_image(const std::string& path, const torch::Tensor& image) {
   write_raw(path, tensor_to_bgr8(image));
 }
+
+std::string encode_png(const torch::Tensor& image) { return encode(tensor_to_bgr8(image), ".png", "PNG"); }
 
 FlowMap read_flow_png(const std::string& path) {
   cv::Mat m = read_raw(path, cv::IMREAD_UNCHANGED);

@@ -18,6 +18,8 @@ torch::Tensor read_image_resized(const std::string& path, int64_t height, int64_
                                  int64_t* original_width = nullptr);
 // float [3,H,W] in [0,1] (or uint8) -> 8-bit PNG/JPEG by extension, written atomically.
 void write_image(const std::string& path, const torch::Tensor& image);
+// The same image as PNG file bytes (for TensorBoard summaries).
+std::string encode_png(const torch::Tensor& image);
 
 // KITTI flow PNG: 16-bit, 3 channels, file order R = u, G = v, B = valid; u,v = (value - 2^15)/64.
 struct FlowMap {

@@ -1,7 +1,8 @@
 #include "eval/predictor.h"
 
 #include "geometry/pose.h"
-#include "train/trainer.h"
+#include "core/runtime.h"
+#include "train/checkpoints.h"
 
 #include <filesystem>
 
@@ -10,10 +11,7 @@ namespace fs = std::filesystem;
 namespace geo {
 namespace {
 
-torch::Device choose(const std::string& name) {
-  if (name != "cpu" && torch::cuda::is_available()) return torch::kCUDA;
-  return torch::kCPU;
-}
+torch::Device choose(const std::string& name) { return select_device(name.empty() ? "auto" : name); }
 
 }  // namespace
 
@@ -61,7 +59,7 @@ torch::Tensor Predictor::pose(const torch::Tensor& tgt, const std::vector<torch:
 
 torch::Tensor Predictor::flow(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& K) {
   torch::NoGradGuard no_grad;
-  return predict_pair(nets_, tgt.to(device_), src.to(device_), K.to(device_), config_.loss.ssim_alpha).flow;
+  return predict_pair(nets_, tgt.to(device_), src.to(device_), K.to(device_), config_.loss).flow;
 }
 
 std::string latest_run_checkpoint(const std::string& runs_dir) {

@@ -5,7 +5,7 @@
 
 namespace geo {
 
-Warped warp(const torch::Tensor& image, const torch::Tensor& flow) {
+Warped warp(const torch::Tensor& image, const torch::Tensor& flow, OutOfView out_of_view) {
   TORCH_CHECK(image.dim() == 4, "image must be [B,C,H,W], got ", image.sizes());
   check_shape(flow, "flow", {image.size(0), 2, image.size(2), image.size(3)});
   const auto H = image.size(2), W = image.size(3);
@@ -22,10 +22,16 @@ Warped warp(const torch::Tensor& image, const torch::Tensor& flow) {
                                  .mode(torch::kBilinear)
                                  .padding_mode(torch::kBorder)
                                  .align_corners(true));
-  torch::NoGradGuard no_grad;
-  out.valid = ((x >= 0) & (x <= W - 1) & (y >= 0) & (y <= H - 1))
-                  .unsqueeze(1)
-                  .to(image.dtype());
+  {
+    torch::NoGradGuard no_grad;
+    // GeoNet's sampler: the upper bounds are exclusive (a 1-pixel side keeps its one pixel).
+    const auto inside = [](const torch::Tensor& c, int64_t n, bool exclusive) {
+      return (c >= 0) & (exclusive && n > 1 ? c < n - 1 : c <= n - 1);
+    };
+    const bool zero = out_of_view == OutOfView::kZero;
+    out.valid = (inside(x, W, zero) & inside(y, H, zero)).unsqueeze(1).to(image.dtype());
+  }
+  if (out_of_view == OutOfView::kZero) out.image = out.image * out.valid;
   return out;
 }
 

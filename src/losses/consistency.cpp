@@ -15,9 +15,10 @@ void check_flow_pair(const torch::Tensor& fw, const torch::Tensor& bw, const cha
 torch::Tensor l2_norm(const torch::Tensor& x) { return channel_l2_norm(x.abs() + 1e-10); }
 }  // namespace
 
-torch::Tensor backward_at_forward(const torch::Tensor& flow_fw, const torch::Tensor& flow_bw) {
+torch::Tensor backward_at_forward(const torch::Tensor& flow_fw, const torch::Tensor& flow_bw,
+                                  OutOfView out_of_view) {
   check_flow_pair(flow_fw, flow_bw, "flow_bw");
-  return warp(flow_bw, flow_fw).image;
+  return warp(flow_bw, flow_fw, out_of_view).image;
 }
 
 torch::Tensor visibility_mask(const torch::Tensor& flow_fw, const torch::Tensor& bw_at_fw,

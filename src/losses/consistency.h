@@ -3,10 +3,14 @@
 
 #include <torch/torch.h>
 
+#include "geometry/warp.h"
+
 namespace geo {
 
 // W_b(p + W_f(p)): the backward flow sampled where the forward flow points. [B,2,H,W] each.
-torch::Tensor backward_at_forward(const torch::Tensor& flow_fw, const torch::Tensor& flow_bw);
+// Out of view it is 0 (GeoNet's sampler, kZero) or the border value (kBorder).
+torch::Tensor backward_at_forward(const torch::Tensor& flow_fw, const torch::Tensor& flow_bw,
+                                  OutOfView out_of_view);
 
 // Visibility (paper eq. 13): 1 where
 //   |W_f + W_b(p+W_f)|^2 < alpha1 (|W_f|^2 + |W_b(p+W_f)|^2) + alpha2, else 0 (occluded).

@@ -12,9 +12,9 @@ torch::Tensor edge_aware_smoothness(const torch::Tensor& map, const torch::Tenso
   auto dy = [H](const torch::Tensor& t) { return t.narrow(2, 0, H - 1) - t.narrow(2, 1, H - 1); };
   const auto wx = torch::exp(-dx(image).abs().mean(1, true));
   const auto wy = torch::exp(-dy(image).abs().mean(1, true));
-  // mean over (B, H, W) per channel, summed over channels.
-  const auto sx = (dx(map).abs() * wx).mean({0, 2, 3}).sum();
-  const auto sy = (dy(map).abs() * wy).mean({0, 2, 3}).sum();
+  // mean over (B, H, W) per channel, averaged over channels.
+  const auto sx = (dx(map).abs() * wx).mean();
+  const auto sy = (dy(map).abs() * wy).mean();
   return sx + sy;
 }
 

@@ -40,6 +40,20 @@ torch::Tensor direction_loss(const std::vector<torch::Tensor>& errors,
 
 }  // namespace
 
+OutOfView out_of_view(const LossConfig& cfg) {
+  return cfg.sampler == "border" ? OutOfView::kBorder : OutOfView::kZero;
+}
+
+torch::Tensor to_loss_range(const torch::Tensor& image01, const LossConfig& cfg) {
+  const double lo = cfg.image_range.at(0), hi = cfg.image_range.at(1);
+  return lo == 0.0 && hi == 1.0 ? image01 : image01 * (hi - lo) + lo;
+}
+
+torch::Tensor from_loss_range(const torch::Tensor& image, const LossConfig& cfg) {
+  const double lo = cfg.image_range.at(0), hi = cfg.image_range.at(1);
+  return lo == 0.0 && hi == 1.0 ? image : (image - lo) / (hi - lo);
+}
+
 RigidTerms rigid_terms(const LossInputs& in, const LossConfig& cfg) {
   check_shape(in.tgt, "tgt", {-1, 3, -1, -1});
   const auto B = in.tgt.size(0);
@@ -64,11 +78,12 @@ RigidTerms rigid_terms(const LossInputs& in, const LossConfig& cfg) {
   }
 
   RigidTerms out;
-  out.tgt_pyr = image_pyramid(in.tgt, S);
+  const OutOfView sampler = out_of_view(cfg);
+  out.tgt_pyr = image_pyramid(to_loss_range(in.tgt, cfg), S);
   const auto Ks = intrinsics_pyramid(in.K, S);
   std::vector<torch::Tensor> rigid_per_scale, smooth_per_scale;
   for (int64_t i = 0; i < N; ++i) {
-    out.src_pyr.push_back(image_pyramid(in.srcs[i], S));
+    out.src_pyr.push_back(image_pyramid(to_loss_range(in.srcs[i], cfg), S));
     for (auto* v : {&out.fwd_flow, &out.bwd_flow, &out.fwd_warp, &out.bwd_warp, &out.fwd_error,
                     &out.bwd_error})
       v->emplace_back(S);
@@ -87,8 +102,8 @@ RigidTerms rigid_terms(const LossInputs& in, const LossConfig& cfg) {
       const auto& tgt = out.tgt_pyr[s];
       out.fwd_flow[i][s] = rigid_flow(1.0 / in.tgt_disp[s], src_from_tgt[i], Ks[s]);
       out.bwd_flow[i][s] = rigid_flow(1.0 / in.src_disp[i][s], tgt_from_src[i], Ks[s]);
-      const auto fw = warp(src, out.fwd_flow[i][s]);
-      const auto bw = warp(tgt, out.bwd_flow[i][s]);
+      const auto fw = warp(src, out.fwd_flow[i][s], sampler);
+      const auto bw = warp(tgt, out.bwd_flow[i][s], sampler);
       out.fwd_warp[i][s] = fw.image;
       out.bwd_warp[i][s] = bw.image;
       const auto fwd_channels = photometric_error_channels(fw.image, tgt, cfg.ssim_alpha);
@@ -132,6 +147,8 @@ FlowTerms flow_terms(const RigidTerms& rigid, const PerSourceScale<torch::Tensor
   const int S = static_cast<int>(rigid.tgt_pyr.size());
   TORCH_CHECK(fwd_full.size() == N && bwd_full.size() == N, "full flows must hold ", N,
               " sources, got ", fwd_full.size(), " and ", bwd_full.size());
+  const OutOfView sampler = out_of_view(cfg);
+  const bool consistency_mask = cfg.flow_mask == "consistency";
   FlowTerms out;
   out.fwd_visible.assign(N, std::vector<torch::Tensor>(S));
   out.bwd_visible.assign(N, std::vector<torch::Tensor>(S));
@@ -146,19 +163,26 @@ FlowTerms flow_terms(const RigidTerms& rigid, const PerSourceScale<torch::Tensor
       const auto& bf = bwd_full[i][s];
       check_shape(ff, "fwd_full[i][s]", {tgt.size(0), 2, tgt.size(2), tgt.size(3)});
       check_shape(bf, "bwd_full[i][s]", {tgt.size(0), 2, tgt.size(2), tgt.size(3)});
-      const auto bw_at_fw = backward_at_forward(ff, bf);
-      const auto fw_at_bw = backward_at_forward(bf, ff);
+      const auto bw_at_fw = backward_at_forward(ff, bf, sampler);
+      const auto fw_at_bw = backward_at_forward(bf, ff, sampler);
       out.fwd_visible[i][s] = visibility_mask(ff, bw_at_fw, cfg.occ_alpha1, cfg.occ_alpha2);
       out.bwd_visible[i][s] = visibility_mask(bf, fw_at_bw, cfg.occ_alpha1, cfg.occ_alpha2);
-      const auto fe = photometric_error(warp(src, ff).image, tgt, cfg.ssim_alpha);
-      const auto be = photometric_error(warp(tgt, bf).image, src, cfg.ssim_alpha);
-      fr.push_back(masked_mean(fe, out.fwd_visible[i][s]) + masked_mean(be, out.bwd_visible[i][s]));
-      fs.push_back((edge_aware_smoothness(ff, tgt) + edge_aware_smoothness(bf, src)) /
-                   static_cast<double>(int64_t{1} << (s + 1)));
       const auto cf = geometric_consistency(ff, bw_at_fw, cfg.consistency_a, cfg.consistency_b, s,
                                             cfg.consistency_scale_factor);
       const auto cb = geometric_consistency(bf, fw_at_bw, cfg.consistency_a, cfg.consistency_b, s,
                                             cfg.consistency_scale_factor);
+      const auto fw = warp(src, ff, sampler), bw = warp(tgt, bf, sampler);
+      auto fmask = consistency_mask ? cf.mask : out.fwd_visible[i][s];
+      auto bmask = consistency_mask ? cb.mask : out.bwd_visible[i][s];
+      if (cfg.mask_out_of_view) {
+        fmask = fmask * fw.valid;
+        bmask = bmask * bw.valid;
+      }
+      const auto fe = photometric_error(fw.image, tgt, cfg.ssim_alpha);
+      const auto be = photometric_error(bw.image, src, cfg.ssim_alpha);
+      fr.push_back(masked_mean(fe, fmask) + masked_mean(be, bmask));
+      fs.push_back((edge_aware_smoothness(ff, tgt) + edge_aware_smoothness(bf, src)) /
+                   static_cast<double>(int64_t{1} << (s + 1)));
       fg.push_back(0.5 * (cf.loss + cb.loss));
     }
   }

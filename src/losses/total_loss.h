@@ -11,8 +11,15 @@
 #include <vector>
 
 #include "core/config.h"
+#include "geometry/warp.h"
 
 namespace geo {
+
+// The sampler the config selects (loss.sampler: zeros -> OutOfView::kZero, border -> kBorder).
+OutOfView out_of_view(const LossConfig& cfg);
+// Images in [0,1] -> the range the losses see (loss.image_range), and back.
+torch::Tensor to_loss_range(const torch::Tensor& image01, const LossConfig& cfg);
+torch::Tensor from_loss_range(const torch::Tensor& image, const LossConfig& cfg);
 
 template <class T> using PerSourceScale = std::vector<std::vector<T>>;  // [source][scale]
 
@@ -25,6 +32,7 @@ struct LossInputs {
   torch::Tensor poses;                      // [B,N,6] pose vectors src_from_tgt (pose.h)
 };
 
+// Images in RigidTerms are in the loss range (loss.image_range), not [0,1].
 struct RigidTerms {
   std::vector<torch::Tensor> tgt_pyr;       // S: target image per scale
   PerSourceScale<torch::Tensor> src_pyr;    // source images per scale
@@ -46,7 +54,7 @@ RigidTerms rigid_terms(const LossInputs& in, const LossConfig& cfg);
 struct FlowTerms {
   PerSourceScale<torch::Tensor> fwd_visible;  // eq. 13 masks [B,1,h,w]
   PerSourceScale<torch::Tensor> bwd_visible;
-  torch::Tensor flow;              // L_fr: full-flow reconstruction on visible pixels
+  torch::Tensor flow;              // L_fr: full-flow reconstruction on loss.flow_mask pixels
   torch::Tensor flow_smooth;       // L_fs: smoothness of the full flows / 2^(s+1)
   torch::Tensor flow_consistency;  // L_fg: geometric consistency, mean of both directions
 };

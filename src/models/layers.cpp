@@ -165,6 +165,19 @@ void init_weights(torch::nn::Module& module) {
   }
 }
 
+void set_batchnorm_style(torch::nn::Module& module, double eps, double momentum) {
+  for (auto& m : module.modules(/*include_self=*/true))
+    if (auto* bn = m->as<torch::nn::BatchNorm2d>()) bn->options.eps(eps).momentum(momentum);
+}
+
+std::vector<torch::Tensor> batchnorm_scales(const torch::nn::Module& module) {
+  std::vector<torch::Tensor> out;
+  for (const auto& m : module.modules(/*include_self=*/true))
+    if (const auto* bn = m->as<torch::nn::BatchNorm2d>())
+      if (bn->weight.defined()) out.push_back(bn->weight);
+  return out;
+}
+
 int64_t count_parameters(const torch::nn::Module& module) {
   int64_t n = 0;
   for (const auto& p : module.parameters()) n += p.numel();

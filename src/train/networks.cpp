@@ -5,6 +5,7 @@
 #include "geometry/pose.h"
 #include "geometry/warp.h"
 #include "losses/photometric.h"
+#include "models/layers.h"
 
 #include <stdexcept>
 
@@ -17,6 +18,15 @@ Networks Networks::create(const Config& c, bool with_flow) {
   po.seq_length = c.data.seq_length;
   n.pose = PoseNet(po);
   if (with_flow) n.flow = FlowNet(FlowNetOptions::from(c.model));
+  n.learn_bn_scale = c.model.bn_scale;
+  const std::vector<torch::nn::Module*> nets = {n.depth.ptr().get(), n.pose.ptr().get(),
+                                                n.flow ? static_cast<torch::nn::Module*>(n.flow.ptr().get()) : nullptr};
+  for (torch::nn::Module* m : nets) {
+    if (!m) continue;
+    set_batchnorm_style(*m, c.model.bn_eps, c.model.bn_momentum);
+    if (!n.learn_bn_scale)
+      for (auto& gamma : batchnorm_scales(*m)) gamma.set_requires_grad(false);
+  }
   return n;
 }
 
@@ -32,17 +42,26 @@ void Networks::set_modes(const StageConfig& s) {
   if (flow) flow->train(s.trains("flow"));
 }
 
-std::vector<torch::Tensor> Networks::parameters_of(const StageConfig& s) const {
-  std::vector<torch::Tensor> out;
-  auto add = [&](const torch::nn::Module& m, bool on) {
-    for (const auto& p : m.parameters()) {
-      p.set_requires_grad(on);
-      if (on) out.push_back(p);
-    }
+void Networks::set_trainable(const StageConfig& s) {
+  auto set = [&](torch::nn::Module& m, bool on) {
+    for (auto& p : m.parameters()) p.set_requires_grad(on);
+    if (!learn_bn_scale)
+      for (auto& gamma : batchnorm_scales(m)) gamma.set_requires_grad(false);
   };
-  add(*depth, s.trains("depth"));
-  add(*pose, s.trains("pose"));
-  if (flow) add(*flow, s.trains("flow"));
+  set(*depth, s.trains("depth"));
+  set(*pose, s.trains("pose"));
+  if (flow) set(*flow, s.trains("flow"));
+}
+
+std::vector<torch::Tensor> Networks::trainable_parameters() const {
+  std::vector<torch::Tensor> out;
+  auto add = [&](const torch::nn::Module& m) {
+    for (const auto& p : m.parameters())
+      if (p.requires_grad()) out.push_back(p);
+  };
+  add(*depth);
+  add(*pose);
+  if (flow) add(*flow);
   return out;
 }
 
@@ -119,11 +138,12 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
   TORCH_CHECK(nets.flow, "the stage trains flow but no FlowNet was created");
   // Both directions of every source in one FlowNet pass: [fwd_0..fwd_N-1, bwd_0..bwd_N-1].
   std::vector<torch::Tensor> inputs;
+  // The warps are in the loss range (loss.image_range); flow_net_input takes [0,1] images.
   for (int64_t i = 0; i < N; ++i)
-    inputs.push_back(flow_net_input(tgt, src_list[i], out.rigid.fwd_warp[i][0].detach(),
+    inputs.push_back(flow_net_input(tgt, src_list[i], from_loss_range(out.rigid.fwd_warp[i][0].detach(), config.loss),
                                     out.rigid.fwd_flow[i][0].detach(), out.rigid.fwd_error_norm[i].detach()));
   for (int64_t i = 0; i < N; ++i)
-    inputs.push_back(flow_net_input(src_list[i], tgt, out.rigid.bwd_warp[i][0].detach(),
+    inputs.push_back(flow_net_input(src_list[i], tgt, from_loss_range(out.rigid.bwd_warp[i][0].detach(), config.loss),
                                     out.rigid.bwd_flow[i][0].detach(), out.rigid.bwd_error_norm[i].detach()));
   std::optional<torch::NoGradGuard> frozen;
   if (!stage.trains("flow")) frozen.emplace();
@@ -145,7 +165,7 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
 }
 
 PairPrediction predict_pair(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& src,
-                            const torch::Tensor& K, double ssim_alpha) {
+                            const torch::Tensor& K, const LossConfig& loss) {
   TORCH_CHECK(tgt.dim() == 4 && tgt.size(1) == 3 && src.sizes() == tgt.sizes(), "predict_pair: tgt ",
               tgt.sizes(), " and src ", src.sizes(), " must both be [B,3,H,W]");
   const int64_t L = nets.pose->options.seq_length, before = (L - 1) / 2;
@@ -157,9 +177,12 @@ PairPrediction predict_pair(Networks& nets, const torch::Tensor& tgt, const torc
   p.rigid_flow = rigid_flow(1.0 / p.disp, p.src_from_tgt, K);
   p.flow = p.rigid_flow;
   if (nets.flow) {
-    const auto warped = warp(src, p.rigid_flow).image;
-    const auto error = channel_l2_norm(photometric_error_channels(warped, tgt, ssim_alpha));
-    p.flow = p.rigid_flow + nets.flow->forward(flow_net_input(tgt, src, warped, p.rigid_flow, error)).flow[0];
+    // As in training (compute_losses): warp and error in the loss range.
+    const auto warped = warp(to_loss_range(src, loss), p.rigid_flow, out_of_view(loss)).image;
+    const auto error =
+        channel_l2_norm(photometric_error_channels(warped, to_loss_range(tgt, loss), loss.ssim_alpha));
+    p.flow = p.rigid_flow + nets.flow->forward(flow_net_input(tgt, src, from_loss_range(warped, loss),
+                                                              p.rigid_flow, error)).flow[0];
   }
   return p;
 }

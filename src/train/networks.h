@@ -20,13 +20,18 @@ struct Networks {
   DepthNet depth{nullptr};
   PoseNet pose{nullptr};
   FlowNet flow{nullptr};  // null when no stage of the config trains flow
+  bool learn_bn_scale = true;  // model.bn_scale: false keeps every BatchNorm gamma at 1 (GeoNet)
 
-  // Built from the model config; flow only when `with_flow`.
+  // Built from the model config (BatchNorm eps/momentum/scale included); flow only when `with_flow`.
   static Networks create(const Config& config, bool with_flow);
   void to(const torch::Device& device);
   // Trainable networks in train mode; frozen ones in eval mode (BatchNorm statistics fixed, GeoNet).
   void set_modes(const StageConfig& stage);
-  std::vector<torch::Tensor> parameters_of(const StageConfig& stage) const;
+  // requires_grad on: the parameters of the networks the stage trains, BatchNorm scales only when
+  // learn_bn_scale. Call once per stage, before building the optimizer.
+  void set_trainable(const StageConfig& stage);
+  // The parameters that require gradients (what set_trainable selected), in a fixed order.
+  std::vector<torch::Tensor> trainable_parameters() const;
   // Inference: every network in eval mode and, with `fold`, BatchNorm folded into the convolutions
   // (ConvBnImpl::fold_batchnorm; same outputs up to rounding, fewer passes over memory). Call after
   // loading and moving to the device; folded networks refuse to train.
@@ -62,7 +67,9 @@ struct PairPrediction {
   torch::Tensor rigid_flow;    // [B,2,H,W]
   torch::Tensor flow;          // [B,2,H,W] full flow (= rigid_flow without a FlowNet)
 };
+// `loss` gives what the FlowNet's input depends on: the sampler, the image range and the SSIM weight
+// of its error channel (as in training).
 PairPrediction predict_pair(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& src,
-                            const torch::Tensor& K, double ssim_alpha);
+                            const torch::Tensor& K, const LossConfig& loss);
 
 }  // namespace geo

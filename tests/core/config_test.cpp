@@ -42,6 +42,33 @@ TEST(Config, DefaultsAreThePapersSettings) {
   EXPECT_DOUBLE_EQ(c.stages[0].weights.flow_smooth, 0.2);
   EXPECT_DOUBLE_EQ(c.optimizer.beta1, 0.9);
   EXPECT_DOUBLE_EQ(c.optimizer.beta2, 0.999);
+  // GeoNet's where the paper is silent: [-1,1] loss images, zero-padding sampler, slim BatchNorm.
+  EXPECT_EQ(c.loss.image_range, (std::vector<double>{-1.0, 1.0}));
+  EXPECT_EQ(c.loss.sampler, "zeros");
+  EXPECT_EQ(c.loss.flow_mask, "occlusion");  // the paper's eq. 13
+  EXPECT_DOUBLE_EQ(c.model.bn_eps, 1e-3);
+  EXPECT_DOUBLE_EQ(c.model.bn_momentum, 1e-3);
+  EXPECT_FALSE(c.model.bn_scale);
+}
+
+TEST(Config, GeoNetSwitchesParseRoundTripAndAreValidated) {
+  const Config c = geo::parse_config(
+      "loss: {image_range: [0, 1], sampler: border, flow_mask: consistency}\n"
+      "model: {bn_eps: 1.0e-5, bn_momentum: 0.1, bn_scale: true}\n");
+  EXPECT_EQ(c.loss.image_range, (std::vector<double>{0.0, 1.0}));
+  EXPECT_EQ(c.loss.sampler, "border");
+  EXPECT_EQ(c.loss.flow_mask, "consistency");
+  const Config back = geo::parse_config(geo::to_yaml(c));
+  EXPECT_EQ(back.loss.image_range, c.loss.image_range);
+  EXPECT_EQ(back.loss.sampler, "border");
+  EXPECT_DOUBLE_EQ(back.model.bn_momentum, 0.1);
+  EXPECT_TRUE(back.model.bn_scale);
+  const std::string msg = error_of([] {
+    geo::parse_config("loss: {image_range: [0, 255], sampler: reflect, flow_mask: none}\nmodel: {bn_momentum: 0}\n");
+  });
+  for (const char* want : {"'loss.image_range' = '[0, 255]' (line 1): must be [-1, 1] (GeoNet) or [0, 1]",
+                           "'loss.sampler' = 'reflect'", "'loss.flow_mask' = 'none'", "'model.bn_momentum' = 0"})
+    EXPECT_NE(msg.find(want), std::string::npos) << want << "\n" << msg;
 }
 
 TEST(Config, ValidConfigRoundTrips) {

@@ -12,7 +12,7 @@ TEST(Occlusion, ConsistentFlowsAreVisibleEverywhere) {
   fw.select(1, 0).fill_(1.5);
   fw.select(1, 1).fill_(-0.5);
   const auto bw = -fw;
-  const auto bw_at_fw = geo::backward_at_forward(fw, bw);
+  const auto bw_at_fw = geo::backward_at_forward(fw, bw, geo::OutOfView::kBorder);
   EXPECT_EQ(geo::visibility_mask(fw, bw_at_fw, 0.01, 0.5).min().item<double>(), 1.0);
   const auto c = geo::geometric_consistency(fw, bw_at_fw, 3.0, 0.05, 0, true);
   EXPECT_EQ(c.loss.item<double>(), 0.0);
@@ -25,7 +25,7 @@ TEST(Occlusion, DisagreeingRegionIsOccluded) {
   auto bw = -fw.clone();
   // Backward flow of a 2x2 block says something else (e.g. a foreground object): +5 px in u.
   bw.select(1, 0).narrow(1, 2, 2).narrow(2, 4, 2).fill_(5.0);
-  const auto bw_at_fw = geo::backward_at_forward(fw, bw);
+  const auto bw_at_fw = geo::backward_at_forward(fw, bw, geo::OutOfView::kBorder);
   const auto vis = geo::visibility_mask(fw, bw_at_fw, 0.01, 0.5);
   // Target pixels (x, y) with x + 1 in {4, 5} and y in {2, 3} land on the block: x in {3, 4}.
   // There |W_f + W_b|^2 = 36 > 0.01 (1 + 25) + 0.5.
@@ -47,11 +47,26 @@ TEST(Occlusion, DisagreeingRegionIsOccluded) {
   EXPECT_EQ(c.mask.sum().item<double>(), 64);
 }
 
+TEST(Occlusion, FlowLeavingTheImageIsOccludedWithGeoNetsSampler) {
+  // u = 4 forward, -4 backward on an 8x8 image. Pixels x >= 3 land on x + 4 >= 7 = W-1, outside
+  // GeoNet's sampler: W_b(p + W_f) = 0 there, |W_f|^2 = 16 > 0.01 * 16 + 0.5 -> occluded. The
+  // border sampler reads the edge's -4 and keeps them visible. The last row (y = H-1) is outside
+  // GeoNet's sampler too: every pixel there is occluded.
+  auto fw = torch::zeros({1, 2, 8, 8}, kDouble);
+  fw.select(1, 0).fill_(4.0);
+  const auto bw = -fw;
+  const auto zero = geo::visibility_mask(fw, geo::backward_at_forward(fw, bw, geo::OutOfView::kZero), 0.01, 0.5);
+  EXPECT_EQ(zero.sum().item<double>(), 7 * 3);
+  EXPECT_EQ(zero.narrow(3, 0, 3).narrow(2, 0, 7).min().item<double>(), 1.0);
+  const auto border = geo::visibility_mask(fw, geo::backward_at_forward(fw, bw, geo::OutOfView::kBorder), 0.01, 0.5);
+  EXPECT_EQ(border.sum().item<double>(), 64);
+}
+
 TEST(Consistency, GradientFlowsIntoTheFlowsButNotTheBound) {
   torch::manual_seed(12);
   const auto fw = (torch::randn({1, 2, 6, 6}, kDouble)).requires_grad_();
   const auto bw = (torch::randn({1, 2, 6, 6}, kDouble)).requires_grad_();
-  const auto c = geo::geometric_consistency(fw, geo::backward_at_forward(fw, bw), 3.0, 0.05, 0, true);
+  const auto c = geo::geometric_consistency(fw, geo::backward_at_forward(fw, bw, geo::OutOfView::kBorder), 3.0, 0.05, 0, true);
   c.loss.backward();
   EXPECT_FALSE(c.mask.requires_grad());
   EXPECT_TRUE(torch::isfinite(fw.grad()).all().item<bool>());
@@ -61,7 +76,7 @@ TEST(Consistency, GradientFlowsIntoTheFlowsButNotTheBound) {
 TEST(Consistency, MalformedShapesThrow) {
   EXPECT_THROW(geo::visibility_mask(torch::zeros({1, 3, 4, 4}), torch::zeros({1, 3, 4, 4}), 0.01, 0.5),
                c10::Error);
-  EXPECT_THROW(geo::backward_at_forward(torch::zeros({1, 2, 4, 4}), torch::zeros({2, 2, 4, 4})),
+  EXPECT_THROW(geo::backward_at_forward(torch::zeros({1, 2, 4, 4}), torch::zeros({2, 2, 4, 4}), geo::OutOfView::kZero),
                c10::Error);
 }
 

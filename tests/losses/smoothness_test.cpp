@@ -27,10 +27,11 @@ TEST(Smoothness, HandComputed4x4Case) {
   auto d2 = (torch::arange(4, kDouble) * 2).view({1, 1, 4, 1}).expand({1, 1, 4, 4}).contiguous();
   EXPECT_NEAR(geo::edge_aware_smoothness(d2, torch::zeros({1, 3, 4, 4}, kDouble)).item<double>(), 2.0,
               1e-12);
-  // Flow (2 channels): u = x, v = 2y on a flat image -> 1 + 2 = 3 (sum over channels).
+  // Flow (2 channels): u = x, v = 2y on a flat image -> (1 + 2) / 2 = 1.5: the mean of the u and v
+  // terms, as GeoNet's compute_flow_smooth_loss (sum over i of compute_smooth_loss, divided by 2).
   const auto flow = torch::cat({d, d2}, 1);
   EXPECT_NEAR(geo::edge_aware_smoothness(flow, torch::zeros({1, 3, 4, 4}, kDouble)).item<double>(),
-              3.0, 1e-12);
+              1.5, 1e-12);
 }
 
 TEST(Smoothness, MismatchedImageThrows) {

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 namespace {
 
 const auto kDouble = torch::TensorOptions().dtype(torch::kFloat64);
@@ -45,6 +47,66 @@ TEST(TotalLoss, TruePoseReconstructsExactlyOnVisiblePixels) {
   const auto wrong = geo::rigid_terms(shifted_plane(2, 0.5).in, cfg);
   EXPECT_GT(wrong.rigid.item<double>(), 0.05);
   EXPECT_EQ(right.disp_smooth.item<double>(), 0.0);  // constant disparity
+}
+
+TEST(TotalLoss, ImageRangeScalesL1AndTheEdgeWeights) {
+  // Pure L1 on in-view pixels: GeoNet's [-1,1] range doubles every difference.
+  auto sc = shifted_plane(1, 0.5);  // the wrong pose: a non-zero error
+  geo::LossConfig unit, geonet;
+  unit.image_range = {0.0, 1.0};
+  for (auto* c : {&unit, &geonet}) {
+    c->ssim_alpha = 0.0;
+    c->mask_out_of_view = true;
+  }
+  EXPECT_EQ(geonet.image_range, (std::vector<double>{-1.0, 1.0}));  // the default
+  const double l01 = geo::rigid_terms(sc.in, unit).rigid.item<double>();
+  EXPECT_GT(l01, 0.01);
+  EXPECT_NEAR(geo::rigid_terms(sc.in, geonet).rigid.item<double>(), 2 * l01, 1e-12);
+  // Edge weights: a column ramp 0.04 x (|dx I| = 0.04 in [0,1] units) and disparity 0.1 + 0.001 x:
+  // smoothness = 0.001 exp(-0.04) on [0,1], 0.001 exp(-0.08) on [-1,1] (GeoNet's exp(-2g)).
+  const auto ramp = torch::arange(24, kDouble).view({1, 1, 1, 24}).expand({1, 3, 16, 24});
+  sc.in.tgt = (0.04 * ramp).contiguous();
+  sc.in.srcs = {sc.in.tgt.clone()};
+  const auto disp = (0.1 + 0.001 * ramp.narrow(1, 0, 1)).contiguous();
+  sc.in.tgt_disp = {disp};
+  sc.in.src_disp = {{disp}};
+  // Mean over the W-1 column pairs of |dx d| e^{-w}, for each of the two frames: both equal.
+  EXPECT_NEAR(geo::rigid_terms(sc.in, unit).disp_smooth.item<double>(), 0.001 * std::exp(-0.04), 1e-12);
+  EXPECT_NEAR(geo::rigid_terms(sc.in, geonet).disp_smooth.item<double>(), 0.001 * std::exp(-0.08), 1e-12);
+}
+
+TEST(TotalLoss, FlowReconstructionMaskIsEq13OrGeoNetsConsistencyMask) {
+  // Forward flow u = 1; the backward flow disagrees by 2.5 px on a 2x2 block. Eq. 13 calls those
+  // pixels occluded (6.25 > 0.01 (1 + 2.25) + 0.5), GeoNet's consistency bound max(3, 0.05) keeps
+  // them. With an error of 1 only on those pixels, L_fr is 0 with the eq. 13 mask and
+  // (4 / 64) per direction with the consistency mask.
+  const int64_t H = 8, W = 8;
+  geo::RigidTerms rigid;
+  const auto zeros = torch::zeros({1, 3, H, W}, kDouble);
+  rigid.tgt_pyr = {zeros};
+  rigid.src_pyr = {{zeros}};
+  auto ff = torch::zeros({1, 2, H, W}, kDouble);
+  ff.select(1, 0).fill_(1.0);
+  auto bf = -ff.clone();
+  bf.select(1, 0).narrow(1, 2, 2).narrow(2, 4, 2).fill_(1.5);
+  // The target is 0; the source is 1 on the block (rows 2-3, columns 4-5). Forward, target pixels
+  // x in {3, 4} read the source block at x + 1: error 1 exactly where the flows disagree. Backward,
+  // the block pixels read the target (0) and compare with their own 1: error 1 there too.
+  auto src = zeros.clone();
+  src.narrow(2, 2, 2).narrow(3, 4, 2).fill_(1.0);
+  rigid.src_pyr = {{src}};
+  geo::LossConfig cfg;
+  cfg.ssim_alpha = 0.0;
+  cfg.image_range = {0.0, 1.0};  // the images above are already in the loss range
+  cfg.sampler = "border";
+  const auto occ = geo::flow_terms(rigid, {{ff}}, {{bf}}, cfg);
+  cfg.flow_mask = "consistency";
+  const auto con = geo::flow_terms(rigid, {{ff}}, {{bf}}, cfg);
+  EXPECT_EQ(occ.fwd_visible[0][0].sum().item<double>(), 60);
+  // Each direction: error 1 on the 4 disputed pixels, excluded by eq. 13 (-> 0), kept by the
+  // consistency mask (-> 4 / 64, every pixel within the bound).
+  EXPECT_NEAR(occ.flow.item<double>(), 0.0, 1e-12);
+  EXPECT_NEAR(con.flow.item<double>(), 4.0 / 64 + 4.0 / 64, 1e-12);
 }
 
 TEST(TotalLoss, StagesWithoutFlowLeaveFlowTermsUndefined) {

@@ -79,3 +79,33 @@ TEST(Layers, FoldedDepthNetMatchesTheUnfoldedOne) {
 
 }  // namespace
 }  // namespace geo
+
+namespace {
+
+// Running mean after k training steps on a constant batch c from 0: c * (1 - (1 - momentum)^k).
+TEST(Layers, BatchNormStyleSetsEpsAndMomentum) {
+  for (const auto& [momentum, eps] : {std::pair<double, double>{0.001, 1e-3}, {0.1, 1e-5}}) {
+    torch::nn::Sequential seq(torch::nn::BatchNorm2d(2));
+    geo::set_batchnorm_style(*seq, eps, momentum);
+    auto* bn = seq[0]->as<torch::nn::BatchNorm2d>();
+    ASSERT_NE(bn, nullptr);
+    EXPECT_EQ(bn->options.eps(), eps);
+    seq->train();
+    const auto x = torch::full({4, 2, 3, 3}, 2.0, torch::kFloat64);
+    seq->to(torch::kFloat64);
+    for (int k = 0; k < 3; ++k) seq->forward(x);
+    const double want = 2.0 * (1 - std::pow(1 - momentum, 3));
+    EXPECT_NEAR(bn->running_mean[0].item<double>(), want, 1e-12) << "momentum " << momentum;
+    // Evaluation normalises with eps: (x - mean) / sqrt(var + eps), var(constant) = 0 -> running_var
+    // decays from 1 towards 0: (1 - m)^3.
+    EXPECT_NEAR(bn->running_var[1].item<double>(), std::pow(1 - momentum, 3), 1e-12);
+    seq->eval();
+    const double rv = std::pow(1 - momentum, 3);
+    EXPECT_NEAR(seq->forward(x)[0][0][0][0].item<double>(), (2.0 - want) / std::sqrt(rv + eps), 1e-9);
+  }
+  torch::nn::Sequential seq(torch::nn::Conv2d(1, 1, 1), torch::nn::BatchNorm2d(3), torch::nn::BatchNorm2d(4));
+  EXPECT_EQ(geo::batchnorm_scales(*seq).size(), 2u);
+  EXPECT_EQ(geo::batchnorm_scales(*seq)[1].numel(), 4);
+}
+
+}  // namespace

@@ -1,12 +1,19 @@
 // Whole-loop behaviour on a tiny synthetic world: a run stopped abruptly (as by kill -9) and resumed
 // logs exactly the losses of an uninterrupted run; bad configs stop before training naming the key;
-// NaN steps never reach a checkpoint.
-#include "data/synth_writer.h"
+// NaN steps never reach a checkpoint; each stage keeps its own best checkpoint, chosen by what the
+// stage trains, and a run folder resolves to the best of its last stage; the TensorBoard file
+// holds the losses of metrics.csv.
+#include "train/checkpoints.h"
 #include "train/trainer.h"
 
 #include <gtest/gtest.h>
 
+#include <fstream>
+#include <map>
+#include <sstream>
+
 #include "synth_world.h"
+#include "tensorboard_reader.h"
 
 namespace geo {
 namespace {
@@ -31,6 +38,37 @@ run: {threads: 2, seed: 3}
 
 std::string metrics(const std::string& dir) { return test::read_file(dir + "/metrics.csv"); }
 
+// Stops the run from inside, as a crash would: no checkpoint for the step it interrupts.
+struct KillAtStep : MetricsSink {
+  explicit KillAtStep(int64_t n) : left(n) {}
+  void on_step(const StepRecord&) override {
+    if (--left == 0) throw std::runtime_error("killed");
+  }
+  int64_t left;
+};
+
+TrainState state_of(const std::string& checkpoint) {
+  torch::serialize::InputArchive a;
+  a.load_from(checkpoint);
+  return read_train_state(a, checkpoint);
+}
+
+// val.csv rows of one stage: iteration -> score.
+std::map<int64_t, double> val_scores(const std::string& dir, const std::string& stage) {
+  std::ifstream in(dir + "/val.csv");
+  std::string line;
+  std::getline(in, line);
+  EXPECT_EQ(line, "stage_index,stage,iteration,photometric,flow,score");
+  std::map<int64_t, double> out;
+  while (std::getline(in, line)) {
+    std::vector<std::string> f;
+    std::stringstream ss(line);
+    for (std::string x; std::getline(ss, x, ',');) f.push_back(x);
+    if (f.size() == 6 && f[1] == stage) out[std::stoll(f[2])] = std::stod(f[5]);
+  }
+  return out;
+}
+
 TEST(Trainer, KilledAndResumedRunLogsTheSameLosses) {
   const auto base = test::fresh_dir("resume");
   TrainOptions a;
@@ -38,13 +76,100 @@ TEST(Trainer, KilledAndResumedRunLogsTheSameLosses) {
   ASSERT_EQ(train(tiny_config(), a), 0);
   TrainOptions b;
   b.run_dir = base + "/killed";
-  b.stop_after = 5;  // s1: 3 steps (checkpoints 2, 3), s2: 2 steps (checkpoint 2), then "killed"
-  EXPECT_EQ(train(tiny_config(), b), 137);
+  // s1: 3 steps (checkpoints 2, 3), s2: 2 steps (checkpoint 2), killed during the 6th step.
+  b.sinks.push_back(std::make_shared<KillAtStep>(6));
+  GEO_EXPECT_THROW_WITH(train(tiny_config(), b), "killed");
   EXPECT_EQ(test::read_file(b.run_dir + "/checkpoints/latest"), "s2-00000002.pt\n");
   ASSERT_EQ(resume(b.run_dir, {}), 0);
   const auto whole = metrics(a.run_dir), resumed = metrics(b.run_dir);
   EXPECT_EQ(std::count(whole.begin(), whole.end(), '\n'), 7);  // header + 6 iterations
   EXPECT_EQ(whole, resumed);
+
+  // The TensorBoard file of the uninterrupted run: a loss value per iteration, steps 1..6 over both
+  // stages, equal to metrics.csv's (as float32).
+  const auto events = test::read_tensorboard_dir(a.run_dir + "/tb");
+  std::map<int64_t, float> rigid;
+  for (const auto& e : events)
+    for (const auto& v : e.values)
+      if (v.tag == "loss/rigid") rigid[e.step] = v.simple_value;
+  ASSERT_EQ(rigid.size(), 6u);
+  std::istringstream rows(whole);
+  std::string row;
+  std::getline(rows, row);  // header: stage_index,stage,iteration,total,rigid,...
+  for (int64_t step = 1; std::getline(rows, row); ++step) {
+    std::vector<std::string> f;
+    std::stringstream ss(row);
+    for (std::string x; std::getline(ss, x, ',');) f.push_back(x);
+    ASSERT_TRUE(rigid.count(step)) << step;
+    EXPECT_EQ(rigid[step], static_cast<float>(std::stod(f[4]))) << "step " << step;
+  }
+}
+
+TEST(Trainer, FlowOnlyStageKeepsItsOwnBestChosenByTheFlowLoss) {
+  // GeoNet's schedule: depth and pose first, then the FlowNet alone (depth and pose frozen, so the
+  // rigid validation loss is constant there and cannot select a FlowNet).
+  auto cfg = tiny_config();
+  cfg.logging.checkpoint_interval = 1;
+  cfg.logging.val_interval = 1;
+  cfg.logging.keep_last = 2;
+  cfg.stages[0].iterations = 2;
+  cfg.stages[1].iterations = 4;
+  cfg.stages[1].train = {"flow"};
+  cfg.stages[1].learning_rate = 1e-3;
+  TrainOptions o;
+  o.run_dir = test::fresh_dir("flowbest") + "/run";
+  ASSERT_EQ(train(cfg, o), 0);
+  const auto s1 = val_scores(o.run_dir, "s1"), s2 = val_scores(o.run_dir, "s2");
+  ASSERT_EQ(s1.size(), 2u);
+  ASSERT_EQ(s2.size(), 4u);
+  auto argmin = [](const std::map<int64_t, double>& m) {
+    return std::min_element(m.begin(), m.end(), [](auto& a, auto& b) { return a.second < b.second; })->first;
+  };
+  // Each stage's best file is that stage's checkpoint with the lowest score (ties: the first).
+  const std::string ck = o.run_dir + "/checkpoints";
+  const auto b1 = state_of(ck + "/best-s1.pt"), b2 = state_of(ck + "/best-s2.pt");
+  EXPECT_EQ(b1.stage, 0);
+  EXPECT_EQ(b1.iteration, argmin(s1));
+  EXPECT_EQ(b2.stage, 1);
+  EXPECT_EQ(b2.iteration, argmin(s2));
+  EXPECT_NEAR(b2.best_score, s2.at(argmin(s2)), 1e-7);  // val.csv holds 9 digits
+  // The flow stage's scores are L_fr: they change while the FlowNet trains.
+  EXPECT_NE(s2.begin()->second, s2.rbegin()->second);
+  // keep_last 2 rotated the others away, the best files stay; the run resolves to the last stage's.
+  EXPECT_EQ(resolve_checkpoint(o.run_dir), ck + "/best-s2.pt");
+  EXPECT_FALSE(std::filesystem::exists(ck + "/s1-00000001.pt"));
+}
+
+TEST(Trainer, TwoStageRunResolvesToTheLastStagesBest) {
+  auto cfg = tiny_config();
+  cfg.logging.checkpoint_interval = 1;
+  cfg.logging.val_interval = 1;
+  cfg.logging.summary_interval = 2;  // summaries (PNG files and TensorBoard images) too
+  cfg.stages[0].iterations = 2;
+  cfg.stages[1].iterations = 2;
+  TrainOptions o;
+  o.run_dir = test::fresh_dir("twostage") + "/run";
+  ASSERT_EQ(train(cfg, o), 0);
+  const std::string best = resolve_checkpoint(o.run_dir);
+  EXPECT_EQ(best, o.run_dir + "/checkpoints/best-s2.pt");
+  EXPECT_EQ(state_of(best).stage, 1);  // never a stage-1 checkpoint without a trained FlowNet
+  torch::serialize::InputArchive a, flow;
+  a.load_from(best);
+  EXPECT_TRUE(a.try_read("flow", flow));
+  // The summary images reached TensorBoard as PNGs, tagged by stage, at the global step.
+  std::map<std::string, int64_t> images;
+  for (const auto& e : test::read_tensorboard_dir(o.run_dir + "/tb"))
+    for (const auto& v : e.values)
+      if (v.has_image) {
+        images[v.tag] = e.step;
+        EXPECT_EQ(v.png.substr(1, 3), "PNG") << v.tag;
+        EXPECT_EQ(v.height, 64);
+        EXPECT_EQ(v.width, 208);
+      }
+  EXPECT_EQ(images["s1/disp"], 2);
+  EXPECT_EQ(images["s2/flow"], 4);
+  EXPECT_EQ(images.size(), 3u + 5u);  // stage 1: target, disp, warped; stage 2 adds flow, visible
+  EXPECT_TRUE(std::filesystem::exists(o.run_dir + "/summaries/s2-2-visible.png"));
 }
 
 TEST(Trainer, BadConfigStopsBeforeTrainingNamingTheKey) {
@@ -55,6 +180,14 @@ TEST(Trainer, BadConfigStopsBeforeTrainingNamingTheKey) {
   GEO_EXPECT_THROW_WITH(train(cfg, o), "data.root", "/nonexistent/kitti");
   EXPECT_FALSE(std::filesystem::exists(o.run_dir + "/checkpoints/latest"));
   GEO_EXPECT_THROW_WITH(tiny_config("optimizer: {beta3: 1}\n"), "optimizer.beta3");
+}
+
+TEST(Trainer, ExplicitCudaWithoutCudaIsAnError) {
+  if (torch::cuda::is_available()) GTEST_SKIP() << "CUDA is available here";
+  TrainOptions o;
+  o.run_dir = test::fresh_dir("nocuda") + "/run";
+  o.device = "cuda";
+  GEO_EXPECT_THROW_WITH(train(tiny_config(), o), "device 'cuda'", "CUDA is not available");
 }
 
 TEST(Trainer, NonFiniteStepsAreSkippedAndStopTheRun) {

@@ -1,0 +1,119 @@
+#include "train/checkpoints.h"
+
+#include "core/logging.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+#include <system_error>
+
+namespace fs = std::filesystem;
+
+namespace geo {
+namespace {
+
+std::string read_first_line(const std::string& path) {
+  std::ifstream in(path);
+  std::string line;
+  std::getline(in, line);
+  return line;
+}
+
+bool is_best_name(const std::string& name) { return name.rfind("best", 0) == 0; }
+
+}  // namespace
+
+void write_train_state(torch::serialize::OutputArchive& archive, const TrainState& s) {
+  archive.write("meta", torch::tensor({static_cast<double>(s.stage), static_cast<double>(s.iteration), s.best_score},
+                                      torch::kFloat64));
+}
+
+TrainState read_train_state(torch::serialize::InputArchive& archive, const std::string& source) {
+  torch::Tensor meta;
+  if (!archive.try_read("meta", meta) || meta.numel() != 3)
+    throw std::runtime_error(source + ": not a geo training checkpoint (no train state 'meta' of 3 values)");
+  meta = meta.to(torch::kFloat64);
+  TrainState s;
+  s.stage = static_cast<int64_t>(meta[0].item<double>());
+  s.iteration = static_cast<int64_t>(meta[1].item<double>());
+  s.best_score = meta[2].item<double>();
+  return s;
+}
+
+std::string checkpoint_name(const std::string& stage, int64_t iteration) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "-%08lld.pt", static_cast<long long>(iteration));
+  return stage + buf;
+}
+
+std::string stage_of_checkpoint(const std::string& name) {
+  const auto dash = name.rfind('-');
+  if (dash == std::string::npos || dash == 0 || name.size() < 4 || name.substr(name.size() - 3) != ".pt") return "";
+  const std::string digits = name.substr(dash + 1, name.size() - 3 - dash - 1);
+  if (digits.empty() || !std::all_of(digits.begin(), digits.end(), ::isdigit)) return "";
+  return name.substr(0, dash);
+}
+
+CheckpointManager::CheckpointManager(std::string dir, int keep_last)
+    : dir_(std::move(dir)), keep_last_(std::max(1, keep_last)) {
+  fs::create_directories(this->dir());
+  std::vector<std::pair<fs::file_time_type, std::string>> found;
+  for (const auto& e : fs::directory_iterator(this->dir())) {
+    const std::string name = e.path().filename().string();
+    if (e.path().extension() == ".pt" && !is_best_name(name)) found.emplace_back(e.last_write_time(), name);
+  }
+  std::sort(found.begin(), found.end());
+  for (const auto& f : found) kept_.push_back(f.second);
+}
+
+std::string CheckpointManager::save(const std::string& stage, int64_t iteration, bool best,
+                                    const std::function<void(torch::serialize::OutputArchive&)>& fill) {
+  torch::serialize::OutputArchive archive;
+  fill(archive);
+  const std::string name = checkpoint_name(stage, iteration);
+  const std::string path = dir() + "/" + name, tmp = path + ".tmp";
+  archive.save_to(tmp);
+  fs::rename(tmp, path);
+  if (best) {
+    // A new name for the same file, swapped into place: rotation deleting <stage>-<it>.pt later
+    // leaves best-<stage>.pt whole, and no second copy of the weights is written.
+    const std::string best_path = dir() + "/best-" + stage + ".pt", best_tmp = best_path + ".tmp";
+    fs::remove(best_tmp);
+    std::error_code ec;
+    fs::create_hard_link(path, best_tmp, ec);
+    if (ec) fs::copy_file(path, best_tmp, fs::copy_options::overwrite_existing);
+    fs::rename(best_tmp, best_path);
+  }
+  write_file_atomic(dir() + "/latest", name + "\n");
+  kept_.erase(std::remove(kept_.begin(), kept_.end(), name), kept_.end());
+  kept_.push_back(name);
+  while (static_cast<int>(kept_.size()) > keep_last_) {
+    fs::remove(dir() + "/" + kept_.front());
+    kept_.erase(kept_.begin());
+  }
+  return path;
+}
+
+std::string CheckpointManager::latest() const {
+  const std::string name = read_first_line(dir() + "/latest");
+  return name.empty() ? "" : dir() + "/" + name;
+}
+
+std::string resolve_checkpoint(const std::string& path) {
+  if (fs::is_regular_file(path)) return path;
+  if (!fs::is_directory(path)) throw std::runtime_error("checkpoint '" + path + "' does not exist");
+  const std::string latest = read_first_line(path + "/checkpoints/latest");
+  if (latest.empty())
+    throw std::runtime_error("run folder '" + path + "' has no checkpoint (checkpoints/latest missing or empty)");
+  const std::string stage = stage_of_checkpoint(latest);
+  const std::string best = path + "/checkpoints/best-" + stage + ".pt";
+  if (!stage.empty() && fs::is_regular_file(best)) return best;
+  const std::string file = path + "/checkpoints/" + latest;
+  if (!fs::is_regular_file(file))
+    throw std::runtime_error("run folder '" + path + "': checkpoints/latest names " + latest + ", which does not exist");
+  return file;
+}
+
+}  // namespace geo

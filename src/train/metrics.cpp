@@ -1,0 +1,168 @@
+#include "train/metrics.h"
+
+#include "core/logging.h"
+
+#include <spdlog/spdlog.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace fs = std::filesystem;
+
+namespace geo {
+namespace {
+
+const char* kTermColumns[] = {"rigid", "disp_smooth", "flow", "flow_smooth", "flow_consistency"};
+
+std::optional<double> term(const StepRecord& r, const std::string& name) {
+  for (const auto& [n, v] : r.losses)
+    if (n == name) return v;
+  return std::nullopt;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------- CSV
+
+CsvSink::CsvSink(std::string dir) : dir_(std::move(dir)) {}
+
+void CsvSink::append(const std::string& file, const std::string& header, const std::string& row) {
+  const std::string path = dir_ + "/" + file;
+  const bool fresh = !fs::exists(path);
+  std::ofstream out(path, std::ios::app);
+  if (fresh) out << header << "\n";
+  out << row << "\n";
+  if (!out) throw std::runtime_error("cannot append to " + path);
+}
+
+void CsvSink::trim_after(int64_t stage_index, int64_t iteration) {
+  for (const char* file : {"metrics.csv", "val.csv"}) {
+    const std::string path = dir_ + "/" + file;
+    if (!fs::exists(path)) continue;
+    std::ifstream in(path);
+    std::string line, kept;
+    std::getline(in, line);
+    kept = line + "\n";
+    while (std::getline(in, line)) {
+      std::istringstream ls(line);
+      std::string stage_idx, name, it;
+      std::getline(ls, stage_idx, ',');
+      std::getline(ls, name, ',');
+      std::getline(ls, it, ',');
+      try {
+        const int64_t si = std::stoll(stage_idx), ii = std::stoll(it);
+        if (si < stage_index || (si == stage_index && ii <= iteration)) kept += line + "\n";
+      } catch (const std::exception&) {
+        throw std::runtime_error(path + ": malformed row '" + line + "' (expected stage_index,stage,iteration,...)");
+      }
+    }
+    write_file_atomic(path, kept);
+  }
+}
+
+void CsvSink::on_step(const StepRecord& r) {
+  std::string header = "stage_index,stage,iteration,total";
+  std::string row = fmt::format("{},{},{},{:.9g}", r.stage_index, r.stage, r.iteration, term(r, "total").value_or(0));
+  for (const char* name : kTermColumns) {
+    header += std::string(",") + name;
+    const auto v = term(r, name);
+    row += v ? fmt::format(",{:.9g}", *v) : ",";
+  }
+  header += ",lr";
+  row += fmt::format(",{:.6g}", r.lr);
+  append("metrics.csv", header, row);
+}
+
+void CsvSink::on_validation(const ValidationRecord& r) {
+  append("val.csv", "stage_index,stage,iteration,photometric,flow,score",
+         fmt::format("{},{},{},{:.9g},{},{:.9g}", r.stage_index, r.stage, r.iteration, r.rigid,
+                     r.flow ? fmt::format("{:.9g}", *r.flow) : "", r.score));
+}
+
+void CsvSink::flush() {}  // every row is written through an ofstream that is closed at once
+
+// ---------------------------------------------------------------- TensorBoard
+
+TensorBoardSink::TensorBoardSink(const std::string& dir, int64_t resumed_at) : writer_(dir + "/tb") {
+  if (resumed_at >= 0) writer_.add_session_start(resumed_at);
+}
+
+void TensorBoardSink::on_step(const StepRecord& r) {
+  for (const auto& [name, value] : r.losses) writer_.add_scalar("loss/" + name, r.global_step, value);
+  writer_.add_scalar("lr", r.global_step, r.lr);
+  writer_.add_scalar("grad_norm", r.global_step, r.grad_norm);
+  const auto now = std::chrono::steady_clock::now();
+  if (last_ && r.global_step > last_->first) {
+    const double secs = std::chrono::duration<double>(now - last_->second).count();
+    if (secs > 0) writer_.add_scalar("iterations_per_s", r.global_step, static_cast<double>(r.global_step - last_->first) / secs);
+  }
+  last_ = std::make_pair(r.global_step, now);
+}
+
+void TensorBoardSink::on_validation(const ValidationRecord& r) {
+  writer_.add_scalar("val/photometric", r.global_step, r.rigid);
+  if (r.flow) writer_.add_scalar("val/flow", r.global_step, *r.flow);
+  writer_.add_scalar("val/score", r.global_step, r.score);
+  writer_.flush();
+}
+
+void TensorBoardSink::on_image(const ImageRecord& r) {
+  writer_.add_image(r.stage + "/" + r.tag, r.global_step, r.png, r.height, r.width, r.channels);
+}
+
+// ---------------------------------------------------------------- console
+
+std::string format_duration(double s) {
+  if (!(s >= 0) || s > 1e9) return "?";
+  const auto t = static_cast<long long>(s + 0.5);
+  char buf[32];
+  if (t >= 3600) std::snprintf(buf, sizeof buf, "%lldh%02lldm", t / 3600, (t % 3600) / 60);
+  else if (t >= 60) std::snprintf(buf, sizeof buf, "%lldm%02llds", t / 60, t % 60);
+  else std::snprintf(buf, sizeof buf, "%llds", t);
+  return buf;
+}
+
+ProgressSink::ProgressSink(int64_t interval, bool redraw_in_place)
+    : interval_(std::max<int64_t>(1, interval)), redraw_(redraw_in_place) {}
+
+void ProgressSink::on_step(const StepRecord& r) {
+  const auto now = std::chrono::steady_clock::now();
+  if (r.stage != last_stage_ || last_iteration_ < 0 || r.iteration <= last_iteration_) {
+    last_stage_ = r.stage;
+    last_iteration_ = r.iteration - 1;
+    last_time_ = now;
+  }
+  const bool line = r.iteration % interval_ == 0 || r.iteration == r.stage_iterations;
+  const double secs = std::chrono::duration<double>(now - last_time_).count();
+  if (line && r.iteration > last_iteration_ && secs > 0) {
+    rate_ = static_cast<double>(r.iteration - last_iteration_) / secs;
+    last_iteration_ = r.iteration;
+    last_time_ = now;
+  }
+  const bool redraw = redraw_ && std::chrono::duration<double>(now - last_redraw_).count() > 0.2;
+  if (!line && !redraw) return;
+  std::string terms;
+  for (const auto& [name, value] : r.losses) terms += fmt::format(" {} {:.4f}", name, value);
+  const std::string rate = rate_ > 0 ? fmt::format("{:.2f} it/s, ETA {}", rate_,
+                                                   format_duration(static_cast<double>(r.stage_iterations - r.iteration) / rate_))
+                                     : "-- it/s";
+  const std::string text = fmt::format("{} {}/{}{} | {}", r.stage, r.iteration, r.stage_iterations, terms, rate);
+  if (line) {
+    if (redraw_) std::fputs("\r\033[K", stderr);
+    spdlog::info("{}{}", text, r.skipped_steps ? fmt::format(" | {} NaN/Inf steps skipped", r.skipped_steps) : "");
+  } else {
+    std::fprintf(stderr, "\r\033[K%s\r", text.c_str());  // the cursor back at column 0 for other output
+    std::fflush(stderr);
+    last_redraw_ = now;
+  }
+}
+
+void ProgressSink::on_validation(const ValidationRecord& r) {
+  if (redraw_) std::fputs("\r\033[K", stderr);
+  spdlog::info("validation at {} {}: photometric {:.5f}{}, score {:.5f} over {} snippets{}", r.stage, r.iteration, r.rigid,
+               r.flow ? fmt::format(", flow {:.5f}", *r.flow) : "", r.score, r.snippets, r.best ? " (best so far)" : "");
+}
+
+}  // namespace geo

@@ -1,0 +1,114 @@
+// Where training reports go: MetricsSink receives every step, validation and summary image;
+// CsvSink writes metrics.csv / val.csv, TensorBoardSink <run>/tb/events.out.tfevents.*, and
+// ProgressSink the console progress line. Library users add their own sinks (TrainOptions::sinks).
+// LibTorch-free.
+#pragma once
+
+#include "train/tensorboard.h"
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace geo {
+
+struct StepRecord {
+  int64_t stage_index = 0;
+  std::string stage;
+  int64_t iteration = 0;        // iterations done in the stage after this step (1-based)
+  int64_t stage_iterations = 0; // the stage's total
+  int64_t global_step = 0;      // iterations done over all stages (TensorBoard's step)
+  std::vector<std::pair<std::string, double>> losses;  // defined terms and "total" (LossTerms::values)
+  double lr = 0;
+  double grad_norm = 0;
+  int64_t skipped_steps = 0;    // NaN/Inf steps skipped so far in this process
+};
+
+struct ValidationRecord {
+  int64_t stage_index = 0;
+  std::string stage;
+  int64_t iteration = 0;
+  int64_t global_step = 0;
+  double rigid = 0;             // mean L_br
+  std::optional<double> flow;   // mean L_fr, when the stage trains flow
+  double score = 0;             // what selects best-<stage>.pt (validate.h)
+  bool best = false;
+  size_t snippets = 0;
+};
+
+struct ImageRecord {
+  std::string stage;
+  int64_t iteration = 0, global_step = 0;
+  std::string tag;              // e.g. "disp"
+  std::string png;              // PNG file bytes
+  int height = 0, width = 0, channels = 3;
+};
+
+class MetricsSink {
+ public:
+  virtual ~MetricsSink() = default;
+  virtual void on_step(const StepRecord&) {}
+  virtual void on_validation(const ValidationRecord&) {}
+  virtual void on_image(const ImageRecord&) {}
+  virtual void flush() {}  // at checkpoints: what was reported so far reaches the disk
+};
+
+// metrics.csv: stage_index,stage,iteration,total,rigid,disp_smooth,flow,flow_smooth,flow_consistency,lr
+// (terms a stage does not compute are empty). val.csv: stage_index,stage,iteration,photometric,flow,score.
+class CsvSink : public MetricsSink {
+ public:
+  explicit CsvSink(std::string dir);
+  // Resume: drops rows after (stage_index, iteration), which an interrupted process logged past
+  // its last checkpoint.
+  void trim_after(int64_t stage_index, int64_t iteration);
+  void on_step(const StepRecord& r) override;
+  void on_validation(const ValidationRecord& r) override;
+  void flush() override;
+
+ private:
+  void append(const std::string& file, const std::string& header, const std::string& row);
+  std::string dir_;
+};
+
+// Scalars "loss/<term>", "lr", "grad_norm", "iterations_per_s", "val/photometric", "val/flow",
+// "val/score", and the summary images "<stage>/<tag>", against the global step.
+class TensorBoardSink : public MetricsSink {
+ public:
+  // Events go to <dir>/tb; `resumed_at` >= 0 first writes a SessionLog START at that global step.
+  explicit TensorBoardSink(const std::string& dir, int64_t resumed_at = -1);
+  void on_step(const StepRecord& r) override;
+  void on_validation(const ValidationRecord& r) override;
+  void on_image(const ImageRecord& r) override;
+  void flush() override { writer_.flush(); }
+  const std::string& path() const { return writer_.path(); }
+
+ private:
+  EventWriter writer_;
+  std::optional<std::pair<int64_t, std::chrono::steady_clock::time_point>> last_;
+};
+
+// The console progress: every `interval` iterations a log line (stage, iteration, rate, ETA, the
+// losses); on a terminal also a line redrawn in place after every step.
+class ProgressSink : public MetricsSink {
+ public:
+  explicit ProgressSink(int64_t interval, bool redraw_in_place);
+  void on_step(const StepRecord& r) override;
+  void on_validation(const ValidationRecord& r) override;
+
+ private:
+  int64_t interval_;
+  bool redraw_;
+  std::chrono::steady_clock::time_point last_time_, last_redraw_;
+  int64_t last_iteration_ = -1;
+  std::string last_stage_;
+  double rate_ = 0;  // iterations/s, smoothed
+};
+
+// Formats "1h02m", "3m07s", "12s".
+std::string format_duration(double seconds);
+
+}  // namespace geo

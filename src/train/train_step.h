@@ -1,0 +1,52 @@
+// One training update, the only implementation of it: geo_train's loop and geo_bench both run it.
+// Also the learning-rate schedule and the one place the Adam optimiser is built (paper Sec. 4.2).
+// LibTorch only.
+#pragma once
+
+#include "core/config.h"
+#include "train/networks.h"
+
+#include <memory>
+
+namespace geo {
+
+// stages[].lr_schedule: constant, or step (x lr_gamma every lr_step iterations).
+struct LrSchedule {
+  double base = 2e-4;
+  int64_t step = 0;     // 0 = constant
+  double gamma = 1.0;
+
+  static LrSchedule of(const StageConfig& stage);
+  double at(int64_t iteration) const;  // the rate used for the update that makes `iteration` + 1
+};
+
+// Adam with the config's betas, eps and weight decay over `parameters`.
+std::unique_ptr<torch::optim::Adam> make_adam(const std::vector<torch::Tensor>& parameters, double lr,
+                                              const OptimizerConfig& optimizer);
+
+struct StepResult {
+  bool finite = false;    // false: NaN/Inf loss or gradient; weights and Adam state untouched
+  double grad_norm = 0;   // global L2 norm of the gradients before clipping (when finite)
+  StepOutput out;         // losses and intermediate maps (for logging and summaries)
+};
+
+// Binds networks, config and one stage: sets the networks' modes and trainable parameters for the
+// stage and builds Adam over them. run() does forward, loss (eq. 16), backward, the finiteness
+// check, optional clipping (optimizer.grad_clip) and the Adam update.
+class TrainStep {
+ public:
+  TrainStep(Networks& nets, const Config& config, const StageConfig& stage);
+  // tgt [B,3,H,W], srcs [B,N,3,H,W], K [B,3,3] on the networks' device.
+  StepResult run(const torch::Tensor& tgt, const torch::Tensor& srcs, const torch::Tensor& K, double lr);
+  torch::optim::Adam& optimizer() { return *adam_; }
+  const StageConfig& stage() const { return stage_; }
+
+ private:
+  Networks& nets_;
+  const Config& config_;
+  StageConfig stage_;
+  std::vector<torch::Tensor> params_;
+  std::unique_ptr<torch::optim::Adam> adam_;
+};
+
+}  // namespace geo

@@ -1,0 +1,29 @@
+// Validation of one stage on a held-out snippet list: the mean losses of what the stage trains,
+// networks in eval mode, no augmentation. LibTorch only.
+#pragma once
+
+#include "core/config.h"
+#include "data/snippets.h"
+#include "train/networks.h"
+
+#include <memory>
+#include <optional>
+
+namespace geo {
+
+struct Validation {
+  double rigid = 0;             // mean L_br (photometric, rigid flow)
+  std::optional<double> flow;   // mean L_fr (photometric, full flow), when the stage trains flow
+  // What selects the stage's best checkpoint: L_br when the stage trains depth or pose, plus L_fr
+  // when it trains flow (a flow-only stage, GeoNet's, is ranked by L_fr alone: its frozen depth and
+  // pose leave L_br constant).
+  double score = 0;
+  size_t snippets = 0;
+  int64_t skipped = 0;          // bad samples replaced (data.on_bad_sample: skip)
+};
+
+// Restores the stage's train/eval modes before returning.
+Validation validate(Networks& nets, std::shared_ptr<const SnippetSource> source, const StageConfig& stage,
+                    const Config& config, const torch::Device& device);
+
+}  // namespace geo

@@ -1,0 +1,254 @@
+// The training loop's parts on their own: TensorBoard encoding, the CSV sink's resume trimming, the
+// LR schedule, checkpoint rotation and best files, and run-folder resolution.
+#include "train/checkpoints.h"
+#include "train/metrics.h"
+#include "train/tensorboard.h"
+#include "train/train_step.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+#include "tensorboard_reader.h"
+#include "test_util.h"
+
+namespace geo {
+namespace {
+
+namespace fs = std::filesystem;
+
+TEST(TensorBoard, Crc32cOfTheStandardCheckString) {
+  EXPECT_EQ(crc32c("123456789"), 0xE3069283u);  // the CRC-32C check value (RFC 3720 B.4)
+  EXPECT_EQ(crc32c(""), 0u);
+  const uint32_t c = 0xE3069283u;
+  EXPECT_EQ(masked_crc32c("123456789"), ((c >> 15) | (c << 17)) + 0xa282ead8u);
+}
+
+TEST(TensorBoard, ScalarEventBytesByHand) {
+  // Event{wall_time 0.0 (field 1, fixed64), step 3 (field 2), summary (5){value (1){tag "a" (1),
+  // simple_value 1.0f (2, fixed32)}}}.
+  const std::string e = encode_scalar_event(0.0, 3, "a", 1.0f);
+  const std::string want = std::string("\x09", 1) + std::string(8, '\0') + "\x10\x03" + "\x2a\x0a" + "\x0a\x08" +
+                           "\x0a\x01" "a" + "\x15" + std::string("\x00\x00\x80\x3f", 4);
+  EXPECT_EQ(e, want);
+  // The TFRecord around it: 8-byte length, its masked CRC, the payload, its masked CRC.
+  const std::string r = tfrecord(e);
+  ASSERT_EQ(r.size(), 8 + 4 + e.size() + 4);
+  EXPECT_EQ(static_cast<unsigned char>(r[0]), e.size());
+  EXPECT_EQ(r.substr(12, e.size()), e);
+}
+
+TEST(TensorBoard, WriterFileReadsBack) {
+  const auto dir = test::fresh_dir("tb");
+  std::string path;
+  {
+    EventWriter w(dir);
+    path = w.path();
+    w.add_scalar("loss/total", 7, 0.25);
+    w.add_scalar("lr", 8, 2e-4);
+    w.add_image("s1/disp", 9, std::string("\x89PNG\r\n\x1a\n", 8) + std::string(300, 'x'), 4, 5, 3);
+    w.add_session_start(6);
+    w.flush();
+  }
+  EXPECT_EQ(fs::path(path).filename().string().rfind("events.out.tfevents.", 0), 0u);
+  const auto ev = test::read_tensorboard_file(path);
+  ASSERT_EQ(ev.size(), 5u);
+  EXPECT_EQ(ev[0].file_version, "brain.Event:2");
+  ASSERT_EQ(ev[1].values.size(), 1u);
+  EXPECT_EQ(ev[1].step, 7);
+  EXPECT_EQ(ev[1].values[0].tag, "loss/total");
+  EXPECT_EQ(ev[1].values[0].simple_value, 0.25f);
+  EXPECT_EQ(ev[2].values[0].simple_value, 2e-4f);
+  const auto& img = ev[3].values[0];
+  EXPECT_TRUE(img.has_image);
+  EXPECT_EQ(img.tag, "s1/disp");
+  EXPECT_EQ(ev[3].step, 9);
+  EXPECT_EQ(img.height, 4);
+  EXPECT_EQ(img.width, 5);
+  EXPECT_EQ(img.colorspace, 3);
+  EXPECT_EQ(img.png.size(), 308u);
+  EXPECT_EQ(ev[4].session_status, 1);  // START
+  EXPECT_EQ(ev[4].step, 6);
+  EXPECT_GT(ev[1].wall_time, 1.7e9);  // seconds since 1970
+}
+
+StepRecord step_record(int64_t stage, const std::string& name, int64_t it, double total) {
+  StepRecord r;
+  r.stage_index = stage;
+  r.stage = name;
+  r.iteration = it;
+  r.stage_iterations = 10;
+  r.global_step = stage * 10 + it;
+  r.losses = {{"rigid", total / 2}, {"total", total}};
+  r.lr = 1e-4;
+  return r;
+}
+
+TEST(CsvSink, RowsAndResumeTrimming) {
+  const auto dir = test::fresh_dir("csv");
+  CsvSink csv(dir);
+  for (int64_t it = 1; it <= 3; ++it) csv.on_step(step_record(0, "s1", it, it));
+  for (int64_t it = 1; it <= 2; ++it) csv.on_step(step_record(1, "s2", it, 10 + it));
+  ValidationRecord v;
+  v.stage_index = 1;
+  v.stage = "s2";
+  v.iteration = 2;
+  v.rigid = 0.5;
+  v.flow = 0.25;
+  v.score = 0.75;
+  csv.on_validation(v);
+  EXPECT_EQ(test::read_file(dir + "/metrics.csv"),
+            "stage_index,stage,iteration,total,rigid,disp_smooth,flow,flow_smooth,flow_consistency,lr\n"
+            "0,s1,1,1,0.5,,,,,0.0001\n0,s1,2,2,1,,,,,0.0001\n0,s1,3,3,1.5,,,,,0.0001\n"
+            "1,s2,1,11,5.5,,,,,0.0001\n1,s2,2,12,6,,,,,0.0001\n");
+  EXPECT_EQ(test::read_file(dir + "/val.csv"),
+            "stage_index,stage,iteration,photometric,flow,score\n1,s2,2,0.5,0.25,0.75\n");
+  csv.trim_after(1, 1);  // resumed from s2 iteration 1: later rows go
+  EXPECT_EQ(test::read_file(dir + "/metrics.csv"),
+            "stage_index,stage,iteration,total,rigid,disp_smooth,flow,flow_smooth,flow_consistency,lr\n"
+            "0,s1,1,1,0.5,,,,,0.0001\n0,s1,2,2,1,,,,,0.0001\n0,s1,3,3,1.5,,,,,0.0001\n"
+            "1,s2,1,11,5.5,,,,,0.0001\n");
+  EXPECT_EQ(test::read_file(dir + "/val.csv"), "stage_index,stage,iteration,photometric,flow,score\n");
+}
+
+TEST(TensorBoardSink, LossesLrAndValidationAgainstTheGlobalStep) {
+  const auto dir = test::fresh_dir("tbsink");
+  {
+    TensorBoardSink tb(dir, 12);
+    tb.on_step(step_record(1, "s2", 3, 2.5));
+    ValidationRecord v;
+    v.global_step = 13;
+    v.rigid = 0.5;
+    v.score = 0.5;
+    tb.on_validation(v);
+  }
+  const auto ev = test::read_tensorboard_dir(dir + "/tb");
+  std::map<std::string, std::pair<int64_t, float>> seen;
+  for (const auto& e : ev)
+    for (const auto& v : e.values) seen[v.tag] = {e.step, v.simple_value};
+  EXPECT_EQ(ev[1].session_status, 1);  // resumed at global step 12
+  EXPECT_EQ(ev[1].step, 12);
+  EXPECT_EQ(seen["loss/total"], std::make_pair(int64_t{13}, 2.5f));
+  EXPECT_EQ(seen["loss/rigid"], std::make_pair(int64_t{13}, 1.25f));
+  EXPECT_EQ(seen["lr"], std::make_pair(int64_t{13}, 1e-4f));
+  EXPECT_EQ(seen["val/photometric"], std::make_pair(int64_t{13}, 0.5f));
+  EXPECT_EQ(seen.count("val/flow"), 0u);  // no flow validation in this record
+}
+
+TEST(LrSchedule, ConstantAndStep) {
+  StageConfig s;
+  s.learning_rate = 1e-3;
+  EXPECT_EQ(LrSchedule::of(s).at(123456), 1e-3);
+  s.lr_schedule = "step";
+  s.lr_step = 10;
+  s.lr_gamma = 0.5;
+  const auto l = LrSchedule::of(s);
+  EXPECT_EQ(l.at(0), 1e-3);
+  EXPECT_EQ(l.at(9), 1e-3);
+  EXPECT_EQ(l.at(10), 5e-4);
+  EXPECT_EQ(l.at(25), 2.5e-4);
+}
+
+TEST(FormatDuration, Units) {
+  EXPECT_EQ(format_duration(12.4), "12s");
+  EXPECT_EQ(format_duration(187), "3m07s");
+  EXPECT_EQ(format_duration(3720), "1h02m");
+}
+
+TEST(CheckpointNames, RoundTrip) {
+  EXPECT_EQ(checkpoint_name("stage-2", 42), "stage-2-00000042.pt");
+  EXPECT_EQ(stage_of_checkpoint("stage-2-00000042.pt"), "stage-2");
+  EXPECT_EQ(stage_of_checkpoint("best-s1.pt"), "");
+  EXPECT_EQ(stage_of_checkpoint("latest"), "");
+}
+
+void fill_state(torch::serialize::OutputArchive& a, int64_t stage, int64_t it) {
+  TrainState s;
+  s.stage = stage;
+  s.iteration = it;
+  s.best_score = 0.5;
+  write_train_state(a, s);
+}
+
+TrainState state_of(const std::string& path) {
+  torch::serialize::InputArchive a;
+  a.load_from(path);
+  return read_train_state(a, path);
+}
+
+TEST(CheckpointManager, RotationKeepsBestFilesAndLatest) {
+  const auto dir = test::fresh_dir("ckpt");
+  {
+    CheckpointManager m(dir, 2);
+    EXPECT_EQ(m.latest(), "");
+    m.save("s1", 1, true, [](auto& a) { fill_state(a, 0, 1); });
+    m.save("s1", 2, false, [](auto& a) { fill_state(a, 0, 2); });
+    m.save("s2", 1, false, [](auto& a) { fill_state(a, 1, 1); });
+    m.save("s2", 2, true, [](auto& a) { fill_state(a, 1, 2); });
+    EXPECT_EQ(m.latest(), dir + "/checkpoints/s2-00000002.pt");
+  }
+  std::set<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir + "/checkpoints")) names.insert(e.path().filename().string());
+  EXPECT_EQ(names, (std::set<std::string>{"best-s1.pt", "best-s2.pt", "latest", "s2-00000001.pt", "s2-00000002.pt"}));
+  // best-s1.pt outlived the rotation of s1-00000001.pt, its content intact.
+  EXPECT_EQ(state_of(dir + "/checkpoints/best-s1.pt").iteration, 1);
+  EXPECT_EQ(resolve_checkpoint(dir), dir + "/checkpoints/best-s2.pt");
+  // A resumed manager continues the rotation from the files present.
+  CheckpointManager again(dir, 2);
+  again.save("s2", 3, false, [](auto& a) { fill_state(a, 1, 3); });
+  EXPECT_FALSE(fs::exists(dir + "/checkpoints/s2-00000001.pt"));
+  EXPECT_TRUE(fs::exists(dir + "/checkpoints/s2-00000002.pt"));
+}
+
+TEST(ResolveCheckpoint, FilesFoldersAndErrors) {
+  const auto dir = test::fresh_dir("resolve");
+  const std::string missing = dir + "/nothing";
+  GEO_EXPECT_THROW_WITH(resolve_checkpoint(missing), missing.c_str(), "does not exist");
+  GEO_EXPECT_THROW_WITH(resolve_checkpoint(dir), "has no checkpoint");
+  CheckpointManager m(dir, 3);
+  m.save("s1", 4, true, [](auto& a) { fill_state(a, 0, 4); });
+  m.save("s2", 1, false, [](auto& a) { fill_state(a, 1, 1); });
+  // The last stage has no best yet (no validation): its latest checkpoint, not stage 1's best.
+  EXPECT_EQ(resolve_checkpoint(dir), dir + "/checkpoints/s2-00000001.pt");
+  EXPECT_EQ(resolve_checkpoint(dir + "/checkpoints/best-s1.pt"), dir + "/checkpoints/best-s1.pt");
+  test::write_text(dir + "/checkpoints/latest", "s2-00000009.pt\n");
+  GEO_EXPECT_THROW_WITH(resolve_checkpoint(dir), "s2-00000009.pt", "does not exist");
+}
+
+TEST(Networks, GeoNetBatchNormByDefaultAndTrainableSetOncePerStage) {
+  Config c = parse_config("model: {encoder_depth: 18}\n");
+  Networks n = Networks::create(c, true);
+  int bns = 0;
+  for (const auto& m : n.depth->modules())
+    if (const auto* bn = m->as<torch::nn::BatchNorm2d>()) {
+      ++bns;
+      EXPECT_EQ(bn->options.eps(), 1e-3);            // slim's epsilon
+      EXPECT_EQ(bn->options.momentum().value(), 1e-3);  // slim's decay 0.999
+      EXPECT_FALSE(bn->weight.requires_grad());     // scale=False: gamma stays 1
+    }
+  EXPECT_GT(bns, 20);
+  StageConfig flow_only;
+  flow_only.train = {"flow"};
+  n.set_trainable(flow_only);
+  const auto params = n.trainable_parameters();
+  int64_t flow_trainable = 0;
+  for (const auto& p : n.flow->parameters()) flow_trainable += p.requires_grad();
+  EXPECT_EQ(static_cast<int64_t>(params.size()), flow_trainable);
+  EXPECT_EQ(static_cast<int64_t>(n.flow->parameters().size() - batchnorm_scales(*n.flow).size()), flow_trainable);
+  for (const auto& p : n.depth->parameters()) EXPECT_FALSE(p.requires_grad());
+  // trainable_parameters() only reads: calling it again changes nothing.
+  EXPECT_EQ(n.trainable_parameters().size(), params.size());
+
+  // LibTorch's convention as the option: learned gamma, eps 1e-5, momentum 0.1.
+  c = parse_config("model: {encoder_depth: 18, bn_eps: 1.0e-5, bn_momentum: 0.1, bn_scale: true}\n");
+  Networks t = Networks::create(c, false);
+  t.set_trainable(c.stages[0]);
+  EXPECT_EQ(t.trainable_parameters().size(), t.depth->parameters().size() + t.pose->parameters().size());
+  for (const auto& m : t.pose->modules())
+    if (const auto* bn = m->as<torch::nn::BatchNorm2d>()) {
+      EXPECT_EQ(bn->options.momentum().value(), 0.1);
+    }
+}
+
+}  // namespace
+}  // namespace geo
