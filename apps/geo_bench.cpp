@@ -29,6 +29,7 @@
 #include <thread>
 
 #include "core/config.h"
+#include "core/files.h"
 #include "core/logging.h"
 #include "core/runtime.h"
 #include "core/state_io.h"
@@ -216,7 +217,7 @@ std::vector<geo::StageConfig> stages_to_time(const geo::Config& config, bool con
   geo::StageConfig s1;  // the paper's schedule: stage 1 depth + pose, stage 2 all three jointly
   geo::StageConfig s2;
   s2.name = "stage2";
-  s2.train = {"depth", "pose", "flow"};
+  s2.train = geo::NetworkSet{true, true, true};
   return {s1, s2};
 }
 
@@ -407,7 +408,7 @@ int main(int argc, char** argv) {
           t->step = std::make_unique<geo::TrainStep>(t->nets, t->config, stage);
           trainees.push_back(std::move(t));
         }
-        spdlog::info("training step {} [{}], FR {}, batch {} ...", stage.name, fmt::join(stage.train, ","), fr_mode, b);
+        spdlog::info("training step {} [{}], FR {}, batch {} ...", stage.name, fmt::join(stage.train.names(), ","), fr_mode, b);
         std::vector<std::pair<Row*, std::function<void()>>> calls;
         for (auto& t : trainees) {
           // The trainer's own step (loss, backward, finiteness check, clipping, Adam).

@@ -1,4 +1,4 @@
-// geo_eval: the published evaluation protocols (reference.md Sec. 5) on KITTI or a geo_synth world.
+// geo_eval: the published evaluation protocols (Eigen et al. 2014 as in GeoNet's kitti_eval) on KITTI or a geo_synth world.
 //   geo_eval --split eigen     --data-root <kitti_raw>  --checkpoint <ckpt | run folder>
 //   geo_eval --split kitti2015 --data-root <kitti2015>  --checkpoint <ckpt>
 //   geo_eval --split odometry  --data-root <odometry>   --sequence 09 --checkpoint <ckpt>
@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <filesystem>
 
+#include "core/files.h"
 #include "core/logging.h"
 #include "core/runtime.h"
 #include "eval/protocols.h"
@@ -20,7 +21,8 @@ int main(int argc, char** argv) {
   app.footer(
       "Data root: --data-root, else $GEO_KITTI_ROOT, else ./data/kitti. For a geo_synth world give its root;\n"
       "the split's folder (raw/, kitti2015/, odometry/) is found inside.\n"
-      "Model: --checkpoint (a .pt file or a run folder), else the newest run under ./runs (its best.pt).\n"
+      "Model: --checkpoint (a .pt file or a run folder: the best checkpoint of its last stage, else its latest),\n"
+      "else the newest run under ./runs. --export-gt DIR alone writes the Eigen ground truth without a model.\n"
       "Predictions (--predictions): eigen = folder of 16-bit PNGs (depth x 256) named %06d.png by line of\n"
       "the split file, or one float32 .npy [N,H,W]; kitti2015 = folder of KITTI flow PNGs named like the\n"
       "ground truth (000123_10.png); odometry = one KITTI pose file (3x4 camera-to-world a line, frame 0 first).\n"
@@ -43,7 +45,10 @@ int main(int argc, char** argv) {
   app.add_option("--output", output, "write the results as JSON here");
   app.add_option("--output-poses", o.output_poses, "odometry: write the predicted trajectory (KITTI pose file)");
   app.add_option("--export-gt", o.export_gt, "eigen: write the ground-truth depth maps (uint16 PNG, depth x 256)");
-  app.add_option("--device", device, "auto, cpu or cuda")->check(CLI::IsMember({"auto", "cpu", "cuda"}));
+  app.add_option("--device", device, "auto (CUDA when available), cpu, cuda or cuda:N (an error without CUDA)");
+  std::string flow_resize = "nearest";
+  app.add_option("--flow-resize", flow_resize, "kitti2015: resize predicted flow to the ground truth by nearest (GeoNet) or bilinear")
+      ->check(CLI::IsMember({"nearest", "bilinear"}));
   app.add_flag("--exact-pixels", no_matlab, "eigen: project Velodyne points without the reference code's -1 pixel shift");
   app.add_option("--compare", compare, "print these results JSON files side by side and exit")->expected(1, -1);
   CLI11_PARSE(app, argc, argv);
@@ -62,6 +67,7 @@ int main(int argc, char** argv) {
     }
     if (o.split.empty()) throw std::runtime_error("--split is required (eigen, kitti2015 or odometry); see --help");
     o.matlab_offset = !no_matlab;
+    o.flow_resize = flow_resize == "bilinear" ? geo::FlowResize::kBilinear : geo::FlowResize::kNearest;
     if (o.data_root.empty()) {
       const char* env = std::getenv("GEO_KITTI_ROOT");
       o.data_root = env && *env ? env : "data/kitti";
@@ -71,7 +77,8 @@ int main(int argc, char** argv) {
     std::unique_ptr<geo::Predictor> predictor;
     if (!untrained.empty()) {
       predictor = std::make_unique<geo::Predictor>(geo::load_config(geo::resolve_config_path(untrained)), device);
-    } else if (o.predictions.empty() && !o.trivial) {
+    } else if (o.predictions.empty() && !o.trivial && (o.export_gt.empty() || !checkpoint.empty())) {
+      // (--export-gt alone writes the ground truth and needs no model)
       if (checkpoint.empty()) {
         checkpoint = geo::latest_run_checkpoint(runs);
         if (checkpoint.empty())

@@ -29,7 +29,7 @@ int main(int argc, char** argv) {
   app.add_option("--checkpoint", checkpoint, "checkpoint file or run folder")->required();
   app.add_option("--input", input, "an image, a folder of frames (sorted by name) or a video file")->required();
   app.add_option("--output", output, "output folder (created)")->required();
-  app.add_option("--device", device, "auto, cpu or cuda")->check(CLI::IsMember({"auto", "cpu", "cuda"}));
+  app.add_option("--device", device, "auto (CUDA when available), cpu, cuda or cuda:N (an error without CUDA)");
   app.add_option("--intrinsics", intrinsics,
                  "fx fy cx cy of the input images in pixels (default: KITTI-like 0.58 W, 1.92 H, W/2, H/2)")
       ->expected(4);

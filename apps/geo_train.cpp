@@ -1,4 +1,4 @@
-// geo_train: trains DepthNet, PoseNet and FlowNet without labels (reference.md Sec. 4).
+// geo_train: trains DepthNet, PoseNet and FlowNet without labels (paper Sec. 4.2).
 //   geo_train --config configs/stage1.yaml [--run-dir DIR] [--set key=value ...] [--device auto|cpu|cuda]
 //   geo_train --config stage2.yaml --init runs/stage1-...      (stage 2 from stage 1's result)
 //   geo_train --resume RUN_DIR

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The standard measurements of geo (issue #9 protocol: 128x416, batch 4 training steps, median of
+# The standard measurements of geo (protocol: 128x416, batch 4 training steps, median of
 # 5 after 2 warm-ups; inference at batch 1 and 4; FR on and off; loader on a small geo_synth
 # world), written as a markdown table for the README and as JSON.
 #   scripts/bench.sh [cpu|cuda] [more geo_bench options, e.g. --threads 2]

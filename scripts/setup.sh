@@ -4,6 +4,7 @@
 # only rebuilt incrementally. Works as root or through sudo.
 #   GEO_BUILD_DIR   build folder (default: build)
 #   GEO_JOBS        parallel compile jobs (default: number of cores)
+#   GEO_WERROR=1    compiler warnings in geo's own code are errors (CI sets it)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -35,6 +36,9 @@ BUILD_DIR="${GEO_BUILD_DIR:-build}"
 JOBS="${GEO_JOBS:-$(nproc)}"
 if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
   cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release
+fi
+if [ "${GEO_WERROR:-0}" = 1 ]; then
+  cmake -S . -B "$BUILD_DIR" -DGEO_WERROR=ON >/dev/null
 fi
 echo "geo setup: building in $BUILD_DIR with $JOBS jobs (first build takes a while on 2 cores)"
 cmake --build "$BUILD_DIR" -j "$JOBS"

@@ -35,9 +35,13 @@ std::string format_double(double v) {
 }
 
 template <class T> std::string to_text(const T& v) {
-  std::ostringstream os;
-  os << v;
-  return os.str();
+  if constexpr (std::is_enum_v<T>) {
+    return std::string("'") + name_of(v) + "'";
+  } else {
+    std::ostringstream os;
+    os << v;
+    return os.str();
+  }
 }
 std::string to_text(double v) { return format_double(v); }
 std::string to_text(const std::string& v) { return "'" + v + "'"; }
@@ -45,6 +49,13 @@ std::string to_text(const std::vector<std::string>& v) {
   std::string s = "[";
   for (size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + v[i];
   return s + "]";
+}
+std::string to_text(const NetworkSet& v) { return to_text(v.names()); }
+
+template <class E> std::string valid_names() {
+  std::string all;
+  for (const auto& n : enum_names(E{})) all += (all.empty() ? "" : ", ") + std::string(n.name);
+  return all;
 }
 
 // ---------------------------------------------------------------- parsing
@@ -149,15 +160,45 @@ template <class T> void read_value(const YAML::Node& node, const std::string& pa
   }
 }
 
-// Structs: anything with fields().
+template <class E> void read_enum(const YAML::Node& node, const std::string& path, E& out, ParseContext& ctx) {
+  std::string name;
+  read_scalar(node, path, name, ctx);
+  for (const auto& n : enum_names(E{}))
+    if (name == n.name) {
+      out = n.value;
+      return;
+    }
+  throw ConfigError(ctx.where(path, node) + ": key '" + path + "' must be one of " + valid_names<E>() +
+                    ", got '" + name + "'");
+}
+
+void read_value(const YAML::Node& node, const std::string& path, NetworkSet& out, ParseContext& ctx) {
+  if (!node.IsSequence())
+    throw ConfigError(ctx.where(path, node) + ": key '" + path + "' must be a list of " + valid_names<Net>() +
+                      " (e.g. [depth, pose])");
+  out = NetworkSet{false, false, false};
+  for (size_t i = 0; i < node.size(); ++i) {
+    Net net{};
+    const std::string item_path = path + "[" + std::to_string(i) + "]";
+    ctx.record(item_path, node[i]);
+    read_enum(node[i], item_path, net, ctx);
+    (net == Net::kDepth ? out.depth : net == Net::kPose ? out.pose : out.flow) = true;
+  }
+}
+
+// Structs: anything with fields(); enumerations by name.
 template <class T> void read_value(const YAML::Node& node, const std::string& path, T& out,
                                    ParseContext& ctx) {
-  if (!node.IsMap())
-    throw ConfigError(ctx.where(path, node) + ": key '" + (path.empty() ? "<top>" : path) +
-                      "' must be a map of keys");
-  ParseVisitor visitor{node, path, ctx, {}};
-  out.fields(visitor);
-  visitor.reject_unknown();
+  if constexpr (std::is_enum_v<T>) {
+    read_enum(node, path, out, ctx);
+  } else {
+    if (!node.IsMap())
+      throw ConfigError(ctx.where(path, node) + ": key '" + (path.empty() ? "<top>" : path) +
+                        "' must be a map of keys");
+    ParseVisitor visitor{node, path, ctx, {}};
+    out.fields(visitor);
+    visitor.reject_unknown();
+  }
 }
 
 // ---------------------------------------------------------------- emitting
@@ -186,15 +227,23 @@ struct EmitVisitor {
     for (auto& item : v) out << item;
     out << YAML::EndSeq;
   }
+  void emit(NetworkSet& v) {
+    auto names = v.names();
+    emit(names);
+  }
   void emit(std::vector<double>& v) {
     out << YAML::Flow << YAML::BeginSeq;
     for (double item : v) out << format_double(item);
     out << YAML::EndSeq;
   }
   template <class T> void emit(T& s) {
-    out << YAML::BeginMap;
-    s.fields(*this);
-    out << YAML::EndMap;
+    if constexpr (std::is_enum_v<T>) {
+      out << name_of(s);
+    } else {
+      out << YAML::BeginMap;
+      s.fields(*this);
+      out << YAML::EndMap;
+    }
   }
 };
 
@@ -336,8 +385,6 @@ void ModelConfig::validate(Checker& c) const {
   c.require(encoder_depth == 18 || encoder_depth == 34 || encoder_depth == 50, "encoder_depth",
             encoder_depth, "must be 18, 34 or 50");
   c.require(fr_ratio >= 1, "fr_ratio", fr_ratio, "must be >= 1");
-  c.require(one_of(upsample, {"nearest", "bilinear"}), "upsample", upsample,
-            "must be nearest or bilinear");
   c.require(num_scales >= 1 && num_scales <= 4, "num_scales", num_scales, "must be in 1..4");
   c.require(bn_eps > 0, "bn_eps", bn_eps, "must be > 0");
   c.require(bn_momentum > 0 && bn_momentum <= 1, "bn_momentum", bn_momentum, "must be in (0, 1]");
@@ -356,8 +403,6 @@ void AugmentConfig::validate(Checker& c) const {
 }
 
 void DataConfig::validate(Checker& c) const {
-  c.require(one_of(format, {"auto", "kitti_raw", "packed"}), "format", format,
-            "must be auto, kitti_raw or packed");
   c.require(height >= 16 && height % 8 == 0, "height", height,
             "must be a positive multiple of 8 (4 pyramid scales), at least 16");
   c.require(width >= 16 && width % 8 == 0, "width", width,
@@ -365,8 +410,9 @@ void DataConfig::validate(Checker& c) const {
   c.require(seq_length >= 3 && seq_length % 2 == 1, "seq_length", seq_length,
             "must be odd and >= 3 (target in the middle)");
   c.require(num_workers >= 0, "num_workers", num_workers, "must be >= 0");
-  c.require(one_of(on_bad_sample, {"stop", "skip"}), "on_bad_sample", on_bad_sample,
-            "must be stop or skip");
+  c.require(split != "odometry" || !sequences.empty(), "sequences", sequences,
+            "must name at least one KITTI odometry sequence when data.split is odometry");
+  c.require(!split.empty(), "split", split, "must not be empty (eigen_zhou, raw_minus_kitti2015, odometry, ...)");
   Checker::Scope s(c, "augment");
   augment.validate(c);
 }
@@ -383,9 +429,6 @@ void LossConfig::validate(Checker& c) const {
   std::string shown = "[";
   for (size_t i = 0; i < image_range.size(); ++i) shown += (i ? ", " : "") + format_double(image_range[i]);
   c.require(range_ok, "image_range", shown + "]", "must be [-1, 1] (GeoNet) or [0, 1]");
-  c.require(one_of(sampler, {"zeros", "border"}), "sampler", sampler, "must be zeros (GeoNet) or border");
-  c.require(one_of(flow_mask, {"occlusion", "consistency"}), "flow_mask", flow_mask,
-            "must be occlusion (paper eq. 13) or consistency (GeoNet)");
 }
 
 void LossWeights::validate(Checker& c) const {
@@ -396,24 +439,52 @@ void LossWeights::validate(Checker& c) const {
   c.require(flow_consistency >= 0, "flow_consistency", flow_consistency, "must be >= 0");
 }
 
-bool StageConfig::trains(const std::string& net) const {
-  return std::find(train.begin(), train.end(), net) != train.end();
+std::vector<std::string> NetworkSet::names() const {
+  std::vector<std::string> out;
+  for (const auto& n : enum_names(Net{}))
+    if (has(n.value)) out.emplace_back(n.name);
+  return out;
 }
 
-bool StageConfig::uses_flow() const { return trains("flow"); }
+const std::vector<EnumName<Upsample>>& enum_names(Upsample) {
+  static const std::vector<EnumName<Upsample>> n{{Upsample::kNearest, "nearest"}, {Upsample::kBilinear, "bilinear"}};
+  return n;
+}
+const std::vector<EnumName<LrScheduleKind>>& enum_names(LrScheduleKind) {
+  static const std::vector<EnumName<LrScheduleKind>> n{{LrScheduleKind::kConstant, "constant"},
+                                                       {LrScheduleKind::kStep, "step"}};
+  return n;
+}
+const std::vector<EnumName<DataFormat>>& enum_names(DataFormat) {
+  static const std::vector<EnumName<DataFormat>> n{
+      {DataFormat::kAuto, "auto"}, {DataFormat::kKittiRaw, "kitti_raw"}, {DataFormat::kPacked, "packed"}};
+  return n;
+}
+const std::vector<EnumName<BadSample>>& enum_names(BadSample) {
+  static const std::vector<EnumName<BadSample>> n{{BadSample::kStop, "stop"}, {BadSample::kSkip, "skip"}};
+  return n;
+}
+const std::vector<EnumName<Sampler>>& enum_names(Sampler) {
+  static const std::vector<EnumName<Sampler>> n{{Sampler::kZeros, "zeros"}, {Sampler::kBorder, "border"}};
+  return n;
+}
+const std::vector<EnumName<FlowMask>>& enum_names(FlowMask) {
+  static const std::vector<EnumName<FlowMask>> n{{FlowMask::kOcclusion, "occlusion"},
+                                                 {FlowMask::kConsistency, "consistency"}};
+  return n;
+}
+const std::vector<EnumName<Net>>& enum_names(Net) {
+  static const std::vector<EnumName<Net>> n{{Net::kDepth, "depth"}, {Net::kPose, "pose"}, {Net::kFlow, "flow"}};
+  return n;
+}
 
 void StageConfig::validate(Checker& c) const {
   c.require(!name.empty(), "name", name, "must not be empty");
   c.require(iterations > 0, "iterations", iterations, "must be > 0");
   c.require(!train.empty(), "train", train, "must name at least one of depth, pose, flow");
-  for (const auto& net : train)
-    c.require(one_of(net, {"depth", "pose", "flow"}), "train", train,
-              "entries must be depth, pose or flow (got '" + net + "')");
   c.require(learning_rate > 0, "learning_rate", learning_rate, "must be > 0");
   c.require(batch_size >= 1, "batch_size", batch_size, "must be >= 1");
-  c.require(one_of(lr_schedule, {"constant", "step"}), "lr_schedule", lr_schedule,
-            "must be constant or step");
-  c.require(lr_schedule != "step" || lr_step > 0, "lr_step", lr_step,
+  c.require(lr_schedule != LrScheduleKind::kStep || lr_step > 0, "lr_step", lr_step,
             "must be > 0 when lr_schedule is step");
   c.require(lr_gamma > 0 && lr_gamma <= 1, "lr_gamma", lr_gamma, "must be in (0, 1]");
   if (uses_flow())
@@ -447,7 +518,9 @@ void RunConfig::validate(Checker& c) const {
   c.require(!name.empty(), "name", name, "must not be empty");
   c.require(!dir.empty(), "dir", dir, "must not be empty");
   c.require(seed >= 0, "seed", seed, "must be >= 0");
-  c.require(one_of(device, {"auto", "cpu", "cuda"}), "device", device, "must be auto, cpu or cuda");
+  const bool cuda_n = device.rfind("cuda:", 0) == 0 && device.size() > 5 &&
+                      device.find_first_not_of("0123456789", 5) == std::string::npos;
+  c.require(one_of(device, {"auto", "cpu", "cuda"}) || cuda_n, "device", device, "must be auto, cpu, cuda or cuda:N");
   c.require(threads >= 0, "threads", threads, "must be >= 0 (0 = all cores)");
 }
 

@@ -2,7 +2,7 @@
 //
 // Each struct lists its keys exactly once, in `fields(v)`: the same list drives parsing (unknown
 // keys are errors naming the full key path), emitting the resolved config, and `--set key=value`
-// overrides. Defaults are the paper's settings (reference.md); the comment on each says where from.
+// overrides. Defaults are the paper's settings (GeoNet's where the paper is silent); the comment on each says where from.
 #pragma once
 
 #include <cstdint>
@@ -21,6 +21,43 @@ class ConfigError : public std::runtime_error {
 
 class Checker;  // collects validation failures with key paths and YAML lines (config.cpp)
 
+// Enumerated keys: read from YAML by name once, at parsing (an unknown name is a ConfigError listing
+// the valid ones), written back by name, compared as values everywhere else.
+template <class E> struct EnumName {
+  E value;
+  const char* name;
+};
+enum class Upsample { kNearest, kBilinear };
+enum class LrScheduleKind { kConstant, kStep };
+enum class DataFormat { kAuto, kKittiRaw, kPacked };
+enum class BadSample { kStop, kSkip };
+enum class Sampler { kZeros, kBorder };
+enum class FlowMask { kOcclusion, kConsistency };
+enum class Net { kDepth, kPose, kFlow };
+const std::vector<EnumName<Upsample>>& enum_names(Upsample);
+const std::vector<EnumName<LrScheduleKind>>& enum_names(LrScheduleKind);
+const std::vector<EnumName<DataFormat>>& enum_names(DataFormat);
+const std::vector<EnumName<BadSample>>& enum_names(BadSample);
+const std::vector<EnumName<Sampler>>& enum_names(Sampler);
+const std::vector<EnumName<FlowMask>>& enum_names(FlowMask);
+const std::vector<EnumName<Net>>& enum_names(Net);
+
+// The YAML name of an enumerated value ("nearest").
+template <class E> const char* name_of(E value) {
+  for (const auto& n : enum_names(E{}))
+    if (n.value == value) return n.name;
+  return "?";
+}
+
+// The networks a stage trains; YAML: a list of names, e.g. [depth, pose].
+struct NetworkSet {
+  bool depth = false, pose = false, flow = false;
+  bool has(Net net) const { return net == Net::kDepth ? depth : net == Net::kPose ? pose : flow; }
+  bool empty() const { return !depth && !pose && !flow; }
+  std::vector<std::string> names() const;  // in the order depth, pose, flow
+  bool operator==(const NetworkSet& o) const { return depth == o.depth && pose == o.pose && flow == o.flow; }
+};
+
 struct ModelConfig {
   int encoder_depth = 50;            // ResNet-50 encoder (paper Sec. 3.1); 18/34 for speed and tests
   bool use_fr = true;                // feature refinement on (paper); false = Table 4 "w/o FR"
@@ -28,8 +65,8 @@ struct ModelConfig {
   bool fr_decoder = true;            // FR after each decoder stage, Refined5..10 (paper)
   int fr_ratio = 16;                 // channel-attention reduction ratio r (paper, CBAM)
   bool fr_spatial_bn = false;        // BatchNorm after the 7x7 spatial conv (CBAM's code; optional)
-  std::string upsample = "nearest";  // decoder upsampling: nearest (GeoNet) or bilinear
-  int num_scales = 4;                // disparity / flow outputs at full, 1/2, 1/4, 1/8 (GeoNet)
+  Upsample upsample = Upsample::kNearest;  // decoder upsampling: nearest (GeoNet) or bilinear
+  int num_scales = 4;                // scales the losses use: full, 1/2, 1/4, 1/8 (GeoNet's num_scales)
   // BatchNorm of every conv+BN layer. GeoNet uses TF-slim's batch_norm: epsilon 1e-3, decay 0.999
   // (= momentum 0.001 in PyTorch's convention) and scale=False (no learned gamma). LibTorch's
   // defaults are eps 1e-5, momentum 0.1, learned gamma.
@@ -54,7 +91,7 @@ struct ModelConfig {
 };
 
 struct AugmentConfig {
-  bool enabled = true;              // GeoNet augmentation (reference.md Sec. 4)
+  bool enabled = true;              // GeoNet augmentation (data_loader.py)
   double scale_max = 1.15;          // scale x,y by U[1, scale_max] then random-crop back (GeoNet)
   double photometric_prob = 0.5;    // probability of photometric jitter per batch (GeoNet)
   double gamma_min = 0.8, gamma_max = 1.2;              // gamma U[0.8,1.2] (GeoNet)
@@ -77,21 +114,26 @@ struct AugmentConfig {
 
 struct DataConfig {
   std::string root;                   // dataset root (KITTI raw, packed cache or a geo_synth world)
-  std::string format = "auto";        // auto | kitti_raw | packed
-  std::string split = "eigen_zhou";   // split folder under configs/splits (paper: Eigen split)
+  DataFormat format = DataFormat::kAuto;  // auto | kitti_raw | packed
+  // Training data of a task: eigen_zhou (depth; the paper's Eigen split), raw_minus_kitti2015 (flow,
+  // GeoNet: eigen_zhou without the KITTI 2015 scenes), odometry (pose, GeoNet: KITTI odometry
+  // `sequences`), or any split folder under configs/splits or <root>/splits.
+  std::string split = "eigen_zhou";
+  std::vector<std::string> sequences = {"00", "01", "02", "03", "04", "05", "06", "07", "08"};  // odometry split (GeoNet)
   std::string train_list;             // explicit training list; empty = <split>/train_files.txt
   std::string val_list;               // explicit validation list; empty = <split>/val_files.txt
   int height = 128;                   // training height (paper Sec. 4.2)
   int width = 416;                    // training width (paper Sec. 4.2)
   int seq_length = 3;                 // target in the middle + 2 sources (paper); 5 for odometry
   int num_workers = 2;                // loader threads prefetching batches
-  std::string on_bad_sample = "stop"; // stop | skip
+  BadSample on_bad_sample = BadSample::kStop;  // stop | skip
   AugmentConfig augment;
 
   template <class V> void fields(V& v) {
     v("root", root);
     v("format", format);
     v("split", split);
+    v("sequences", sequences);
     v("train_list", train_list);
     v("val_list", val_list);
     v("height", height);
@@ -118,11 +160,11 @@ struct LossConfig {
   std::vector<double> image_range = {-1.0, 1.0};
   // Out-of-view samples of every warp: zeros (GeoNet's bilinear_sampler returns 0 outside
   // [0,W-1)x[0,H-1)) or border (clamped to the edge pixels).
-  std::string sampler = "zeros";
+  Sampler sampler = Sampler::kZeros;
   bool mask_out_of_view = false;     // drop samples that leave the image from L_br and L_fr (off: GeoNet)
   // Mask of the flow reconstruction L_fr: occlusion (paper eq. 13, alpha1/alpha2) or consistency
   // (GeoNet: the eq. 15 mask, consistency_a/consistency_b).
-  std::string flow_mask = "occlusion";
+  FlowMask flow_mask = FlowMask::kOcclusion;
   bool min_reprojection = false;     // per-pixel minimum over sources (monodepth2; off)
   bool automask = false;             // auto-mask static pixels (monodepth2; off)
 
@@ -161,21 +203,21 @@ struct LossWeights {
   void validate(Checker& c) const;
 };
 
-// One training stage (reference.md Sec. 4). Stages are data, not flags.
+// One training stage (paper Sec. 4.2). Stages are data, not flags.
 struct StageConfig {
   std::string name = "stage1";
   int64_t iterations = 350000;       // stage 1: 350k (paper); stage 2: 1500k
-  std::vector<std::string> train = {"depth", "pose"};  // networks updated: depth, pose, flow
+  NetworkSet train = {true, true, false};  // networks updated: depth, pose, flow
   double learning_rate = 2e-4;       // Adam lr (paper Sec. 4.2)
   int batch_size = 4;                // paper Sec. 4.2
-  std::string lr_schedule = "constant";  // constant | step
+  LrScheduleKind lr_schedule = LrScheduleKind::kConstant;  // constant | step
   int64_t lr_step = 0;               // step schedule: multiply by lr_gamma every lr_step iterations
   double lr_gamma = 0.5;
   std::string init;                  // checkpoint (or run folder) to start from; empty = scratch
   LossWeights weights;
 
-  bool trains(const std::string& net) const;
-  bool uses_flow() const;  // flow terms are computed only when the stage has non-zero flow weights
+  bool trains(Net net) const { return train.has(net); }
+  bool uses_flow() const { return train.flow; }  // flow terms are computed only in stages training flow
 
   template <class V> void fields(V& v) {
     v("name", name);
@@ -236,7 +278,7 @@ struct RunConfig {
   std::string name = "geo";     // run folder prefix
   std::string dir = "runs";     // parent folder of run folders
   int64_t seed = 42;            // seeds torch and the data pipeline
-  std::string device = "auto";  // auto | cpu | cuda
+  std::string device = "auto";  // auto | cpu | cuda | cuda:N (core/runtime.h: select_device)
   int threads = 0;              // intra-op threads; 0 = all cores
 
   template <class V> void fields(V& v) {

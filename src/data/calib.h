@@ -1,4 +1,4 @@
-// KITTI calibration files (reference.md Sec. 6): raw `calib_cam_to_cam.txt` / `calib_velo_to_cam.txt`,
+// KITTI calibration files (KITTI devkit formats): raw `calib_cam_to_cam.txt` / `calib_velo_to_cam.txt`,
 // KITTI 2015 per-image `calib_cam_to_cam/%06d.txt` (same format), odometry `calib.txt`.
 // All are "KEY: v v v ..." lines; non-numeric lines such as `calib_time:` are kept aside.
 // Matrices are returned as CPU float64 tensors.
@@ -35,7 +35,7 @@ struct RawCalib {
   torch::Tensor cam_from_velo;// [4,4] [R|T] from calib_velo_to_cam.txt
   int64_t width = 0, height = 0;  // S_rect_0c (0 when the file has none)
   torch::Tensor K() const;    // [3,3] left 3x3 of P_rect
-  // x_img = P_rect * R_rect * cam_from_velo * x_velo  ([3,4], reference.md Sec. 5).
+  // x_img = P_rect * R_rect * cam_from_velo * x_velo  ([3,4], KITTI devkit).
   torch::Tensor img_from_velo() const;
 };
 // Reads <date_dir>/calib_cam_to_cam.txt and calib_velo_to_cam.txt (the latter optional when

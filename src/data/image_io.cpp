@@ -1,7 +1,7 @@
 #include "data/image_io.h"
 
-#include "core/logging.h"
-#include "geometry/checks.h"
+#include "core/files.h"
+#include "core/tensor_checks.h"
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>

@@ -1,4 +1,4 @@
-// Image files through OpenCV (reference.md Sec. 6): colour images, KITTI 16-bit flow PNGs and
+// Image files through OpenCV (KITTI devkit formats): colour images, KITTI 16-bit flow PNGs and
 // 16-bit depth/disparity PNGs. Every reader names the file and the problem on bad input.
 #pragma once
 

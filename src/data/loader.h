@@ -1,5 +1,5 @@
 // Batches for training: a deterministic sample order (a fresh permutation per epoch from the seed),
-// GeoNet augmentation (reference.md Sec. 4) drawn from a generator seeded by (seed, batch index), and
+// GeoNet augmentation (data_loader.py) drawn from a generator seeded by (seed, batch index), and
 // worker threads that prefetch batches while the trainer computes. Batch k depends only on the seed
 // and k, so a resumed run sees exactly the batches an uninterrupted one would.
 #pragma once

@@ -1,6 +1,6 @@
 #include "data/packed.h"
 
-#include "core/logging.h"
+#include "core/files.h"
 #include "data/text_io.h"
 
 #include <filesystem>

@@ -1,5 +1,5 @@
 // Training snippets: `seq_length` consecutive frames centred on a target, resized to the training
-// size, with the intrinsics scaled to match (reference.md Sec. 4). Sources: KITTI raw folders
+// size, with the intrinsics scaled to match (paper Sec. 4.2). Sources: KITTI raw folders
 // (sequence_dataset.h, needs OpenCV) or a packed cache (packed.h, LibTorch only).
 #pragma once
 

@@ -1,4 +1,4 @@
-// Split lists (reference.md Sec. 4-5). Two formats are read alike:
+// Split lists (Eigen / Zhou et al. splits). Two formats are read alike:
 //   "folder frame side"   e.g. "2011_09_26/2011_09_26_drive_0022_sync 473 r" (monodepth2, eigen_zhou)
 //   "one image path"      e.g. "2011_09_26/2011_09_26_drive_0002_sync/image_02/data/0000000069.png"
 // side l = camera 02 (image_02), r = camera 03. Odometry lists ("9 0 l") read as folder "9".

@@ -1,4 +1,4 @@
-// A procedural driving world with exact ground truth (issue #5): a road plane, building facades on
+// A procedural driving world with exact ground truth: a road plane, building facades on
 // both sides, poles and boxes at 5-80 m, and independently moving cars, seen by a pinhole camera
 // that drives forward about 1 m per frame with gentle turns. Rendered by exact ray casting with
 // supersampling; every texture is a deterministic function of the surface point (solid noise,

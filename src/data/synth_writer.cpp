@@ -1,6 +1,6 @@
 #include "data/synth_writer.h"
 
-#include "core/logging.h"
+#include "core/files.h"
 #include "data/calib.h"
 #include "data/image_io.h"
 #include "data/text_io.h"

@@ -1,6 +1,6 @@
 #include "data/text_io.h"
 
-#include "core/logging.h"
+#include "core/files.h"
 
 #include <cerrno>
 #include <cstdlib>

@@ -1,6 +1,6 @@
 #include "data/velodyne_depth.h"
 
-#include "geometry/checks.h"
+#include "core/tensor_checks.h"
 
 #include <cmath>
 

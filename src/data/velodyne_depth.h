@@ -1,4 +1,4 @@
-// Ground-truth depth from a Velodyne scan with the Eigen protocol (reference.md Sec. 5), as used by
+// Ground-truth depth from a Velodyne scan with the Eigen protocol (Eigen et al. 2014 as in GeoNet's kitti_eval), as used by
 // SfMLearner, GeoNet and monodepth2: x_img = P_rect * R_rect_00 * [R|T]_velo_to_cam * x_velo,
 // points behind the scanner (x < 0) dropped, depth = the Velodyne x (forward distance), pixel =
 // round(x/z) - 1 (the MATLAB-origin convention of the reference code), the nearest point kept where

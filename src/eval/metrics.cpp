@@ -1,6 +1,6 @@
 #include "eval/metrics.h"
 
-#include "geometry/checks.h"
+#include "core/tensor_checks.h"
 
 namespace geo {
 
@@ -56,20 +56,23 @@ DepthErrors eigen_image_errors(const torch::Tensor& gt_in, const torch::Tensor& 
   return depth_errors(g, (p * s).clamp(o.min_depth, o.max_depth));
 }
 
-torch::Tensor resize_flow(const torch::Tensor& flow, int64_t H, int64_t W) {
+torch::Tensor resize_flow(const torch::Tensor& flow, int64_t H, int64_t W, FlowResize resize) {
   check_shape(flow, "flow", {2, -1, -1});
   const int64_t h = flow.size(1), w = flow.size(2);
   if (h == H && w == W) return flow;
   namespace F = torch::nn::functional;
-  auto r = F::interpolate(flow.unsqueeze(0).to(torch::kFloat32),
-                          F::InterpolateFuncOptions().size(std::vector<int64_t>{H, W}).mode(torch::kBilinear).align_corners(false))[0];
+  auto opts = F::InterpolateFuncOptions().size(std::vector<int64_t>{H, W});
+  if (resize == FlowResize::kBilinear) opts.mode(torch::kBilinear).align_corners(false);
+  else opts.mode(torch::kNearest);  // floor(x * w / W), as OpenCV's INTER_NEAREST
+  auto r = F::interpolate(flow.unsqueeze(0).to(torch::kFloat32), opts)[0];
   auto factor = torch::tensor({static_cast<double>(W) / w, static_cast<double>(H) / h}, r.options()).view({2, 1, 1});
   return r * factor;
 }
 
-FlowErrors flow_errors(const torch::Tensor& gt, const torch::Tensor& valid_in, const torch::Tensor& pred_in) {
+FlowErrors flow_errors(const torch::Tensor& gt, const torch::Tensor& valid_in, const torch::Tensor& pred_in,
+                       FlowResize resize) {
   check_shape(gt, "ground-truth flow", {2, -1, -1});
-  const auto pred = resize_flow(pred_in, gt.size(1), gt.size(2)).to(torch::kFloat64);
+  const auto pred = resize_flow(pred_in, gt.size(1), gt.size(2), resize).to(torch::kFloat64);
   const auto valid = valid_in.reshape({gt.size(1), gt.size(2)}) > 0.5;
   const auto g = gt.to(torch::kFloat64);
   const auto epe = (pred - g).pow(2).sum(0).sqrt().masked_select(valid);

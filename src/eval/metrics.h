@@ -1,4 +1,4 @@
-// Evaluation metrics with the published protocols' conventions (reference.md Sec. 5). LibTorch only.
+// Evaluation metrics with the published protocols' conventions (Eigen et al. 2014 as in GeoNet's kitti_eval). LibTorch only.
 #pragma once
 
 #include <torch/torch.h>
@@ -18,7 +18,7 @@ struct DepthErrors {
 DepthErrors depth_errors(const torch::Tensor& gt, const torch::Tensor& pred);
 
 struct EigenOptions {
-  double min_depth = 1e-3, max_depth = 80;  // mask and clamp (reference.md Sec. 5)
+  double min_depth = 1e-3, max_depth = 80;  // mask and clamp (Eigen et al. 2014 as in GeoNet's kitti_eval)
   bool garg_crop = true;                    // rows [0.408 H, 0.992 H), columns [0.036 W, 0.964 W)
   bool median_scaling = true;               // monocular: scale by median(gt)/median(pred)
 };
@@ -34,11 +34,17 @@ struct FlowErrors {
   double fl = 0;       // fraction of valid pixels with EPE > 3 px and > 5% of |gt|
   int64_t pixels = 0;
 };
+// How a predicted flow is resized to the ground truth: nearest (GeoNet's flowlib, cv2 INTER_NEAREST:
+// source pixel floor(x * w / W)) or bilinear.
+enum class FlowResize { kNearest, kBilinear };
+
 // pred [2,h,w] (resized to the ground truth with u, v scaled), gt [2,H,W], valid [1,H,W] or [H,W].
-FlowErrors flow_errors(const torch::Tensor& gt, const torch::Tensor& valid, const torch::Tensor& pred);
+FlowErrors flow_errors(const torch::Tensor& gt, const torch::Tensor& valid, const torch::Tensor& pred,
+                       FlowResize resize = FlowResize::kNearest);
 
 // Resizes a flow field to height x width, scaling u and v by the size ratios.
-torch::Tensor resize_flow(const torch::Tensor& flow, int64_t height, int64_t width);
+torch::Tensor resize_flow(const torch::Tensor& flow, int64_t height, int64_t width,
+                          FlowResize resize = FlowResize::kNearest);
 
 // SfMLearner's snippet ATE: the first positions aligned, one least-squares scale
 // s = sum(gt.pred)/sum(pred.pred), ATE = sqrt(sum ||s pred - gt||^2) / N. gt, pred: [N,3].

@@ -57,9 +57,11 @@ torch::Tensor Predictor::pose(const torch::Tensor& tgt, const std::vector<torch:
   return pose_vec_to_matrix(vec.reshape({B * N, 6})).view({B, N, 4, 4});
 }
 
-torch::Tensor Predictor::flow(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& K) {
+torch::Tensor Predictor::flow(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& K,
+                              const torch::Tensor& prev) {
   torch::NoGradGuard no_grad;
-  return predict_pair(nets_, tgt.to(device_), src.to(device_), K.to(device_), config_.loss).flow;
+  return predict_pair(nets_, tgt.to(device_), src.to(device_), K.to(device_), config_.loss,
+                      prev.defined() ? prev.to(device_) : prev).flow;
 }
 
 std::string latest_run_checkpoint(const std::string& runs_dir) {

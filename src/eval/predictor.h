@@ -30,7 +30,9 @@ class Predictor {
   // Full flow tgt -> src [B,2,H,W] in pixels: rigid flow from depth and pose plus the FlowNet's
   // residual (rigid flow alone when the checkpoint has no FlowNet). The PoseNet sees the snippet
   // (tgt, tgt, src) for a 3-frame model: zero motion before the target, the pair after it.
-  torch::Tensor flow(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& K);
+  // `prev` (optional, [B,3,H,W]): the frame before tgt, for the PoseNet's snippet (prev, tgt, src).
+  torch::Tensor flow(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& K,
+                     const torch::Tensor& prev = {});
 
  private:
   Config config_;

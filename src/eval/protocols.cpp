@@ -60,6 +60,8 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
   vo.matlab_offset = o.matlab_offset;
   std::vector<double> sums(7, 0.0);
   int64_t images = 0, pixels = 0;
+  // --export-gt without a model or predictions: write the ground truth only, no metrics.
+  const bool gt_only = !pred && o.predictions.empty() && !o.trivial && !o.export_gt.empty();
   for (size_t i = 0; i < entries.size(); ++i) {
     const auto& e = entries[i];
     const std::string image = e.image_path(root);
@@ -69,6 +71,14 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
     const auto calib = read_raw_calib(root + "/" + e.date(), e.camera());
     int64_t H = 0, W = 0;
     torch::Tensor depth;
+    if (gt_only) {
+      const auto img = read_image(image);
+      const auto gt = velodyne_depth(read_velodyne(velo), calib.img_from_velo(), img.size(1), img.size(2), vo);
+      write_depth_png(o.export_gt + "/" + numbered("%06lld", static_cast<long long>(i)) + ".png", gt);
+      ++images;
+      progress(i, entries.size(), "image");
+      continue;
+    }
     if (pred) {
       depth = pred->depth(net_input(image, *pred, &H, &W))[0][0].cpu();
     } else {
@@ -96,8 +106,12 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
     }
     progress(i, entries.size(), "image");
   }
-  if (images == 0) throw std::runtime_error("no test image had valid ground-truth pixels");
   EvalResult r;
+  if (gt_only) {
+    r.counts = {{"exported", images}, {"listed", static_cast<int64_t>(entries.size())}};
+    return r;
+  }
+  if (images == 0) throw std::runtime_error("no test image had valid ground-truth pixels");
   const char* names[7] = {"abs_rel", "sq_rel", "rmse", "rmse_log", "a1", "a2", "a3"};
   for (int k = 0; k < 7; ++k) r.metrics.emplace_back(names[k], sums[k] / static_cast<double>(images));
   r.counts = {{"images", images}, {"pixels", pixels}, {"listed", static_cast<int64_t>(entries.size())}};
@@ -133,7 +147,7 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
   }
   if (names.empty()) throw std::runtime_error("no flow pairs to evaluate under " + root);
   double epe_noc = 0, epe_occ = 0, fl_noc = 0, fl_occ = 0;
-  int64_t px_noc = 0, px_occ = 0;
+  int64_t px_noc = 0, px_occ = 0, with_previous = 0;
   for (size_t i = 0; i < names.size(); ++i) {
     const std::string t = root + "/training/image_2/" + names[i] + "_10.png";
     const std::string s = root + "/training/image_2/" + names[i] + "_11.png";
@@ -147,7 +161,15 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
       auto K = flow_calib_K(root, names[i]).clone();
       K[0] *= static_cast<double>(pred->width()) / W;
       K[1] *= static_cast<double>(pred->height()) / H;
-      flow = pred->flow(a, b, K.to(torch::kFloat32).unsqueeze(0))[0].cpu();
+      // The frame before the pair (KITTI 2015's multi-view extension, image_2/%06d_09.png) gives
+      // the PoseNet its real snippet (09, 10, 11), as GeoNet; without it (tgt, tgt, src).
+      const std::string prev_path = root + "/training/image_2/" + names[i] + "_09.png";
+      torch::Tensor prev;
+      if (fs::exists(prev_path)) {
+        prev = net_input(prev_path, *pred);
+        ++with_previous;
+      }
+      flow = pred->flow(a, b, K.to(torch::kFloat32).unsqueeze(0), prev)[0].cpu();
     } else if (o.trivial) {
       flow = torch::zeros({2, 1, 1});
     } else {
@@ -156,7 +178,8 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
       flow = read_flow_png(p).flow;
     }
     const auto occ = read_flow_png(gocc), noc = read_flow_png(gnoc);
-    const auto eo = flow_errors(occ.flow, occ.valid, flow), en = flow_errors(noc.flow, noc.valid, flow);
+    const auto eo = flow_errors(occ.flow, occ.valid, flow, o.flow_resize);
+    const auto en = flow_errors(noc.flow, noc.valid, flow, o.flow_resize);
     epe_occ += eo.epe;
     fl_occ += eo.fl;
     epe_noc += en.epe;
@@ -169,6 +192,13 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
   EvalResult r;
   r.metrics = {{"epe_all", epe_occ / n}, {"epe_noc", epe_noc / n}, {"fl_all", fl_occ / n}, {"fl_noc", fl_noc / n}};
   r.counts = {{"pairs", static_cast<int64_t>(names.size())}, {"pixels_all", px_occ}, {"pixels_noc", px_noc}};
+  if (pred) {
+    r.counts.emplace_back("pairs_with_frame_09", with_previous);
+    if (with_previous < static_cast<int64_t>(names.size()))
+      spdlog::warn("{} of {} pairs have no previous frame (training/image_2/<pair>_09.png, KITTI 2015's multi-view "
+                   "extension): the PoseNet saw the duplicate-frame snippet (tgt, tgt, src) for them",
+                   static_cast<int64_t>(names.size()) - with_previous, names.size());
+  }
   return r;
 }
 
@@ -180,10 +210,11 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
   const auto gt = read_poses(gt_path);
   const int64_t n = gt.size(0);
   torch::Tensor traj;
+  // 5-frame PoseNets (GeoNet's odometry model): snippet c-2..c+2 predicted at once, cam_to_world of
+  // its frames in the target's frame (the target's pose is the identity).
+  std::vector<torch::Tensor> snippet_poses(static_cast<size_t>(n));
   if (pred) {
-    if (pred->config().data.seq_length != 3)
-      throw std::runtime_error("odometry inference expects a 3-frame PoseNet, this checkpoint has seq_length " +
-                               std::to_string(pred->config().data.seq_length));
+    const int64_t L = pred->config().data.seq_length, k = (L - 1) / 2;
     auto image = [&](int64_t f) {
       const std::string p = seq + "/image_2/" + numbered("%06lld", static_cast<long long>(f)) + ".png";
       require_file(p, "odometry image");
@@ -192,10 +223,21 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
     std::vector<torch::Tensor> frames;
     for (int64_t f = 0; f < n; ++f) frames.push_back(image(f));
     std::vector<torch::Tensor> cam_to_world = {torch::eye(4, torch::kFloat64)};
-    for (int64_t j = 0; j + 1 < n; ++j) {  // T_{j+1 <- j} from the snippet (j-1, j, j+1)
-      const auto T = pred->pose(frames[j], {frames[std::max<int64_t>(j - 1, 0)], frames[j + 1]})[0][1].cpu().to(torch::kFloat64);
-      cam_to_world.push_back(cam_to_world.back().matmul(torch::inverse(T)));
-      progress(static_cast<size_t>(j), static_cast<size_t>(n - 1), "frame");
+    for (int64_t j = 0; j < n; ++j) {
+      // The snippet around j (frames clamped at the sequence ends): k before, k after.
+      std::vector<torch::Tensor> srcs;
+      for (int64_t m = k; m >= 1; --m) srcs.push_back(frames[std::max<int64_t>(j - m, 0)]);
+      for (int64_t m = 1; m <= k; ++m) srcs.push_back(frames[std::min<int64_t>(j + m, n - 1)]);
+      const auto src_from_tgt = pred->pose(frames[j], srcs)[0].cpu().to(torch::kFloat64);  // [L-1,4,4]
+      if (j + 1 < n)  // T_{j+1 <- j}: the first source after the target, chained into the trajectory
+        cam_to_world.push_back(cam_to_world.back().matmul(torch::inverse(src_from_tgt[k])));
+      if (L == 5 && j >= 2 && j + 2 < n) {
+        std::vector<torch::Tensor> in_target;
+        for (int64_t m = 0; m < 4; ++m) in_target.push_back(torch::inverse(src_from_tgt[m]));
+        in_target.insert(in_target.begin() + 2, torch::eye(4, torch::kFloat64));
+        snippet_poses[static_cast<size_t>(j)] = torch::stack(in_target);  // frames j-2..j+2
+      }
+      progress(static_cast<size_t>(j), static_cast<size_t>(n), "frame");
     }
     traj = torch::stack(cam_to_world);
   } else if (o.trivial) {
@@ -216,10 +258,13 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
   std::vector<double> ates;
   for (int64_t c : centres) {
     if (c < 2 || c + 2 >= n) continue;  // snippets need two neighbours on each side
-    auto rel = [&](const torch::Tensor& P) {
-      return positions(torch::inverse(P[c - 2]).unsqueeze(0).matmul(P.slice(0, c - 2, c + 3)));
+    auto rel = [&](const torch::Tensor& P, int64_t first) {  // positions in the snippet's first frame
+      return positions(torch::inverse(P[first]).unsqueeze(0).matmul(P.slice(0, first, first + 5)));
     };
-    ates.push_back(snippet_ate(rel(gt), rel(traj)));
+    // A 5-frame PoseNet is scored on its own snippet predictions (GeoNet's protocol); a 3-frame one
+    // on the chained trajectory.
+    const auto& own = snippet_poses[static_cast<size_t>(c)];
+    ates.push_back(snippet_ate(rel(gt, c - 2), own.defined() ? rel(own, 0) : rel(traj, c - 2)));
   }
   if (ates.empty()) throw std::runtime_error("sequence " + o.sequence + " has no 5-frame snippet");
   const auto t = torch::tensor(ates, torch::kFloat64);
@@ -239,7 +284,9 @@ std::string split_root(const std::string& split, const std::string& root) {
 }
 
 EvalResult evaluate(const EvalOptions& o, Predictor* pred) {
-  if (!pred && o.predictions.empty() && !o.trivial) throw std::runtime_error("nothing to evaluate: give --checkpoint or --predictions");
+  const bool gt_only = o.split == "eigen" && !o.export_gt.empty();
+  if (!pred && o.predictions.empty() && !o.trivial && !gt_only)
+    throw std::runtime_error("nothing to evaluate: give --checkpoint or --predictions");
   if (!fs::is_directory(o.data_root)) throw std::runtime_error("data root '" + o.data_root + "' is not a directory (--data-root)");
   const std::string root = split_root(o.split, o.data_root);
   EvalResult r;
@@ -248,7 +295,7 @@ EvalResult evaluate(const EvalOptions& o, Predictor* pred) {
   else if (o.split == "odometry") r = eval_odometry(o, root, pred);
   else throw std::runtime_error("unknown split '" + o.split + "' (eigen, kitti2015, odometry)");
   r.split = o.split;
-  r.source = pred ? pred->path() : o.trivial ? "trivial baseline" : o.predictions;
+  r.source = pred ? pred->path() : o.trivial ? "trivial baseline" : !o.predictions.empty() ? o.predictions : "ground truth export";
   r.data_root = root;
   return r;
 }

@@ -1,4 +1,4 @@
-// The evaluation protocols of reference.md Sec. 5 over KITTI-format folders (real KITTI or a
+// The published evaluation protocols (Eigen depth, KITTI 2015 flow, SfMLearner's snippet ATE) over KITTI-format folders (real KITTI or a
 // geo_synth world), from a checkpoint or from precomputed predictions:
 //   eigen      depth on the Eigen test images, Velodyne ground truth, Garg crop, median scaling, 80 m
 //   kitti2015  flow EPE on flow_noc and flow_occ, Fl-all, over the image_2/%06d_10.png pairs
@@ -6,6 +6,7 @@
 //              error after a Sim(3) alignment; the predicted trajectory as a KITTI pose file
 #pragma once
 
+#include "eval/metrics.h"
 #include "eval/predictor.h"
 
 #include <string>
@@ -24,6 +25,7 @@ struct EvalOptions {
   std::string output_poses;     // odometry: write the predicted trajectory here
   bool matlab_offset = true;    // eigen: pixel = round(x/z) - 1 as in the reference code
   bool trivial = false;         // evaluate the trivial baseline: constant depth, zero flow, no motion
+  FlowResize flow_resize = FlowResize::kNearest;  // kitti2015: prediction -> ground-truth size (GeoNet: nearest)
 };
 
 struct EvalResult {

@@ -1,6 +1,6 @@
 #include "geometry/camera.h"
 
-#include "geometry/checks.h"
+#include "core/tensor_checks.h"
 
 namespace geo {
 

@@ -1,5 +1,5 @@
 // Pinhole camera geometry: intrinsics per pyramid scale, back-projection, projection, rigid flow
-// (reference.md Sec. 2). Pixel coordinates are x = 0..W-1, y = 0..H-1 (pixel centres at integers).
+// (GeoNet's utils.py: compute_rigid_flow, bilinear_sampler). Pixel coordinates are x = 0..W-1, y = 0..H-1 (pixel centres at integers).
 // Device and dtype follow the inputs.
 #pragma once
 
@@ -27,7 +27,7 @@ torch::Tensor project(const torch::Tensor& points, const torch::Tensor& K, doubl
 // b_from_a applied to points: [B,4,4] x [B,3,H,W] -> [B,3,H,W].
 torch::Tensor transform_points(const torch::Tensor& b_from_a, const torch::Tensor& points);
 
-// Rigid flow from the target into the source (reference.md Sec. 2):
+// Rigid flow from the target into the source (GeoNet's utils.py: compute_rigid_flow, bilinear_sampler):
 //   p_s = K T_{s<-t} D_t(p_t) K^-1 p_t,  flow = p_s - p_t.
 // depth_tgt [B,1,H,W], src_from_tgt [B,4,4], K [B,3,3] (at this scale) -> [B,2,H,W].
 // The backward flow (source into target) is rigid_flow(depth_src, inverse_transform(T), K).

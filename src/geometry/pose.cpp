@@ -1,6 +1,6 @@
 #include "geometry/pose.h"
 
-#include "geometry/checks.h"
+#include "core/tensor_checks.h"
 
 namespace geo {
 

@@ -1,7 +1,7 @@
 #include "geometry/warp.h"
 
 #include "geometry/camera.h"
-#include "geometry/checks.h"
+#include "core/tensor_checks.h"
 
 namespace geo {
 

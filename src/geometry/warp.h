@@ -1,4 +1,4 @@
-// Bilinear warping of an image by a flow field (reference.md Sec. 2).
+// Bilinear warping of an image by a flow field (GeoNet's utils.py: compute_rigid_flow, bilinear_sampler).
 #pragma once
 
 #include <torch/torch.h>

@@ -1,6 +1,6 @@
 #include "losses/consistency.h"
 
-#include "geometry/checks.h"
+#include "core/tensor_checks.h"
 #include "geometry/warp.h"
 #include "losses/photometric.h"
 

@@ -7,7 +7,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "geometry/checks.h"
+#include "core/tensor_checks.h"
 
 namespace geo {
 

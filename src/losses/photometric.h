@@ -1,4 +1,4 @@
-// Photometric reconstruction error (reference.md Sec. 3, GeoNet).
+// Photometric reconstruction error (paper Sec. 3.3-3.6; GeoNet's image_similarity).
 #pragma once
 
 #include <torch/torch.h>

@@ -1,4 +1,4 @@
-// Edge-aware first-order smoothness (reference.md Sec. 3, GeoNet compute_smooth_loss).
+// Edge-aware first-order smoothness (paper Sec. 3.3-3.6; GeoNet's compute_smooth_loss).
 #pragma once
 
 #include <torch/torch.h>

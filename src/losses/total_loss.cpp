@@ -1,7 +1,7 @@
 #include "losses/total_loss.h"
 
 #include "geometry/camera.h"
-#include "geometry/checks.h"
+#include "core/tensor_checks.h"
 #include "geometry/pose.h"
 #include "geometry/warp.h"
 #include "losses/consistency.h"
@@ -41,7 +41,7 @@ torch::Tensor direction_loss(const std::vector<torch::Tensor>& errors,
 }  // namespace
 
 OutOfView out_of_view(const LossConfig& cfg) {
-  return cfg.sampler == "border" ? OutOfView::kBorder : OutOfView::kZero;
+  return cfg.sampler == Sampler::kBorder ? OutOfView::kBorder : OutOfView::kZero;
 }
 
 torch::Tensor to_loss_range(const torch::Tensor& image01, const LossConfig& cfg) {
@@ -148,7 +148,7 @@ FlowTerms flow_terms(const RigidTerms& rigid, const PerSourceScale<torch::Tensor
   TORCH_CHECK(fwd_full.size() == N && bwd_full.size() == N, "full flows must hold ", N,
               " sources, got ", fwd_full.size(), " and ", bwd_full.size());
   const OutOfView sampler = out_of_view(cfg);
-  const bool consistency_mask = cfg.flow_mask == "consistency";
+  const bool consistency_mask = cfg.flow_mask == FlowMask::kConsistency;
   FlowTerms out;
   out.fwd_visible.assign(N, std::vector<torch::Tensor>(S));
   out.bwd_visible.assign(N, std::vector<torch::Tensor>(S));

@@ -1,4 +1,4 @@
-// The unsupervised objective of the paper (eq. 16, reference.md Sec. 3), in two steps so that the
+// The unsupervised objective of the paper (eq. 16, paper Sec. 3.3-3.6), in two steps so that the
 // FlowNet can be fed from the rigid step: rigid_terms() (L_br, L_ds, and the rigid flows / warps /
 // errors the FlowNet takes as input), then flow_terms() (L_fr, L_fs, L_fg) from the full flows.
 // Each warp is computed once per direction, source and scale and reused by every term.

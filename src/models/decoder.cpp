@@ -42,10 +42,12 @@ std::vector<torch::Tensor> EncoderDecoderImpl::forward(const torch::Tensor& x) {
   for (int k = 0; k < 6; ++k) {
     const torch::Tensor& ref = k < 5 ? feats[4 - k] : x;  // stage 1 resizes to the input size
     // Nearest x2 then 3x3 conv (GeoNet's upconv), computed at the coarse resolution (exact).
-    auto up = resize_like(options.upsample == "nearest" ? upconv[k]->forward_upsampled(y)
+    auto up = resize_like(options.upsample == UpsampleMode::kNearest ? upconv[k]->forward_upsampled(y)
                                                         : upconv[k](upsample2(y, options.upsample)),
                           ref);
-    std::vector<torch::Tensor> parts{up};
+    std::vector<torch::Tensor> parts;  // (not an initializer list: GCC 12 -Warray-bounds false positive)
+    parts.reserve(3);
+    parts.push_back(up);
     if (k < 5) parts.push_back(feats[4 - k]);
     if (k >= 3) parts.push_back(resize_like(upsample2(preds.back(), options.upsample), ref));
     y = iconv[k](torch::cat(parts, 1));

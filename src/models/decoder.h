@@ -23,7 +23,7 @@ struct EncoderDecoderOptions {
   ResNetEncoderOptions encoder;
   int64_t out_channels = 1;          // 1 (disparity) or 2 (flow)
   bool fr_decoder = true;            // FR after each decoder stage (paper)
-  std::string upsample = "nearest";  // GeoNet
+  UpsampleMode upsample = UpsampleMode::kNearest;  // GeoNet
 };
 
 struct EncoderDecoderImpl : torch::nn::Module {

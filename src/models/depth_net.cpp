@@ -2,18 +2,6 @@
 
 namespace geo {
 
-DepthNetOptions DepthNetOptions::from(const ModelConfig& m) {
-  DepthNetOptions o;
-  o.encoder_depth = m.encoder_depth;
-  o.use_fr = m.use_fr;
-  o.fr_encoder = m.fr_encoder;
-  o.fr_decoder = m.fr_decoder;
-  o.fr_ratio = m.fr_ratio;
-  o.fr_spatial_bn = m.fr_spatial_bn;
-  o.upsample = m.upsample;
-  return o;
-}
-
 EncoderDecoderOptions encoder_decoder_options(const DepthNetOptions& o, int64_t in, int64_t out) {
   EncoderDecoderOptions e;
   e.encoder.in_channels = in;

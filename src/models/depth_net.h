@@ -1,11 +1,10 @@
-// DepthNet: ResNet-50 encoder-decoder with FR predicting disparity at 4 scales (reference.md Sec. 1).
+// DepthNet: ResNet-50 encoder-decoder with FR predicting disparity at 4 scales (paper Sec. 3).
 #pragma once
 
 #include <torch/torch.h>
 
 #include <vector>
 
-#include "core/config.h"
 #include "models/decoder.h"
 
 namespace geo {
@@ -17,11 +16,9 @@ struct DepthNetOptions {
   bool fr_decoder = true;            // Refined5..10 (paper)
   int64_t fr_ratio = 16;             // paper
   bool fr_spatial_bn = false;        // CBAM's code option
-  std::string upsample = "nearest";  // GeoNet
+  UpsampleMode upsample = UpsampleMode::kNearest;  // GeoNet
   double disp_scale = 5.0;           // disp = 5 sigmoid(x) + 0.01 (GeoNet ResNet-50 scaling)
   double min_disp = 0.01;            // GeoNet
-
-  static DepthNetOptions from(const ModelConfig& m);
 };
 
 // The encoder-decoder options of these settings for `in` input and `out` output channels

@@ -1,14 +1,8 @@
 #include "models/flow_net.h"
 
-#include "geometry/checks.h"
+#include "core/tensor_checks.h"
 
 namespace geo {
-
-FlowNetOptions FlowNetOptions::from(const ModelConfig& m) {
-  FlowNetOptions o;
-  o.backbone = DepthNetOptions::from(m);
-  return o;
-}
 
 torch::Tensor flow_net_input(const torch::Tensor& tgt, const torch::Tensor& src,
                              const torch::Tensor& rigid_warp, const torch::Tensor& rigid_flow,

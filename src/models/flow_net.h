@@ -1,4 +1,4 @@
-// Residual FlowNet (reference.md Sec. 1, GeoNet's ResFlowNet with the paper's FR): the DepthNet
+// Residual FlowNet (paper Sec. 3, GeoNet's ResFlowNet with the paper's FR): the DepthNet
 // design over a 12-channel input, predicting the non-rigid residual flow at 4 scales.
 #pragma once
 
@@ -13,7 +13,6 @@ namespace geo {
 struct FlowNetOptions {
   DepthNetOptions backbone;   // same encoder-decoder settings as the DepthNet (paper)
   double flow_scale = 0.1;    // residual = 0.1 * conv, in units of the image size (GeoNet)
-  static FlowNetOptions from(const ModelConfig& m);
 };
 
 struct FlowOutput {

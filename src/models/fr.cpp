@@ -1,6 +1,6 @@
 #include "models/fr.h"
 
-#include "geometry/checks.h"
+#include "core/tensor_checks.h"
 
 #include <ATen/Dispatch.h>
 #include <ATen/Parallel.h>

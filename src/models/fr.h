@@ -1,5 +1,5 @@
 // Feature refinement (FR): CBAM-style channel attention then spatial attention (Woo et al. 2018),
-// as placed by the paper after every encoder stage and decoder stage (reference.md Sec. 1).
+// as placed by the paper after every encoder stage and decoder stage (paper Sec. 3).
 #pragma once
 
 #include <torch/torch.h>

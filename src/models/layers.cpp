@@ -37,7 +37,7 @@ torch::Tensor ConvBnImpl::forward_upsampled(const torch::Tensor& x) {
   TORCH_CHECK((*o.kernel_size())[0] == 3 && (*o.kernel_size())[1] == 3 && (*o.stride())[0] == 1 &&
                   (*o.stride())[1] == 1,
               "forward_upsampled needs a 3x3 stride-1 ConvBn");
-  if (x.size(2) * x.size(3) < kMinSubpixelArea) return forward(upsample2(x, "nearest"));
+  if (x.size(2) * x.size(3) < kMinSubpixelArea) return forward(upsample2(x, UpsampleMode::kNearest));
   return conv_bn_relu(x, conv3x3_of_upsampled);
 }
 
@@ -136,11 +136,10 @@ int fold_batchnorm(torch::nn::Module& module) {
   return n;
 }
 
-torch::Tensor upsample2(const torch::Tensor& x, const std::string& mode) {
+torch::Tensor upsample2(const torch::Tensor& x, UpsampleMode mode) {
   namespace F = torch::nn::functional;
   auto opts = F::InterpolateFuncOptions().scale_factor(std::vector<double>{2.0, 2.0});
-  if (mode == "bilinear") return F::interpolate(x, opts.mode(torch::kBilinear).align_corners(false));
-  TORCH_CHECK(mode == "nearest", "upsample mode must be nearest or bilinear, got '", mode, "'");
+  if (mode == UpsampleMode::kBilinear) return F::interpolate(x, opts.mode(torch::kBilinear).align_corners(false));
   return F::interpolate(x, opts.mode(torch::kNearest));
 }
 

@@ -48,8 +48,9 @@ torch::Tensor conv3x3_of_upsampled(const torch::Tensor& x, const torch::Tensor& 
 // Folds every ConvBn inside `module` (see ConvBnImpl::fold_batchnorm); returns how many.
 int fold_batchnorm(torch::nn::Module& module);
 
-// x2 upsampling: "nearest" (GeoNet) or "bilinear".
-torch::Tensor upsample2(const torch::Tensor& x, const std::string& mode);
+// x2 upsampling of the decoders.
+enum class UpsampleMode { kNearest, kBilinear };  // nearest: GeoNet
+torch::Tensor upsample2(const torch::Tensor& x, UpsampleMode mode);
 
 // Resizes x to ref's height and width when they differ (GeoNet's resize_like; nearest).
 torch::Tensor resize_like(const torch::Tensor& x, const torch::Tensor& ref);

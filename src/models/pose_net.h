@@ -1,4 +1,4 @@
-// PoseNet (reference.md Sec. 1, GeoNet): eight convolutions over the stacked snippet.
+// PoseNet (paper Sec. 3, GeoNet's pose_net): eight convolutions over the stacked snippet.
 #pragma once
 
 #include <torch/torch.h>

@@ -1,6 +1,6 @@
 #include "train/checkpoints.h"
 
-#include "core/logging.h"
+#include "core/files.h"
 
 #include <algorithm>
 #include <cstdio>

@@ -20,14 +20,16 @@ std::string find_split_file(const std::string& root, const std::string& split, c
   return "";
 }
 
-TrainingData open_training_data(const DataConfig& d) {
-  if (d.root.empty())
-    throw ConfigError("data.root is empty: set it in the config or with --set data.root=DIR "
-                      "(a KITTI raw folder, a geo_prepare cache or a geo_synth world's raw/ folder)");
-  if (!fs::is_directory(d.root))
-    throw ConfigError("data.root '" + d.root + "' is not a directory");
-  TrainingData out;
-  const bool packed = d.format == "packed" || (d.format == "auto" && is_packed_cache(d.root + "/train"));
+namespace {
+
+std::string fmt_list(const std::vector<std::string>& v) {
+  std::string s;
+  for (const auto& x : v) s += (s.empty() ? "" : ",") + x;
+  return s;
+}
+
+TrainingData open_at(const DataConfig& d, TrainingData out) {
+  const bool packed = d.format == DataFormat::kPacked || (d.format == DataFormat::kAuto && is_packed_cache(d.root + "/train"));
   if (packed) {
     out.format = "packed";
     auto train = std::make_shared<PackedSnippets>(d.root + "/train");
@@ -42,26 +44,59 @@ TrainingData open_training_data(const DataConfig& d) {
     out.train_list = d.root + "/train";
     return out;
   }
+  if (d.split == "odometry") {
+    OdometryDatasetOptions oo;
+    oo.root = d.root;
+    oo.sequences = d.sequences;
+    oo.height = d.height;
+    oo.width = d.width;
+    oo.seq_length = d.seq_length;
+    out.format = "kitti_odometry";
+    out.train = std::make_shared<OdometryDataset>(oo);
+    out.train_list = d.root + "/sequences/{" + fmt_list(d.sequences) + "}";
+    if (out.train->size() == 0)
+      throw ConfigError("data.sequences: no " + std::to_string(d.seq_length) + "-frame snippet in " + out.train_list);
+    return out;
+  }
   out.format = "kitti_raw";
-  out.train_list = d.train_list.empty() ? find_split_file(d.root, d.split, "train_files.txt") : d.train_list;
-  out.val_list = d.val_list.empty() ? find_split_file(d.root, d.split, "val_files.txt") : d.val_list;
+  // raw_minus_kitti2015 (GeoNet's flow data): the eigen_zhou lists without the KITTI 2015 scenes.
+  const bool minus_2015 = d.split == "raw_minus_kitti2015";
+  const std::string list_split = minus_2015 ? "eigen_zhou" : d.split;
+  out.train_list = d.train_list.empty() ? find_split_file(d.root, list_split, "train_files.txt") : d.train_list;
+  out.val_list = d.val_list.empty() ? find_split_file(d.root, list_split, "val_files.txt") : d.val_list;
   if (out.train_list.empty() || !fs::exists(out.train_list))
     throw ConfigError("data.train_list: no training list found (" +
-                      (d.train_list.empty() ? "looked for " + d.root + "/splits/" + d.split +
-                                                  "/train_files.txt and the shipped configs/splits/" + d.split
+                      (d.train_list.empty() ? "looked for " + d.root + "/splits/" + list_split +
+                                                  "/train_files.txt and the shipped configs/splits/" + list_split
                                             : "'" + d.train_list + "' does not exist") + ")");
   std::set<std::string> scenes, statics;
   const std::string scenes_file = find_split_file(d.root, "eigen", "test_scenes.txt");
-  if (!scenes_file.empty()) scenes = read_scene_list(scenes_file);
+  if (!scenes_file.empty()) {
+    scenes = read_scene_list(scenes_file);
+    out.exclusions.push_back(scenes_file);
+  }
+  if (minus_2015) {
+    const std::string stereo = find_split_file(d.root, "stereo", "test_scenes_stereo.txt");
+    if (stereo.empty()) throw ConfigError("data.split raw_minus_kitti2015: no stereo/test_scenes_stereo.txt found");
+    for (const auto& s : read_scene_list(stereo)) scenes.insert(s);
+    out.exclusions.push_back(stereo);
+  }
   const std::string static_file = shipped_config_dir() + "/splits/static_frames.txt";
-  if (fs::exists(static_file)) statics = read_static_frames(static_file);
+  if (fs::exists(static_file)) {
+    statics = read_static_frames(static_file);
+    out.exclusions.push_back(static_file);
+  }
   SequenceDatasetOptions so;
   so.root = d.root;
   so.height = d.height;
   so.width = d.width;
   so.seq_length = d.seq_length;
   auto entries = read_split(out.train_list);
+  const size_t listed = entries.size();
   out.excluded = exclude_entries(entries, scenes, statics);
+  if (entries.empty())
+    throw ConfigError("data.split " + d.split + ": all " + std::to_string(listed) + " entries of " + out.train_list +
+                      " are excluded (test scenes or static frames listed in " + fmt_list(out.exclusions) + ")");
   auto train = std::make_shared<SequenceDataset>(std::move(entries), so);
   out.dropped = train->dropped();
   if (train->size() == 0)
@@ -70,10 +105,36 @@ TrainingData open_training_data(const DataConfig& d) {
                       read_split(out.train_list).front().image_path(d.root) + ")");
   out.train = train;
   if (!out.val_list.empty() && fs::exists(out.val_list)) {
-    auto val = std::make_shared<SequenceDataset>(read_split(out.val_list), so);
+    auto val_entries = read_split(out.val_list);
+    if (minus_2015) out.excluded += exclude_entries(val_entries, scenes, {});
+    auto val = std::make_shared<SequenceDataset>(std::move(val_entries), so);
     if (val->size() > 0) out.val = val;
   }
   return out;
+}
+
+}  // namespace
+
+TrainingData open_training_data(const DataConfig& d) {
+  if (d.root.empty())
+    throw ConfigError("data.root is empty: set it in the config or with --set data.root=DIR "
+                      "(a KITTI raw folder, a geo_prepare cache or a geo_synth world's raw/ folder)");
+  if (!fs::is_directory(d.root))
+    throw ConfigError("data.root '" + d.root + "' is not a directory");
+  TrainingData out;
+  out.root = d.root;
+  // A geo_synth --out folder holds raw/, kitti2015/ and odometry/: training reads raw/ (odometry/
+  // for the odometry split).
+  if (d.split == "odometry") {
+    if (!fs::is_directory(d.root + "/sequences") && fs::is_directory(d.root + "/odometry/sequences"))
+      out.root = d.root + "/odometry";
+  } else if (!is_packed_cache(d.root + "/train") && !fs::exists(d.root + "/splits") &&
+             fs::is_directory(d.root + "/raw") && fs::is_directory(d.root + "/raw/splits")) {
+    out.root = d.root + "/raw";
+  }
+  DataConfig dr = d;
+  dr.root = out.root;
+  return open_at(dr, std::move(out));
 }
 
 }  // namespace geo

@@ -1,4 +1,7 @@
-// Resolves the training and validation data of a config (reference.md Sec. 4):
+// Resolves the training and validation data of a config (paper Sec. 4.2; KITTI raw, Eigen split).
+// data.split selects the data of a task: eigen_zhou (depth, the paper's), raw_minus_kitti2015
+// (flow, GeoNet's: the eigen_zhou lists without the 29 KITTI 2015 scenes of
+// stereo/test_scenes_stereo.txt) or odometry (pose, GeoNet's: KITTI odometry data.sequences, 00-08).
 //   data.format auto   -> a packed cache when <root>/train/index.txt is one (geo_prepare), else KITTI raw
 //   kitti_raw lists    -> data.train_list / data.val_list, else <root>/splits/<split>/{train,val}_files.txt
 //                         (a geo_synth world ships its own), else configs/splits/<split>/...
@@ -12,13 +15,16 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 namespace geo {
 
 struct TrainingData {
   std::shared_ptr<SnippetSource> train, val;  // val may be null (no validation list)
+  std::string root;                            // data.root, or its raw/ for a geo_synth --out folder
   std::string format, train_list, val_list;
   size_t excluded = 0, dropped = 0;            // test-scene/static entries, entries without neighbours
+  std::vector<std::string> exclusions;         // the lists that excluded entries (for the log)
 };
 
 TrainingData open_training_data(const DataConfig& data);

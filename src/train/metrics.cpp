@@ -1,6 +1,6 @@
 #include "train/metrics.h"
 
-#include "core/logging.h"
+#include "core/files.h"
 
 #include <spdlog/spdlog.h>
 

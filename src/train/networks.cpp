@@ -11,13 +11,35 @@
 
 namespace geo {
 
+DepthNetOptions depth_net_options(const ModelConfig& m) {
+  DepthNetOptions o;
+  o.encoder_depth = m.encoder_depth;
+  o.use_fr = m.use_fr;
+  o.fr_encoder = m.fr_encoder;
+  o.fr_decoder = m.fr_decoder;
+  o.fr_ratio = m.fr_ratio;
+  o.fr_spatial_bn = m.fr_spatial_bn;
+  o.upsample = m.upsample == Upsample::kBilinear ? UpsampleMode::kBilinear : UpsampleMode::kNearest;
+  return o;
+}
+
+FlowNetOptions flow_net_options(const ModelConfig& m) {
+  FlowNetOptions o;
+  o.backbone = depth_net_options(m);
+  return o;
+}
+
+PoseNetOptions pose_net_options(const Config& c) {
+  PoseNetOptions o;
+  o.seq_length = c.data.seq_length;
+  return o;
+}
+
 Networks Networks::create(const Config& c, bool with_flow) {
   Networks n;
-  n.depth = DepthNet(DepthNetOptions::from(c.model));
-  PoseNetOptions po;
-  po.seq_length = c.data.seq_length;
-  n.pose = PoseNet(po);
-  if (with_flow) n.flow = FlowNet(FlowNetOptions::from(c.model));
+  n.depth = DepthNet(depth_net_options(c.model));
+  n.pose = PoseNet(pose_net_options(c));
+  if (with_flow) n.flow = FlowNet(flow_net_options(c.model));
   n.learn_bn_scale = c.model.bn_scale;
   const std::vector<torch::nn::Module*> nets = {n.depth.ptr().get(), n.pose.ptr().get(),
                                                 n.flow ? static_cast<torch::nn::Module*>(n.flow.ptr().get()) : nullptr};
@@ -37,9 +59,9 @@ void Networks::to(const torch::Device& device) {
 }
 
 void Networks::set_modes(const StageConfig& s) {
-  depth->train(s.trains("depth"));
-  pose->train(s.trains("pose"));
-  if (flow) flow->train(s.trains("flow"));
+  depth->train(s.trains(Net::kDepth));
+  pose->train(s.trains(Net::kPose));
+  if (flow) flow->train(s.trains(Net::kFlow));
 }
 
 void Networks::set_trainable(const StageConfig& s) {
@@ -48,9 +70,9 @@ void Networks::set_trainable(const StageConfig& s) {
     if (!learn_bn_scale)
       for (auto& gamma : batchnorm_scales(m)) gamma.set_requires_grad(false);
   };
-  set(*depth, s.trains("depth"));
-  set(*pose, s.trains("pose"));
-  if (flow) set(*flow, s.trains("flow"));
+  set(*depth, s.trains(Net::kDepth));
+  set(*pose, s.trains(Net::kPose));
+  if (flow) set(*flow, s.trains(Net::kFlow));
 }
 
 std::vector<torch::Tensor> Networks::trainable_parameters() const {
@@ -113,9 +135,11 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
   {
     // One DepthNet pass over every frame of the snippet (target first, then the sources).
     std::optional<torch::NoGradGuard> frozen;
-    if (!stage.trains("depth")) frozen.emplace();
+    if (!stage.trains(Net::kDepth)) frozen.emplace();
     auto frames = torch::cat({tgt.unsqueeze(1), srcs}, 1).flatten(0, 1);  // [B*(N+1),3,H,W]
     auto disp = nets.depth->forward(frames).disp;
+    // model.num_scales: the losses use the finest num_scales predictions (GeoNet's num_scales).
+    disp.resize(std::min(disp.size(), static_cast<size_t>(config.model.num_scales)));
     in.src_disp.assign(N, {});
     for (auto& d : disp) {
       auto per = d.view({B, N + 1, 1, d.size(2), d.size(3)});
@@ -125,7 +149,7 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
   }
   {
     std::optional<torch::NoGradGuard> frozen;
-    if (!stage.trains("pose")) frozen.emplace();
+    if (!stage.trains(Net::kPose)) frozen.emplace();
     in.poses = nets.pose->forward(tgt, src_list);
   }
   StepOutput out;
@@ -146,7 +170,7 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
     inputs.push_back(flow_net_input(src_list[i], tgt, from_loss_range(out.rigid.bwd_warp[i][0].detach(), config.loss),
                                     out.rigid.bwd_flow[i][0].detach(), out.rigid.bwd_error_norm[i].detach()));
   std::optional<torch::NoGradGuard> frozen;
-  if (!stage.trains("flow")) frozen.emplace();
+  if (!stage.trains(Net::kFlow)) frozen.emplace();
   auto residual = nets.flow->forward(torch::cat(inputs, 0)).flow;
   PerSourceScale<torch::Tensor> bwd_full(N);
   out.fwd_full.assign(N, {});
@@ -165,12 +189,12 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
 }
 
 PairPrediction predict_pair(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& src,
-                            const torch::Tensor& K, const LossConfig& loss) {
+                            const torch::Tensor& K, const LossConfig& loss, const torch::Tensor& prev) {
   TORCH_CHECK(tgt.dim() == 4 && tgt.size(1) == 3 && src.sizes() == tgt.sizes(), "predict_pair: tgt ",
               tgt.sizes(), " and src ", src.sizes(), " must both be [B,3,H,W]");
   const int64_t L = nets.pose->options.seq_length, before = (L - 1) / 2;
   std::vector<torch::Tensor> snippet;  // sources in time order around the target
-  for (int64_t i = 0; i < L - 1; ++i) snippet.push_back(i < before ? tgt : src);
+  for (int64_t i = 0; i < L - 1; ++i) snippet.push_back(i < before ? (prev.defined() ? prev : tgt) : src);
   PairPrediction p;
   p.disp = nets.depth->forward(tgt).disp[0];
   p.src_from_tgt = pose_vec_to_matrix(nets.pose->forward(tgt, snippet).select(1, before));

@@ -1,7 +1,7 @@
 // The three networks of the paper and one training/inference forward pass over a batch:
 // DepthNet on every frame, PoseNet on the snippet, rigid losses, then (when the stage trains flow)
-// the residual FlowNet in both directions for every source and the flow losses (reference.md
-// Sec. 1-3). LibTorch only.
+// the residual FlowNet in both directions for every source and the flow losses (paper Sec. 3).
+// LibTorch only.
 #pragma once
 
 #include "core/config.h"
@@ -15,6 +15,11 @@
 #include <vector>
 
 namespace geo {
+
+// The one mapping from the configuration to the networks' option structs (models see no Config).
+DepthNetOptions depth_net_options(const ModelConfig& model);
+FlowNetOptions flow_net_options(const ModelConfig& model);
+PoseNetOptions pose_net_options(const Config& config);
 
 struct Networks {
   DepthNet depth{nullptr};
@@ -69,7 +74,9 @@ struct PairPrediction {
 };
 // `loss` gives what the FlowNet's input depends on: the sampler, the image range and the SSIM weight
 // of its error channel (as in training).
+// `prev` (optional): the frame before tgt; the PoseNet then sees (prev.., tgt, src..) instead of
+// repeating tgt before it.
 PairPrediction predict_pair(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& src,
-                            const torch::Tensor& K, const LossConfig& loss);
+                            const torch::Tensor& K, const LossConfig& loss, const torch::Tensor& prev = {});
 
 }  // namespace geo

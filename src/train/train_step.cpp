@@ -7,7 +7,7 @@ namespace geo {
 LrSchedule LrSchedule::of(const StageConfig& s) {
   LrSchedule l;
   l.base = s.learning_rate;
-  if (s.lr_schedule == "step") {
+  if (s.lr_schedule == LrScheduleKind::kStep) {
     l.step = s.lr_step;
     l.gamma = s.lr_gamma;
   }

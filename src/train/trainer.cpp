@@ -1,5 +1,6 @@
 #include "train/trainer.h"
 
+#include "core/files.h"
 #include "core/logging.h"
 #include "core/runtime.h"
 #include "data/image_io.h"
@@ -67,12 +68,19 @@ class Run {
 
   int run() {
     SignalScope signals;
-    spdlog::info("run folder {}; device {}; {} threads; data {} ({} training snippets{}{}, {} validation); "
+    spdlog::info("run folder {}; device {}; {} threads; data {} in {} ({} training snippets{}{}, {} validation); "
                  "TensorBoard: tensorboard --logdir {}",
-                 dir_, device_.str(), torch::get_num_threads(), data_.format, data_.train->size(),
-                 data_.excluded ? ", " + std::to_string(data_.excluded) + " excluded" : "",
+                 dir_, device_.str(), torch::get_num_threads(), data_.format, data_.root, data_.train->size(),
+                 data_.excluded ? ", " + std::to_string(data_.excluded) + " excluded by " + fmt::format("{}", fmt::join(data_.exclusions, ", ")) : "",
                  data_.dropped ? ", " + std::to_string(data_.dropped) + " without neighbours" : "",
                  data_.val ? data_.val->size() : 0, fs::path(dir_).parent_path().string());
+    int64_t total = 0;
+    for (const auto& s : cfg_.stages) total += s.iterations;
+    if (static_cast<double>(total) * cfg_.model.bn_momentum < 5.0)
+      spdlog::warn("model.bn_momentum {} averages BatchNorm's running statistics over ~{:.0f} batches but this run "
+                   "has {} iterations: evaluation will see statistics close to their initial values (use "
+                   "model.bn_momentum: 0.1 for short runs)",
+                   cfg_.model.bn_momentum, 1.0 / cfg_.model.bn_momentum, total);
     for (; state_.stage < static_cast<int64_t>(cfg_.stages.size()); next_stage()) {
       const int rc = run_stage(signals);
       if (rc != 0) return rc;
@@ -137,11 +145,11 @@ class Run {
     lo.batch_size = s.batch_size;
     lo.seed = static_cast<uint64_t>(cfg_.run.seed) * 131 + static_cast<uint64_t>(state_.stage);
     lo.workers = cfg_.data.num_workers;
-    lo.skip_bad = cfg_.data.on_bad_sample == "skip";
+    lo.skip_bad = cfg_.data.on_bad_sample == BadSample::kSkip;
     lo.augment = cfg_.data.augment;
     BatchLoader loader(data_.train, lo, state_.iteration);
     spdlog::info("stage {} ({}/{}): training [{}] for {} iterations from {}, batch {}, lr {}", s.name,
-                 state_.stage + 1, cfg_.stages.size(), fmt::join(s.train, ", "), s.iterations, state_.iteration,
+                 state_.stage + 1, cfg_.stages.size(), fmt::join(s.train.names(), ", "), s.iterations, state_.iteration,
                  s.batch_size, s.learning_rate);
     const auto& log = cfg_.logging;
     int bad_in_row = 0;

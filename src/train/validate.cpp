@@ -14,7 +14,7 @@ Validation validate(Networks& nets, std::shared_ptr<const SnippetSource> source,
   lo.batch_size = stage.batch_size;
   lo.workers = 0;
   lo.shuffle = false;
-  lo.skip_bad = config.data.on_bad_sample == "skip";
+  lo.skip_bad = config.data.on_bad_sample == BadSample::kSkip;
   lo.augment.enabled = false;
   Validation v;
   v.snippets = source->size();
@@ -33,7 +33,7 @@ Validation validate(Networks& nets, std::shared_ptr<const SnippetSource> source,
   const double n = static_cast<double>(std::max<int64_t>(batches, 1));
   v.rigid = rigid / n;
   if (flow) v.flow = flow_sum / n;
-  const bool rigid_trained = stage.trains("depth") || stage.trains("pose");
+  const bool rigid_trained = stage.trains(Net::kDepth) || stage.trains(Net::kPose);
   v.score = (rigid_trained ? v.rigid : 0.0) + (flow ? *v.flow : 0.0);
   return v;
 }

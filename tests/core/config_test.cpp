@@ -44,8 +44,8 @@ TEST(Config, DefaultsAreThePapersSettings) {
   EXPECT_DOUBLE_EQ(c.optimizer.beta2, 0.999);
   // GeoNet's where the paper is silent: [-1,1] loss images, zero-padding sampler, slim BatchNorm.
   EXPECT_EQ(c.loss.image_range, (std::vector<double>{-1.0, 1.0}));
-  EXPECT_EQ(c.loss.sampler, "zeros");
-  EXPECT_EQ(c.loss.flow_mask, "occlusion");  // the paper's eq. 13
+  EXPECT_EQ(c.loss.sampler, geo::Sampler::kZeros);
+  EXPECT_EQ(c.loss.flow_mask, geo::FlowMask::kOcclusion);  // the paper's eq. 13
   EXPECT_DOUBLE_EQ(c.model.bn_eps, 1e-3);
   EXPECT_DOUBLE_EQ(c.model.bn_momentum, 1e-3);
   EXPECT_FALSE(c.model.bn_scale);
@@ -56,19 +56,24 @@ TEST(Config, GeoNetSwitchesParseRoundTripAndAreValidated) {
       "loss: {image_range: [0, 1], sampler: border, flow_mask: consistency}\n"
       "model: {bn_eps: 1.0e-5, bn_momentum: 0.1, bn_scale: true}\n");
   EXPECT_EQ(c.loss.image_range, (std::vector<double>{0.0, 1.0}));
-  EXPECT_EQ(c.loss.sampler, "border");
-  EXPECT_EQ(c.loss.flow_mask, "consistency");
+  EXPECT_EQ(c.loss.sampler, geo::Sampler::kBorder);
+  EXPECT_EQ(c.loss.flow_mask, geo::FlowMask::kConsistency);
   const Config back = geo::parse_config(geo::to_yaml(c));
   EXPECT_EQ(back.loss.image_range, c.loss.image_range);
-  EXPECT_EQ(back.loss.sampler, "border");
+  EXPECT_EQ(back.loss.sampler, geo::Sampler::kBorder);
   EXPECT_DOUBLE_EQ(back.model.bn_momentum, 0.1);
   EXPECT_TRUE(back.model.bn_scale);
   const std::string msg = error_of([] {
-    geo::parse_config("loss: {image_range: [0, 255], sampler: reflect, flow_mask: none}\nmodel: {bn_momentum: 0}\n");
+    geo::parse_config("loss: {image_range: [0, 255]}\nmodel: {bn_momentum: 0}\n");
   });
   for (const char* want : {"'loss.image_range' = '[0, 255]' (line 1): must be [-1, 1] (GeoNet) or [0, 1]",
-                           "'loss.sampler' = 'reflect'", "'loss.flow_mask' = 'none'", "'model.bn_momentum' = 0"})
+                           "'model.bn_momentum' = 0 (line 2)"})
     EXPECT_NE(msg.find(want), std::string::npos) << want << "\n" << msg;
+  // Enumerations are checked while parsing, naming the valid names.
+  EXPECT_EQ(error_of([] { geo::parse_config("loss: {sampler: reflect}\n", "x.yaml"); }),
+            "x.yaml line 1: key 'loss.sampler' must be one of zeros, border, got 'reflect'");
+  EXPECT_EQ(error_of([] { geo::parse_config("stages: [{train: [depth, flwo]}]\n", "x.yaml"); }),
+            "x.yaml line 1: key 'stages[0].train[1]' must be one of depth, pose, flow, got 'flwo'");
 }
 
 TEST(Config, ValidConfigRoundTrips) {
@@ -91,7 +96,7 @@ run: {seed: 7, device: cpu}
   EXPECT_EQ(a.data.root, "/data/kitti");
   EXPECT_DOUBLE_EQ(a.data.augment.scale_max, 1.3);
   ASSERT_EQ(a.stages.size(), 2u);
-  EXPECT_EQ(a.stages[1].train, std::vector<std::string>{"flow"});
+  EXPECT_EQ(a.stages[1].train.names(), std::vector<std::string>{"flow"});
   EXPECT_DOUBLE_EQ(a.stages[1].learning_rate, 3.3e-5);
   EXPECT_TRUE(a.stages[1].uses_flow());
   EXPECT_FALSE(a.stages[0].uses_flow());
@@ -166,7 +171,7 @@ TEST(Config, OverridesApplyAndAreValidated) {
   EXPECT_DOUBLE_EQ(c.loss.ssim_alpha, 0.8);
   EXPECT_DOUBLE_EQ(c.stages[0].learning_rate, 1e-3);
   EXPECT_EQ(c.data.root, "/tmp/k");
-  EXPECT_EQ(c.stages[0].train, std::vector<std::string>{"depth"});
+  EXPECT_EQ(c.stages[0].train.names(), std::vector<std::string>{"depth"});
 
   std::string msg = error_of([] { geo::parse_config("", "<s>", {"loss.ssim_alpha=2"}); });
   EXPECT_NE(msg.find("'loss.ssim_alpha' = 2 (from --set)"), std::string::npos) << msg;
@@ -191,6 +196,16 @@ TEST(Config, ShippedConfigsParseWithThePapersSchedule) {
   EXPECT_DOUBLE_EQ(s2.stages[0].weights.flow_consistency, 0.2);
   const Config smoke = geo::load_config(geo::resolve_config_path("smoke.yaml"));
   EXPECT_EQ(smoke.stages.size(), 2u);
+  // The per-task data of GeoNet: pose on odometry 00-08 with 5 frames, flow alone on raw minus
+  // the KITTI 2015 scenes with GeoNet's L_fr mask.
+  const Config pose = geo::load_config(geo::resolve_config_path("pose_odometry.yaml"));
+  EXPECT_EQ(pose.data.split, "odometry");
+  EXPECT_EQ(pose.data.seq_length, 5);
+  EXPECT_EQ(pose.data.sequences, (std::vector<std::string>{"00", "01", "02", "03", "04", "05", "06", "07", "08"}));
+  const Config flow = geo::load_config(geo::resolve_config_path("flow_geonet"));
+  EXPECT_EQ(flow.data.split, "raw_minus_kitti2015");
+  EXPECT_EQ(flow.stages[0].train.names(), std::vector<std::string>{"flow"});
+  EXPECT_EQ(flow.loss.flow_mask, geo::FlowMask::kConsistency);
 }
 
 TEST(Config, ResolveNamesEveryPlaceTried) {

@@ -8,6 +8,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <filesystem>
+
 #include "synth_world.h"
 
 namespace geo {
@@ -54,6 +57,18 @@ TEST(FlowMetrics, EpeAndFlOutliers) {
   // A half-size prediction is upsampled with its vectors doubled.
   const auto half = torch::full({2, 1, 1}, 5.0);
   EXPECT_NEAR(flow_errors(torch::full({2, 2, 2}, 10.0), torch::ones({2, 2}), half).epe, 0.0, 1e-9);
+}
+
+TEST(FlowMetrics, ResizeNearestAsGeoNetsFlowlibOrBilinear) {
+  // u = 0, 4 on a 1x2 prediction, resized to 1x4 (u doubled): nearest (cv2 INTER_NEAREST, source
+  // floor(x / 2)) gives 0 0 8 8; bilinear (half-pixel centres) gives 0 2 6 8.
+  auto flow = torch::zeros({2, 1, 2});
+  flow[0][0][1] = 4.0;
+  const auto n = resize_flow(flow, 1, 4, FlowResize::kNearest);
+  const auto b = resize_flow(flow, 1, 4, FlowResize::kBilinear);
+  EXPECT_TRUE(torch::equal(n[0][0], torch::tensor({0.f, 0.f, 8.f, 8.f}))) << n;
+  EXPECT_TRUE(torch::allclose(b[0][0], torch::tensor({0.f, 2.f, 6.f, 8.f}))) << b;
+  EXPECT_EQ(n[1].abs().sum().item<float>(), 0.f);
 }
 
 TEST(PoseMetrics, SnippetAteIsScaleAndOffsetInvariantAndHandComputed) {
@@ -124,6 +139,34 @@ TEST(Protocols, GroundTruthPredictionsScorePerfectlyOnASyntheticWorld) {
   const auto back = read_result(root + "/r.json");
   EXPECT_EQ(back.split, "odometry");
   EXPECT_NEAR(back.metrics[0].second, pose.metrics[0].second, 1e-9);
+
+  // --export-gt alone: the ground truth is written, no model or predictions needed, no metrics.
+  EvalOptions g;
+  g.split = "eigen";
+  g.data_root = root + "/world";
+  g.export_gt = root + "/gt_only";
+  g.matlab_offset = false;  // as the last export to gt/ above
+  const auto exported = evaluate(g, nullptr);
+  EXPECT_TRUE(exported.metrics.empty());
+  EXPECT_EQ(exported.counts[0], (std::pair<std::string, int64_t>{"exported", static_cast<int64_t>(tests.size())}));
+  EXPECT_EQ(test::read_file(root + "/gt_only/000000.png"), test::read_file(root + "/gt/000000.png"));
+
+  // Untrained models: a 5-frame PoseNet is evaluated on odometry snippets (GeoNet's protocol), and a
+  // KITTI 2015 pair with its previous frame (_09) feeds the PoseNet (09, 10, 11).
+  Config c5 = parse_config("model: {encoder_depth: 18}\ndata: {height: 64, width: 208, seq_length: 5}\n");
+  Predictor five(c5, "cpu");
+  p.predictions.clear();
+  const auto r5 = evaluate(p, &five);
+  EXPECT_EQ(r5.counts[0].second, 4);
+  EXPECT_TRUE(std::isfinite(r5.metrics[0].second));
+  Config c3 = parse_config("model: {encoder_depth: 18}\ndata: {height: 64, width: 208}\n");
+  Predictor three(c3, "cpu");
+  std::filesystem::copy_file(root + "/world/kitti2015/training/image_2/000001_10.png",
+                             root + "/world/kitti2015/training/image_2/000001_09.png");
+  f.split_file.clear();
+  f.predictions.clear();
+  const auto r3 = evaluate(f, &three);
+  EXPECT_EQ(r3.counts.back(), (std::pair<std::string, int64_t>{"pairs_with_frame_09", 1}));
 }
 
 }  // namespace

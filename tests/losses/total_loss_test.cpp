@@ -98,9 +98,9 @@ TEST(TotalLoss, FlowReconstructionMaskIsEq13OrGeoNetsConsistencyMask) {
   geo::LossConfig cfg;
   cfg.ssim_alpha = 0.0;
   cfg.image_range = {0.0, 1.0};  // the images above are already in the loss range
-  cfg.sampler = "border";
+  cfg.sampler = geo::Sampler::kBorder;
   const auto occ = geo::flow_terms(rigid, {{ff}}, {{bf}}, cfg);
-  cfg.flow_mask = "consistency";
+  cfg.flow_mask = geo::FlowMask::kConsistency;
   const auto con = geo::flow_terms(rigid, {{ff}}, {{bf}}, cfg);
   EXPECT_EQ(occ.fwd_visible[0][0].sum().item<double>(), 60);
   // Each direction: error 1 on the 4 disputed pixels, excluded by eq. 13 (-> 0), kept by the

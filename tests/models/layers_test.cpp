@@ -8,7 +8,7 @@
 namespace geo {
 namespace {
 
-torch::Tensor nearest_x2(const torch::Tensor& x) { return upsample2(x, "nearest"); }
+torch::Tensor nearest_x2(const torch::Tensor& x) { return upsample2(x, UpsampleMode::kNearest); }
 
 TEST(Layers, Conv3x3OfUpsampledEqualsConvOfUpsampledImage) {
   torch::manual_seed(3);

@@ -139,7 +139,7 @@ TEST(LrSchedule, ConstantAndStep) {
   StageConfig s;
   s.learning_rate = 1e-3;
   EXPECT_EQ(LrSchedule::of(s).at(123456), 1e-3);
-  s.lr_schedule = "step";
+  s.lr_schedule = LrScheduleKind::kStep;
   s.lr_step = 10;
   s.lr_gamma = 0.5;
   const auto l = LrSchedule::of(s);
@@ -228,7 +228,7 @@ TEST(Networks, GeoNetBatchNormByDefaultAndTrainableSetOncePerStage) {
     }
   EXPECT_GT(bns, 20);
   StageConfig flow_only;
-  flow_only.train = {"flow"};
+  flow_only.train = NetworkSet{false, false, true};
   n.set_trainable(flow_only);
   const auto params = n.trainable_parameters();
   int64_t flow_trainable = 0;
@@ -248,6 +248,31 @@ TEST(Networks, GeoNetBatchNormByDefaultAndTrainableSetOncePerStage) {
     if (const auto* bn = m->as<torch::nn::BatchNorm2d>()) {
       EXPECT_EQ(bn->options.momentum().value(), 0.1);
     }
+}
+
+}  // namespace
+}  // namespace geo
+
+namespace geo {
+namespace {
+
+TEST(ComputeLosses, NumScalesSetsTheScalesOfEveryTerm) {
+  torch::manual_seed(5);
+  for (int scales : {1, 4}) {
+    Config c = parse_config("model: {encoder_depth: 18, num_scales: " + std::to_string(scales) + "}\n");
+    c.stages[0].train = NetworkSet{true, true, true};
+    Networks n = Networks::create(c, true);
+    // Batch 2 at 64x128: BatchNorm in training needs more than one value per channel at the
+    // PoseNet's 1x1 output.
+    const auto tgt = torch::rand({2, 3, 64, 128}), srcs = torch::rand({2, 2, 3, 64, 128});
+    const auto K = torch::tensor({60.f, 0.f, 64.f, 0.f, 60.f, 32.f, 0.f, 0.f, 1.f}).view({1, 3, 3}).repeat({2, 1, 1});
+    const auto out = compute_losses(n, tgt, srcs, K, c.stages[0], c);
+    EXPECT_EQ(out.tgt_disp.size(), static_cast<size_t>(scales));
+    EXPECT_EQ(out.rigid.fwd_flow[1].size(), static_cast<size_t>(scales));
+    EXPECT_EQ(out.fwd_full[0].size(), static_cast<size_t>(scales));
+    EXPECT_EQ(out.flow->fwd_visible[0].size(), static_cast<size_t>(scales));
+    EXPECT_TRUE(std::isfinite(out.losses.total.item<double>()));
+  }
 }
 
 }  // namespace

@@ -4,6 +4,7 @@
 // stage trains, and a run folder resolves to the best of its last stage; the TensorBoard file
 // holds the losses of metrics.csv.
 #include "train/checkpoints.h"
+#include "train/data_source.h"
 #include "train/trainer.h"
 
 #include <gtest/gtest.h>
@@ -114,7 +115,7 @@ TEST(Trainer, FlowOnlyStageKeepsItsOwnBestChosenByTheFlowLoss) {
   cfg.logging.keep_last = 2;
   cfg.stages[0].iterations = 2;
   cfg.stages[1].iterations = 4;
-  cfg.stages[1].train = {"flow"};
+  cfg.stages[1].train = NetworkSet{false, false, true};
   cfg.stages[1].learning_rate = 1e-3;
   TrainOptions o;
   o.run_dir = test::fresh_dir("flowbest") + "/run";
@@ -180,6 +181,46 @@ TEST(Trainer, BadConfigStopsBeforeTrainingNamingTheKey) {
   GEO_EXPECT_THROW_WITH(train(cfg, o), "data.root", "/nonexistent/kitti");
   EXPECT_FALSE(std::filesystem::exists(o.run_dir + "/checkpoints/latest"));
   GEO_EXPECT_THROW_WITH(tiny_config("optimizer: {beta3: 1}\n"), "optimizer.beta3");
+}
+
+TEST(TrainingData, AGeoSynthOutFolderReadsItsRawFolder) {
+  DataConfig d = tiny_config().data;
+  d.root = std::filesystem::path(world()).parent_path().string();  // holds raw/, kitti2015/, odometry/
+  const auto data = open_training_data(d);
+  EXPECT_EQ(data.root, world());
+  EXPECT_EQ(data.train->size(), 7u);
+}
+
+TEST(TrainingData, PerTaskSplits) {
+  // odometry (GeoNet's pose data): every frame of the sequences with L/2 neighbours each side.
+  DataConfig d = tiny_config().data;
+  d.root = std::filesystem::path(world()).parent_path().string();  // its odometry/ is found
+  d.split = "odometry";
+  d.sequences = {"09"};  // the small world has 5 frames of sequence 09
+  d.seq_length = 5;
+  auto odo = open_training_data(d);
+  EXPECT_EQ(odo.format, "kitti_odometry");
+  ASSERT_EQ(odo.train->size(), 1u);
+  const auto s = odo.train->get(0);
+  EXPECT_EQ(s.frames.sizes(), (torch::IntArrayRef{5, 3, 64, 208}));
+  EXPECT_EQ(s.id, "odometry 09 2");
+  d.seq_length = 3;
+  EXPECT_EQ(open_training_data(d).train->size(), 3u);
+  d.sequences = {"00"};
+  GEO_EXPECT_THROW_WITH(open_training_data(d), "sequence 00 not found", "sequences/00/image_2");
+
+  // raw_minus_kitti2015 (GeoNet's flow data): eigen_zhou without the KITTI 2015 scenes. The
+  // shipped list names real KITTI drives, none of this world's; a world's own list is used first.
+  DataConfig r = tiny_config().data;
+  r.split = "raw_minus_kitti2015";
+  const auto shipped = open_training_data(r);
+  EXPECT_EQ(shipped.train->size(), 7u);
+  EXPECT_TRUE(std::any_of(shipped.exclusions.begin(), shipped.exclusions.end(), [](const std::string& f) {
+    return f.find("stereo/test_scenes_stereo.txt") != std::string::npos;
+  }));
+  test::write_text(world() + "/splits/stereo/test_scenes_stereo.txt", "2011_01_01_drive_0001\n");
+  GEO_EXPECT_THROW_WITH(open_training_data(r), "all 7 entries", "are excluded", "test_scenes_stereo.txt");
+  std::filesystem::remove_all(world() + "/splits/stereo");
 }
 
 TEST(Trainer, ExplicitCudaWithoutCudaIsAnError) {

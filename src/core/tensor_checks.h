@@ -1,4 +1,5 @@
-// Shape checks at public entry points: the message names the argument and the shape it got.
+// Tensor checks shared by every layer: shapes at public entry points (the message names the argument
+// and the shape it got), and which tensors the hand-written CPU kernels take.
 #pragma once
 
 #include <torch/torch.h>
