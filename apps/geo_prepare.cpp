@@ -10,6 +10,7 @@
 
 #include "core/config.h"
 #include "core/logging.h"
+#include "core/progress.h"
 #include "core/runtime.h"
 #include "data/loader.h"
 #include "data/packed.h"
@@ -48,9 +49,10 @@ int main(int argc, char** argv) {
     if (out.empty()) throw std::runtime_error("give --out DIR (or --throughput)");
     auto pack = [&](const std::shared_ptr<geo::SnippetSource>& src, const std::string& dir) {
       geo::PackedWriter w(dir, cfg.data.height, cfg.data.width, cfg.data.seq_length);
+      geo::Progress progress(dir, static_cast<int64_t>(src->size()), 500, "snippets");
       for (size_t i = 0; i < src->size(); ++i) {
         w.add(src->get(i));
-        if ((i + 1) % 500 == 0 || i + 1 == src->size()) spdlog::info("  {} {}/{}", dir, i + 1, src->size());
+        progress.update(static_cast<int64_t>(i + 1));
       }
       w.finish();
     };

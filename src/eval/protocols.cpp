@@ -1,5 +1,6 @@
 #include "eval/protocols.h"
 
+#include "core/progress.h"
 #include "data/calib.h"
 #include "data/image_io.h"
 #include "data/splits.h"
@@ -33,11 +34,6 @@ void require_file(const std::string& path, const std::string& what) {
   if (!fs::exists(path)) throw std::runtime_error(what + " not found: '" + path + "'");
 }
 
-// Progress every 10%.
-void progress(size_t i, size_t n, const char* what) {
-  if (n >= 10 && (i + 1) % (n / 10) != 0 && i + 1 != n) return;
-  spdlog::info("  {} {}/{}", what, i + 1, n);
-}
 
 torch::Tensor net_input(const std::string& path, const Predictor& p, int64_t* H = nullptr, int64_t* W = nullptr) {
   return read_image_resized(path, p.height(), p.width(), H, W).unsqueeze(0);
@@ -62,6 +58,7 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
   int64_t images = 0, pixels = 0;
   // --export-gt without a model or predictions: write the ground truth only, no metrics.
   const bool gt_only = !pred && o.predictions.empty() && !o.trivial && !o.export_gt.empty();
+  Progress progress("eigen", static_cast<int64_t>(entries.size()), 0, "images");
   for (size_t i = 0; i < entries.size(); ++i) {
     const auto& e = entries[i];
     const std::string image = e.image_path(root);
@@ -76,7 +73,7 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
       const auto gt = velodyne_depth(read_velodyne(velo), calib.img_from_velo(), img.size(1), img.size(2), vo);
       write_depth_png(o.export_gt + "/" + numbered("%06lld", static_cast<long long>(i)) + ".png", gt);
       ++images;
-      progress(i, entries.size(), "image");
+      progress.update(static_cast<int64_t>(i + 1));
       continue;
     }
     if (pred) {
@@ -104,7 +101,7 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
       ++images;
       pixels += err.pixels;
     }
-    progress(i, entries.size(), "image");
+    progress.update(static_cast<int64_t>(i + 1));
   }
   EvalResult r;
   if (gt_only) {
@@ -148,6 +145,7 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
   if (names.empty()) throw std::runtime_error("no flow pairs to evaluate under " + root);
   double epe_noc = 0, epe_occ = 0, fl_noc = 0, fl_occ = 0;
   int64_t px_noc = 0, px_occ = 0, with_previous = 0;
+  Progress progress("kitti2015", static_cast<int64_t>(names.size()), 0, "pairs");
   for (size_t i = 0; i < names.size(); ++i) {
     const std::string t = root + "/training/image_2/" + names[i] + "_10.png";
     const std::string s = root + "/training/image_2/" + names[i] + "_11.png";
@@ -186,7 +184,7 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
     fl_noc += en.fl;
     px_occ += eo.pixels;
     px_noc += en.pixels;
-    progress(i, names.size(), "pair");
+    progress.update(static_cast<int64_t>(i + 1));
   }
   const double n = static_cast<double>(names.size());
   EvalResult r;
@@ -223,6 +221,7 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
     std::vector<torch::Tensor> frames;
     for (int64_t f = 0; f < n; ++f) frames.push_back(image(f));
     std::vector<torch::Tensor> cam_to_world = {torch::eye(4, torch::kFloat64)};
+    Progress progress("odometry " + o.sequence, n, 0, "frames");
     for (int64_t j = 0; j < n; ++j) {
       // The snippet around j (frames clamped at the sequence ends): k before, k after.
       std::vector<torch::Tensor> srcs;
@@ -237,7 +236,7 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
         in_target.insert(in_target.begin() + 2, torch::eye(4, torch::kFloat64));
         snippet_poses[static_cast<size_t>(j)] = torch::stack(in_target);  // frames j-2..j+2
       }
-      progress(static_cast<size_t>(j), static_cast<size_t>(n), "frame");
+      progress.update(j + 1);
     }
     traj = torch::stack(cam_to_world);
   } else if (o.trivial) {

@@ -4,7 +4,6 @@
 
 #include <spdlog/spdlog.h>
 
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -114,53 +113,19 @@ void TensorBoardSink::on_image(const ImageRecord& r) {
 
 // ---------------------------------------------------------------- console
 
-std::string format_duration(double s) {
-  if (!(s >= 0) || s > 1e9) return "?";
-  const auto t = static_cast<long long>(s + 0.5);
-  char buf[32];
-  if (t >= 3600) std::snprintf(buf, sizeof buf, "%lldh%02lldm", t / 3600, (t % 3600) / 60);
-  else if (t >= 60) std::snprintf(buf, sizeof buf, "%lldm%02llds", t / 60, t % 60);
-  else std::snprintf(buf, sizeof buf, "%llds", t);
-  return buf;
-}
-
-ProgressSink::ProgressSink(int64_t interval, bool redraw_in_place)
-    : interval_(std::max<int64_t>(1, interval)), redraw_(redraw_in_place) {}
-
 void ProgressSink::on_step(const StepRecord& r) {
-  const auto now = std::chrono::steady_clock::now();
-  if (r.stage != last_stage_ || last_iteration_ < 0 || r.iteration <= last_iteration_) {
-    last_stage_ = r.stage;
-    last_iteration_ = r.iteration - 1;
-    last_time_ = now;
+  if (!progress_ || r.stage != stage_) {
+    stage_ = r.stage;
+    progress_.emplace(r.stage, r.stage_iterations, interval_);
   }
-  const bool line = r.iteration % interval_ == 0 || r.iteration == r.stage_iterations;
-  const double secs = std::chrono::duration<double>(now - last_time_).count();
-  if (line && r.iteration > last_iteration_ && secs > 0) {
-    rate_ = static_cast<double>(r.iteration - last_iteration_) / secs;
-    last_iteration_ = r.iteration;
-    last_time_ = now;
-  }
-  const bool redraw = redraw_ && std::chrono::duration<double>(now - last_redraw_).count() > 0.2;
-  if (!line && !redraw) return;
-  std::string terms;
-  for (const auto& [name, value] : r.losses) terms += fmt::format(" {} {:.4f}", name, value);
-  const std::string rate = rate_ > 0 ? fmt::format("{:.2f} it/s, ETA {}", rate_,
-                                                   format_duration(static_cast<double>(r.stage_iterations - r.iteration) / rate_))
-                                     : "-- it/s";
-  const std::string text = fmt::format("{} {}/{}{} | {}", r.stage, r.iteration, r.stage_iterations, terms, rate);
-  if (line) {
-    if (redraw_) std::fputs("\r\033[K", stderr);
-    spdlog::info("{}{}", text, r.skipped_steps ? fmt::format(" | {} NaN/Inf steps skipped", r.skipped_steps) : "");
-  } else {
-    std::fprintf(stderr, "\r\033[K%s\r", text.c_str());  // the cursor back at column 0 for other output
-    std::fflush(stderr);
-    last_redraw_ = now;
-  }
+  std::string details;
+  for (const auto& [name, value] : r.losses) details += fmt::format("{}{} {:.4f}", details.empty() ? "" : " ", name, value);
+  if (r.skipped_steps) details += fmt::format(" ({} NaN/Inf steps skipped)", r.skipped_steps);
+  progress_->update(r.iteration, details);
 }
 
 void ProgressSink::on_validation(const ValidationRecord& r) {
-  if (redraw_) std::fputs("\r\033[K", stderr);
+  if (progress_) progress_->clear();
   spdlog::info("validation at {} {}: photometric {:.5f}{}, score {:.5f} over {} snippets{}", r.stage, r.iteration, r.rigid,
                r.flow ? fmt::format(", flow {:.5f}", *r.flow) : "", r.score, r.snippets, r.best ? " (best so far)" : "");
 }

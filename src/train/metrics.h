@@ -4,6 +4,7 @@
 // LibTorch-free.
 #pragma once
 
+#include "core/progress.h"
 #include "train/tensorboard.h"
 
 #include <chrono>
@@ -91,24 +92,18 @@ class TensorBoardSink : public MetricsSink {
   std::optional<std::pair<int64_t, std::chrono::steady_clock::time_point>> last_;
 };
 
-// The console progress: every `interval` iterations a log line (stage, iteration, rate, ETA, the
-// losses); on a terminal also a line redrawn in place after every step.
+// The console progress (core/progress.h): every `interval` iterations a log line (stage,
+// iteration, rate, ETA, the losses); on a terminal also a line redrawn in place after every step.
 class ProgressSink : public MetricsSink {
  public:
-  explicit ProgressSink(int64_t interval, bool redraw_in_place);
+  explicit ProgressSink(int64_t interval) : interval_(interval) {}
   void on_step(const StepRecord& r) override;
   void on_validation(const ValidationRecord& r) override;
 
  private:
   int64_t interval_;
-  bool redraw_;
-  std::chrono::steady_clock::time_point last_time_, last_redraw_;
-  int64_t last_iteration_ = -1;
-  std::string last_stage_;
-  double rate_ = 0;  // iterations/s, smoothed
+  std::string stage_;
+  std::optional<Progress> progress_;  // of the current stage
 };
-
-// Formats "1h02m", "3m07s", "12s".
-std::string format_duration(double seconds);
 
 }  // namespace geo

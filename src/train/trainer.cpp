@@ -11,7 +11,6 @@
 #include "train/validate.h"
 
 #include <spdlog/spdlog.h>
-#include <unistd.h>
 
 #include <atomic>
 #include <csignal>
@@ -62,7 +61,7 @@ class Run {
     auto csv = std::make_shared<CsvSink>(dir_);
     if (resuming) restore(*csv);
     sinks_ = {csv, std::make_shared<TensorBoardSink>(dir_, resuming ? global_step() : -1),
-              std::make_shared<ProgressSink>(cfg_.logging.interval, isatty(STDERR_FILENO) != 0)};
+              std::make_shared<ProgressSink>(cfg_.logging.interval)};
     sinks_.insert(sinks_.end(), opts_.sinks.begin(), opts_.sinks.end());
   }
 

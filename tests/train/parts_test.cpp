@@ -149,12 +149,6 @@ TEST(LrSchedule, ConstantAndStep) {
   EXPECT_EQ(l.at(25), 2.5e-4);
 }
 
-TEST(FormatDuration, Units) {
-  EXPECT_EQ(format_duration(12.4), "12s");
-  EXPECT_EQ(format_duration(187), "3m07s");
-  EXPECT_EQ(format_duration(3720), "1h02m");
-}
-
 TEST(CheckpointNames, RoundTrip) {
   EXPECT_EQ(checkpoint_name("stage-2", 42), "stage-2-00000042.pt");
   EXPECT_EQ(stage_of_checkpoint("stage-2-00000042.pt"), "stage-2");

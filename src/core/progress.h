@@ -1,0 +1,40 @@
+// Console progress of long loops (training, evaluation, geo_prepare): "<what> 120/350000 | 2.31 it/s,
+// ETA 42h05m | <details>". On a terminal (stderr is a TTY) the line is redrawn in place after every
+// update (at most 5 times a second); every `log_every` items, and at the end, it is also written as
+// a log line (spdlog), which is all that a log file or pipe receives.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <string>
+
+namespace geo {
+
+class Progress {
+ public:
+  // log_every <= 0: every 10% of `total`.
+  Progress(std::string what, int64_t total, int64_t log_every = 0, const char* unit = "it");
+  // `done` items of `total` are finished; `details` is appended (e.g. the latest losses).
+  void update(int64_t done, const std::string& details = "");
+  // Clears the in-place line (before other output on a terminal); no-op elsewhere.
+  void clear() const;
+  double rate() const { return rate_; }  // items per second since the last log line
+
+  // Whether progress is redrawn in place (stderr is a terminal; GEO_PROGRESS=lines forces lines).
+  static bool interactive();
+
+ private:
+  std::string text(int64_t done, const std::string& details) const;
+  std::string what_;
+  int64_t total_, log_every_;
+  const char* unit_;
+  bool interactive_;
+  std::chrono::steady_clock::time_point last_log_time_, last_draw_;
+  int64_t last_log_done_ = -1;
+  double rate_ = 0;
+};
+
+// "1h02m", "3m07s", "12s"; "?" for negative or absurd values.
+std::string format_duration(double seconds);
+
+}  // namespace geo
