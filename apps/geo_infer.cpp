@@ -11,10 +11,12 @@
 #include <opencv2/videoio.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 
 #include "core/logging.h"
 #include "core/runtime.h"
+#include "data/calib.h"
 #include "data/image_io.h"
 #include "data/text_io.h"
 #include "eval/predictor.h"
@@ -88,6 +90,10 @@ int main(int argc, char** argv) {
     spdlog::info("{} frame(s) from {} at {}x{} -> {}", frames.size(), input, w, h, output);
     auto K = torch::tensor({0.58 * w, 0.0, 0.5 * w, 0.0, 1.92 * h, 0.5 * h, 0.0, 0.0, 1.0}).view({1, 3, 3});
     if (intrinsics.size() == 4) {
+      geo::check_focal_lengths(intrinsics[0], intrinsics[1], "--intrinsics");
+      if (!std::isfinite(intrinsics[2]) || !std::isfinite(intrinsics[3]))
+        throw std::runtime_error("--intrinsics: cx, cy must be finite, got " + std::to_string(intrinsics[2]) + ", " +
+                                 std::to_string(intrinsics[3]));
       const double sx = static_cast<double>(w) / W0, sy = static_cast<double>(h) / H0;
       K = torch::tensor({intrinsics[0] * sx, 0.0, intrinsics[2] * sx, 0.0, intrinsics[1] * sy, intrinsics[3] * sy,
                          0.0, 0.0, 1.0}).view({1, 3, 3});

@@ -119,8 +119,13 @@ struct ParseVisitor {
   }
 
   void reject_unknown() const {
+    std::map<std::string, int> seen;  // key -> line
     for (const auto& kv : node) {
       const std::string key = kv.first.as<std::string>();
+      const int line = kv.first.Mark().line + 1;
+      if (!seen.emplace(key, line).second)
+        throw ConfigError(ctx.where(join(prefix, key), kv.first) + ": key '" + join(prefix, key) +
+                          "' is given twice (lines " + std::to_string(seen[key]) + " and " + std::to_string(line) + ")");
       if (std::find(known.begin(), known.end(), key) != known.end()) continue;
       std::string valid;
       for (const auto& k : known) valid += (valid.empty() ? "" : ", ") + k;
@@ -249,19 +254,38 @@ struct EmitVisitor {
 
 // ---------------------------------------------------------------- overrides
 
-// Splits "stages[0].learning_rate" or "stages.0.learning_rate" into parts.
+// Splits "stages[0].learning_rate" or "stages.0.learning_rate" into parts. Brackets must hold an
+// index of at most 6 digits; names are letters, digits and '_'. Throws ConfigError naming the key.
 std::vector<std::string> split_key(const std::string& key) {
+  auto bad = [&](const std::string& why) {
+    return ConfigError("--set key '" + key + "': " + why + " (expected e.g. stages[0].learning_rate)");
+  };
   std::vector<std::string> parts;
-  std::string cur;
-  for (char ch : key) {
-    if (ch == '.' || ch == '[' || ch == ']') {
-      if (!cur.empty()) parts.push_back(cur);
-      cur.clear();
-    } else {
-      cur += ch;
+  size_t i = 0;
+  while (i < key.size()) {
+    if (key[i] == '[') {
+      const auto close = key.find(']', i);
+      if (close == std::string::npos) throw bad("unclosed '['");
+      const std::string index = key.substr(i + 1, close - i - 1);
+      if (index.empty() || index.size() > 6 || !std::all_of(index.begin(), index.end(), ::isdigit))
+        throw bad("'[" + index + "]' is not a list index (0, 1, ...)");
+      parts.push_back(index);
+      i = close + 1;
+      if (i < key.size() && key[i] != '.' && key[i] != '[') throw bad("unexpected text after ']'");
+      if (i < key.size() && key[i] == '.') ++i;
+      continue;
     }
+    const auto end = key.find_first_of(".[]", i);
+    const std::string name = key.substr(i, end == std::string::npos ? std::string::npos : end - i);
+    if (name.empty() || !std::all_of(name.begin(), name.end(), [](char c) { return std::isalnum(static_cast<unsigned char>(c)) || c == '_'; }))
+      throw bad("'" + name + "' is not a key name");
+    if (std::all_of(name.begin(), name.end(), ::isdigit) && name.size() > 6) throw bad("index " + name + " is too large");
+    parts.push_back(name);
+    if (end == std::string::npos) break;
+    if (key[end] == ']') throw bad("unexpected ']'");
+    i = key[end] == '.' ? end + 1 : end;
+    if (key[end] == '.' && i == key.size()) throw bad("ends with '.'");
   }
-  if (!cur.empty()) parts.push_back(cur);
   return parts;
 }
 
@@ -280,6 +304,8 @@ void apply_override(YAML::Node& root, const std::string& text, ParseContext& ctx
     throw ConfigError("--set '" + text + "': expected key.path=value");
   const auto parts = split_key(text.substr(0, eq));
   if (parts.empty()) throw ConfigError("--set '" + text + "': empty key");
+  if (text.find_first_not_of(" \t", eq + 1) == std::string::npos)
+    throw ConfigError("--set '" + text + "': empty value (for an empty string write " + text.substr(0, eq) + "='')");
   YAML::Node value;
   try {
     value = YAML::Load(text.substr(eq + 1));
@@ -409,7 +435,7 @@ void DataConfig::validate(Checker& c) const {
             "must be a positive multiple of 8 (4 pyramid scales), at least 16");
   c.require(seq_length >= 3 && seq_length % 2 == 1, "seq_length", seq_length,
             "must be odd and >= 3 (target in the middle)");
-  c.require(num_workers >= 0, "num_workers", num_workers, "must be >= 0");
+  c.require(num_workers >= 0 && num_workers <= 64, "num_workers", num_workers, "must be in 0..64");
   c.require(split != "odometry" || !sequences.empty(), "sequences", sequences,
             "must name at least one KITTI odometry sequence when data.split is odometry");
   c.require(!split.empty(), "split", split, "must not be empty (eigen_zhou, raw_minus_kitti2015, odometry, ...)");
@@ -479,7 +505,11 @@ const std::vector<EnumName<Net>>& enum_names(Net) {
 }
 
 void StageConfig::validate(Checker& c) const {
-  c.require(!name.empty(), "name", name, "must not be empty");
+  // Stage names become file names (checkpoints/<name>-<iteration>.pt, summaries/<name>-...).
+  const bool plain = !name.empty() && name != "." && name != ".." &&
+                     name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_.-") ==
+                         std::string::npos;
+  c.require(plain, "name", name, "must be a plain name of letters, digits, '_', '-' and '.' (it names files)");
   c.require(iterations > 0, "iterations", iterations, "must be > 0");
   c.require(!train.empty(), "train", train, "must name at least one of depth, pose, flow");
   c.require(learning_rate > 0, "learning_rate", learning_rate, "must be > 0");
@@ -521,7 +551,7 @@ void RunConfig::validate(Checker& c) const {
   const bool cuda_n = device.rfind("cuda:", 0) == 0 && device.size() > 5 &&
                       device.find_first_not_of("0123456789", 5) == std::string::npos;
   c.require(one_of(device, {"auto", "cpu", "cuda"}) || cuda_n, "device", device, "must be auto, cpu, cuda or cuda:N");
-  c.require(threads >= 0, "threads", threads, "must be >= 0 (0 = all cores)");
+  c.require(threads >= 0 && threads <= 1024, "threads", threads, "must be in 0..1024 (0 = all cores)");
 }
 
 void Config::validate() const {

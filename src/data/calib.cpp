@@ -2,6 +2,7 @@
 
 #include "data/text_io.h"
 
+#include <cmath>
 #include <sstream>
 #include <stdexcept>
 
@@ -20,7 +21,26 @@ const std::vector<double>& KeyValues::get(const std::string& key, size_t count) 
 
 torch::Tensor KeyValues::matrix(const std::string& key, int64_t rows, int64_t cols) const {
   const auto& v = get(key, static_cast<size_t>(rows * cols));
+  for (double x : v)
+    if (!std::isfinite(x))
+      throw std::runtime_error(source + ": calibration entry '" + key + "' holds a non-finite value (" +
+                               std::to_string(x) + ")");
   return torch::tensor(v, torch::kFloat64).reshape({rows, cols});
+}
+
+torch::Tensor KeyValues::projection(const std::string& key) const {
+  const auto P = matrix(key, 3, 4);
+  const double fx = P[0][0].item<double>(), fy = P[1][1].item<double>();
+  check_focal_lengths(fx, fy, source + ": calibration entry '" + key + "'");
+  return P;
+}
+
+void check_focal_lengths(double fx, double fy, const std::string& what) {
+  // Positive and below 1e5 px (KITTI: ~720 px; a 1e5 px focal length is a 0.4 degree field of view).
+  auto ok = [](double f) { return std::isfinite(f) && f > 0 && f < 1e5; };
+  if (!ok(fx) || !ok(fy))
+    throw std::runtime_error(what + ": focal lengths fx = " + std::to_string(fx) + ", fy = " + std::to_string(fy) +
+                             " are not plausible (must be finite, > 0 and < 1e5 pixels)");
 }
 
 KeyValues parse_key_values(const std::string& text, const std::string& source) {
@@ -67,7 +87,7 @@ RawCalib read_raw_calib(const std::string& date_dir, int camera, bool need_velo)
   const auto cam = read_key_values(date_dir + "/calib_cam_to_cam.txt");
   const std::string c = "0" + std::to_string(camera);
   RawCalib calib;
-  calib.P_rect = cam.matrix("P_rect_" + c, 3, 4);
+  calib.P_rect = cam.projection("P_rect_" + c);
   calib.R_rect = torch::eye(4, torch::kFloat64);
   calib.R_rect.index_put_({torch::indexing::Slice(0, 3), torch::indexing::Slice(0, 3)},
                           cam.matrix("R_rect_00", 3, 3));
@@ -90,7 +110,7 @@ RawCalib read_raw_calib(const std::string& date_dir, int camera, bool need_velo)
 OdometryCalib read_odometry_calib(const std::string& path) {
   const auto kv = read_key_values(path);
   OdometryCalib calib;
-  for (int i = 0; i < 4; ++i) calib.P.push_back(kv.matrix("P" + std::to_string(i), 3, 4));
+  for (int i = 0; i < 4; ++i) calib.P.push_back(kv.projection("P" + std::to_string(i)));
   calib.Tr = torch::eye(4, torch::kFloat64);
   calib.Tr.index_put_({torch::indexing::Slice(0, 3)}, kv.matrix("Tr", 3, 4));
   return calib;

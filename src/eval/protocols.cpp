@@ -17,6 +17,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <sstream>
 
 namespace fs = std::filesystem;
@@ -32,6 +33,15 @@ std::string numbered(const char* fmt, long long i) {
 
 void require_file(const std::string& path, const std::string& what) {
   if (!fs::exists(path)) throw std::runtime_error(what + " not found: '" + path + "'");
+}
+
+// Predictions must be finite: a NaN would otherwise turn into a nan metric (or, through a mask, a
+// perfect-looking 0) with exit code 0.
+void require_finite(const torch::Tensor& t, const std::string& what) {
+  const auto bad = (~torch::isfinite(t)).sum().item<int64_t>();
+  if (bad > 0)
+    throw std::runtime_error(what + " holds " + std::to_string(bad) + " non-finite value(s) (NaN/Inf) of " +
+                             std::to_string(t.numel()) + ": nothing was scored");
 }
 
 
@@ -92,6 +102,7 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
         depth = read_depth_png(p)[0];
       }
     }
+    require_finite(depth, "the depth prediction for line " + std::to_string(i + 1) + " (" + image + ")");
     const auto gt = velodyne_depth(read_velodyne(velo), calib.img_from_velo(), H, W, vo);
     if (!o.export_gt.empty()) write_depth_png(o.export_gt + "/" + numbered("%06lld", static_cast<long long>(i)) + ".png", gt);
     const auto err = eigen_image_errors(gt, depth.clamp_min(1e-3), eo);
@@ -118,7 +129,7 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
 torch::Tensor flow_calib_K(const std::string& root, const std::string& name) {
   for (const auto& dir : {root + "/training/calib_cam_to_cam", root + "/../data_scene_flow_calib/training/calib_cam_to_cam"}) {
     const std::string p = dir + "/" + name + ".txt";
-    if (fs::exists(p)) return read_key_values(p).matrix("P_rect_02", 3, 4).slice(1, 0, 3);
+    if (fs::exists(p)) return read_key_values(p).projection("P_rect_02").slice(1, 0, 3);
   }
   throw std::runtime_error("calibration for pair " + name + " not found (looked in " + root +
                            "/training/calib_cam_to_cam/" + name + ".txt)");
@@ -175,6 +186,7 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
       require_file(p, "flow prediction");
       flow = read_flow_png(p).flow;
     }
+    require_finite(flow, "the flow prediction for pair " + names[i]);
     const auto occ = read_flow_png(gocc), noc = read_flow_png(gnoc);
     const auto eo = flow_errors(occ.flow, occ.valid, flow, o.flow_resize);
     const auto en = flow_errors(noc.flow, noc.valid, flow, o.flow_resize);
@@ -247,6 +259,7 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
       throw std::runtime_error(o.predictions + ": " + std::to_string(traj.size(0)) + " poses, the sequence has " +
                                std::to_string(n));
   }
+  require_finite(traj, pred ? std::string("the predicted trajectory") : "the trajectory " + o.predictions);
   if (!o.output_poses.empty()) write_poses(o.output_poses, traj);
   std::vector<int64_t> centres;
   if (!o.split_file.empty()) {
@@ -309,7 +322,11 @@ std::string EvalResult::json() const {
   };
   s << "{\n  \"split\": " << q(split) << ",\n  \"source\": " << q(source) << ",\n  \"data_root\": " << q(data_root)
     << ",\n  \"metrics\": {";
-  for (size_t i = 0; i < metrics.size(); ++i) s << (i ? ", " : "") << q(metrics[i].first) << ": " << metrics[i].second;
+  for (size_t i = 0; i < metrics.size(); ++i) {  // JSON has no NaN/Inf: a non-finite metric is null
+    s << (i ? ", " : "") << q(metrics[i].first) << ": ";
+    if (std::isfinite(metrics[i].second)) s << metrics[i].second;
+    else s << "null";
+  }
   s << "},\n  \"counts\": {";
   for (size_t i = 0; i < counts.size(); ++i) s << (i ? ", " : "") << q(counts[i].first) << ": " << counts[i].second;
   s << "}\n}\n";
@@ -326,8 +343,14 @@ EvalResult read_result(const std::string& path) {
   EvalResult r;
   r.split = n["split"].as<std::string>("");
   r.source = n["source"].as<std::string>("");
-  for (const auto& kv : n["metrics"]) r.metrics.emplace_back(kv.first.as<std::string>(), kv.second.as<double>());
-  for (const auto& kv : n["counts"]) r.counts.emplace_back(kv.first.as<std::string>(), kv.second.as<int64_t>());
+  try {
+    for (const auto& kv : n["metrics"])
+      r.metrics.emplace_back(kv.first.as<std::string>(),
+                             kv.second.IsNull() ? std::numeric_limits<double>::quiet_NaN() : kv.second.as<double>());
+    for (const auto& kv : n["counts"]) r.counts.emplace_back(kv.first.as<std::string>(), kv.second.as<int64_t>());
+  } catch (const std::exception& e) {
+    throw std::runtime_error("results '" + path + "': not a geo_eval results file (" + e.what() + ")");
+  }
   return r;
 }
 

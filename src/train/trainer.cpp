@@ -49,8 +49,10 @@ class Run {
       : cfg_(std::move(config)), dir_(std::move(dir)), opts_(options),
         device_(select_device(options.device.empty() ? cfg_.run.device : options.device)),
         checkpoints_(dir_, cfg_.logging.keep_last) {
-    torch::set_num_threads(cfg_.run.threads > 0 ? cfg_.run.threads
-                                                : static_cast<int>(std::max(1u, std::thread::hardware_concurrency())));
+    const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+    if (cfg_.run.threads > cores)
+      spdlog::warn("run.threads {} is more than this machine's {} cores: using {}", cfg_.run.threads, cores, cores);
+    torch::set_num_threads(cfg_.run.threads > 0 ? std::min(cfg_.run.threads, cores) : cores);
     torch::manual_seed(static_cast<uint64_t>(cfg_.run.seed));
     data_ = open_training_data(cfg_.data);
     bool with_flow = false;

@@ -145,6 +145,16 @@ TEST(Config, NegativeLearningRateNamesKeyValueAndLine) {
       << msg;
 }
 
+TEST(Config, StageNamesArePlainAndThreadsBounded) {
+  for (const char* bad : {"../../evil", "a/b", "..", "''"}) {
+    const std::string msg = error_of([&] { geo::parse_config("", "x.yaml", {std::string("stages[0].name=") + bad}); });
+    EXPECT_NE(msg.find("'stages[0].name'"), std::string::npos) << bad << ": " << msg;
+  }
+  EXPECT_NO_THROW(geo::parse_config("stages: [{name: stage-2.b_1}]\n"));
+  EXPECT_NE(error_of([] { geo::parse_config("run: {threads: 100000}\n"); }).find("'run.threads' = 100000"),
+            std::string::npos);
+}
+
 TEST(Config, ReportsEveryInvalidValue) {
   const std::string msg = error_of([] {
     geo::parse_config("model: {encoder_depth: 101}\nrun: {device: tpu}\n", "x.yaml");
@@ -182,6 +192,22 @@ TEST(Config, OverridesApplyAndAreValidated) {
   EXPECT_NE(msg.find("stages[3]"), std::string::npos) << msg;
   msg = error_of([] { geo::parse_config("", "<s>", {"no_equals_sign"}); });
   EXPECT_NE(msg.find("expected key.path=value"), std::string::npos) << msg;
+  // Malformed keys and empty values are errors naming the key (not a default, not "stoul").
+  const std::pair<const char*, const char*> bad[] = {
+      {"stages[-1].iterations=3", "'[-1]' is not a list index"},
+      {"stages[abc].iterations=3", "'[abc]' is not a list index"},
+      {"stages[0.iterations=3", "unclosed '['"},
+      {"stages[99999999999999].iterations=3", "is not a list index"},
+      {"loss.ssim_alpha=", "empty value"},
+      {"loss..ssim_alpha=1", "is not a key name"}};
+  for (const auto& [set, want] : bad) {
+    msg = error_of([&] { geo::parse_config("", "<s>", {set}); });
+    EXPECT_NE(msg.find(want), std::string::npos) << set << ": " << msg;
+  }
+  EXPECT_EQ(geo::parse_config("", "<s>", {"data.root=''"}).data.root, "");
+  // A key given twice in a file is an error, not "the first one wins".
+  msg = error_of([] { geo::parse_config("loss: {ssim_alpha: 0.5}\nloss: {ssim_alpha: 0.9}\n", "d.yaml"); });
+  EXPECT_NE(msg.find("key 'loss' is given twice (lines 1 and 2)"), std::string::npos) << msg;
 }
 
 TEST(Config, ShippedConfigsParseWithThePapersSchedule) {

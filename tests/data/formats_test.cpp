@@ -46,6 +46,25 @@ TEST(Calib, RawAndOdometryFiles) {
   GEO_EXPECT_THROW_WITH(read_odometry_calib(dir + "/calib.txt"), "calib.txt", "'P2'");
 }
 
+TEST(Calib, NonFiniteOrImplausibleFocalLengthsAreRejectedNamingFileAndKey) {
+  const auto dir = test::fresh_dir("calib_nan");
+  test::write_text(dir + "/calib_velo_to_cam.txt", "R: 1 0 0 0 1 0 0 0 1\nT: 0 0 0\n");
+  const std::string rect = "R_rect_00: 1 0 0 0 1 0 0 0 1\n";
+  test::write_text(dir + "/calib_cam_to_cam.txt", rect + "P_rect_02: nan 0 50 0 0 100 20 0 0 0 1 0\n");
+  GEO_EXPECT_THROW_WITH(read_raw_calib(dir, 2), "calib_cam_to_cam.txt", "'P_rect_02'", "non-finite");
+  test::write_text(dir + "/calib_cam_to_cam.txt", rect + "P_rect_02: -7 0 50 0 0 100 20 0 0 0 1 0\n");
+  GEO_EXPECT_THROW_WITH(read_raw_calib(dir, 2), "calib_cam_to_cam.txt", "'P_rect_02'", "fx = -7", "not plausible");
+  test::write_text(dir + "/calib_cam_to_cam.txt", rect + "P_rect_02: 100 0 50 0 0 1e9 20 0 0 0 1 0\n");
+  GEO_EXPECT_THROW_WITH(read_raw_calib(dir, 2), "'P_rect_02'", "not plausible");
+  test::write_text(dir + "/calib_cam_to_cam.txt",
+                   rect + "P_rect_02: 100 0 50 0 0 100 20 0 0 0 1 0\nR_rect_02: inf 0 0 0 1 0 0 0 1\n");
+  EXPECT_NO_THROW(read_raw_calib(dir, 2));  // entries that are not used are not checked
+  test::write_text(dir + "/calib_cam_to_cam.txt",
+                   "R_rect_00: 1 0 0 0 1 0 0 0 inf\nP_rect_02: 100 0 50 0 0 100 20 0 0 0 1 0\n");
+  GEO_EXPECT_THROW_WITH(read_raw_calib(dir, 2), "'R_rect_00'", "non-finite");
+  GEO_EXPECT_THROW_WITH(check_focal_lengths(0, 700, "--intrinsics"), "--intrinsics", "fx = 0");
+}
+
 TEST(Splits, ReadsBothFormatsAndRejectsOthers) {
   const auto a = parse_split_line("2011_09_26/2011_09_26_drive_0022_sync 473 r", "f");
   EXPECT_EQ(a.folder, "2011_09_26/2011_09_26_drive_0022_sync");

@@ -134,6 +134,18 @@ TEST(Protocols, GroundTruthPredictionsScorePerfectlyOnASyntheticWorld) {
   write_poses(root + "/still.txt", torch::eye(4, torch::kFloat64).repeat({8, 1, 1}));
   p.predictions = root + "/still.txt";
   EXPECT_GT(evaluate(p, nullptr).metrics[0].second, 0.5);
+  // A trajectory with a NaN is an error, not a nan metric with exit code 0.
+  auto nan_traj = read_poses(root + "/world/odometry/poses/09.txt");
+  nan_traj[3][0][3] = std::nan("");
+  write_poses(root + "/nan.txt", nan_traj);
+  p.predictions = root + "/nan.txt";
+  GEO_EXPECT_THROW_WITH(evaluate(p, nullptr), "nan.txt", "1 non-finite value");
+  // Non-finite metrics are written as JSON null and read back as NaN.
+  EvalResult with_nan = pose;
+  with_nan.metrics[1].second = std::nan("");
+  EXPECT_NE(with_nan.json().find("\"ate_std\": null"), std::string::npos) << with_nan.json();
+  test::write_text(root + "/nan.json", with_nan.json());
+  EXPECT_TRUE(std::isnan(read_result(root + "/nan.json").metrics[1].second));
   // Results survive a JSON round trip.
   test::write_text(root + "/r.json", pose.json());
   const auto back = read_result(root + "/r.json");
