@@ -48,7 +48,7 @@ inline std::string kitti_samples() {
     } catch (const std::exception& geo_e) {                                           \
       geo_thrown = true;                                                              \
       const std::string geo_msg = geo_e.what();                                       \
-      for (const char* geo_f : {__VA_ARGS__})                                         \
+      for (const std::string& geo_f : std::initializer_list<std::string>{__VA_ARGS__}) \
         EXPECT_NE(geo_msg.find(geo_f), std::string::npos)                             \
             << "message '" << geo_msg << "' lacks '" << geo_f << "'";                 \
     }                                                                                 \

@@ -1,34 +1,70 @@
 #include "core/files.h"
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <chrono>
+#include <cstring>
 #include <ctime>
 #include <filesystem>
-#include <fstream>
 #include <stdexcept>
-#include <unistd.h>
 
 namespace geo {
 namespace fs = std::filesystem;
 
-void write_file_atomic(const std::string& path, const std::string& content) {
+namespace {
+
+std::string os_error() { return std::strerror(errno); }
+
+// fsync of a folder, so that a rename inside it survives a power loss.
+void sync_dir(const std::string& dir) {
+  const int fd = ::open(dir.empty() ? "." : dir.c_str(), O_RDONLY | O_DIRECTORY);
+  if (fd < 0) return;  // not fatal: some file systems do not open folders
+  ::fsync(fd);
+  ::close(fd);
+}
+
+}  // namespace
+
+void write_file_durable(const std::string& path, const std::function<void(const ChunkWriter&)>& produce) {
   const std::string tmp = path + ".tmp." + std::to_string(::getpid());
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) throw std::runtime_error(path + ": cannot open for writing (" + tmp + ")");
-    out.write(content.data(), static_cast<std::streamsize>(content.size()));
-    out.flush();
-    if (!out) {
-      out.close();
-      fs::remove(tmp);
-      throw std::runtime_error(path + ": write failed (disk full?)");
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) throw std::runtime_error("cannot write " + path + ": " + os_error() + " (opening " + tmp + ")");
+  std::string error;
+  const ChunkWriter write = [&](const void* data, size_t n) {
+    const char* p = static_cast<const char*>(data);
+    while (error.empty() && n > 0) {
+      const ssize_t w = ::write(fd, p, n);
+      if (w < 0 && errno == EINTR) continue;
+      if (w <= 0) {
+        error = os_error();
+        break;
+      }
+      p += w;
+      n -= static_cast<size_t>(w);
     }
+  };
+  try {
+    produce(write);
+  } catch (...) {
+    ::close(fd);
+    ::unlink(tmp.c_str());
+    throw;
   }
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  if (ec) {
-    fs::remove(tmp);
-    throw std::runtime_error(path + ": cannot rename temporary file into place: " + ec.message());
+  if (error.empty() && ::fsync(fd) != 0) error = os_error();
+  if (::close(fd) != 0 && error.empty()) error = os_error();
+  if (error.empty() && ::rename(tmp.c_str(), path.c_str()) != 0) error = os_error() + " (renaming " + tmp + ")";
+  if (!error.empty()) {
+    ::unlink(tmp.c_str());
+    throw std::runtime_error("cannot write " + path + ": " + error + "; the file that stood there is unchanged");
   }
+  sync_dir(fs::path(path).parent_path().string());
+}
+
+void write_file_atomic(const std::string& path, const std::string& content) {
+  write_file_durable(path, [&](const ChunkWriter& write) { write(content.data(), content.size()); });
 }
 
 std::string make_run_dir(const std::string& parent, const std::string& name) {

@@ -1,12 +1,23 @@
 // Files every run writes: atomic replacement and run folders.
 #pragma once
 
+#include <cstddef>
+#include <functional>
 #include <string>
 
 namespace geo {
 
-// Writes `content` to `path` through a temporary file renamed into place, so a crash never leaves
-// a half-written file where a good one stood. Throws std::runtime_error naming the path.
+// Receives the bytes of a file being written, chunk by chunk.
+using ChunkWriter = std::function<void(const void* data, size_t size)>;
+
+// Writes `path` durably: `produce` streams the bytes into a temporary file beside it, which is
+// fsync'ed, renamed into place and its folder fsync'ed, so neither a crash nor a power loss leaves
+// a half-written file where a good one stood. A failed write (disk full, read-only folder, quota)
+// removes the temporary file, leaves the old file untouched and throws std::runtime_error naming
+// the path and the OS error.
+void write_file_durable(const std::string& path, const std::function<void(const ChunkWriter&)>& produce);
+
+// write_file_durable of a string.
 void write_file_atomic(const std::string& path, const std::string& content);
 
 // Creates <parent>/<name>-YYYYmmdd-HHMMSS (suffixing -2, -3... if taken) and returns it.

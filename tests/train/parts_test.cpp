@@ -7,6 +7,8 @@
 
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <filesystem>
 
 #include "tensorboard_reader.h"
@@ -192,6 +194,22 @@ TEST(CheckpointManager, RotationKeepsBestFilesAndLatest) {
   again.save("s2", 3, false, [](auto& a) { fill_state(a, 1, 3); });
   EXPECT_FALSE(fs::exists(dir + "/checkpoints/s2-00000001.pt"));
   EXPECT_TRUE(fs::exists(dir + "/checkpoints/s2-00000002.pt"));
+}
+
+TEST(CheckpointManager, AFailedWriteKeepsTheLastCheckpointAndLatest) {
+  const auto dir = test::fresh_dir("ckpt_full");
+  CheckpointManager m(dir, 3);
+  m.save("s1", 1, true, [](auto& a) { fill_state(a, 0, 1); });
+  // The disk is full for the next checkpoint (its temporary file is a link to /dev/full).
+  const std::string next = dir + "/checkpoints/s1-00000002.pt";
+  ASSERT_EQ(::symlink("/dev/full", (next + ".tmp." + std::to_string(::getpid())).c_str()), 0);
+  GEO_EXPECT_THROW_WITH(m.save("s1", 2, true, [](auto& a) { fill_state(a, 0, 2); }), next,
+                        "No space left on device");
+  EXPECT_EQ(m.latest(), dir + "/checkpoints/s1-00000001.pt");
+  EXPECT_EQ(state_of(dir + "/checkpoints/best-s1.pt").iteration, 1);
+  EXPECT_FALSE(fs::exists(next));
+  for (const auto& e : fs::directory_iterator(dir + "/checkpoints"))
+    EXPECT_EQ(e.path().string().find(".tmp"), std::string::npos) << e.path();
 }
 
 TEST(ResolveCheckpoint, FilesFoldersAndErrors) {
