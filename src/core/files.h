@@ -20,6 +20,20 @@ void write_file_durable(const std::string& path, const std::function<void(const 
 // write_file_durable of a string.
 void write_file_atomic(const std::string& path, const std::string& content);
 
+// An exclusive lock on a folder (flock on <dir>/.lock, which holds the owner's PID and host): one
+// writer per run folder. The kernel releases it when the process ends, however it ends, so a crash
+// never leaves a stale lock. Throws std::runtime_error naming the holder when the folder is taken.
+class FolderLock {
+ public:
+  explicit FolderLock(const std::string& dir);
+  ~FolderLock();
+  FolderLock(const FolderLock&) = delete;
+  FolderLock& operator=(const FolderLock&) = delete;
+
+ private:
+  int fd_ = -1;
+};
+
 // Creates <parent>/<name>-YYYYmmdd-HHMMSS (suffixing -2, -3... if taken) and returns it.
 std::string make_run_dir(const std::string& parent, const std::string& name);
 

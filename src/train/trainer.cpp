@@ -279,6 +279,7 @@ int train(const Config& config, const TrainOptions& options, std::string* run_di
     throw std::runtime_error("run folder '" + dir + "' already holds a run; use --resume " + dir + " or another --run-dir");
   fs::create_directories(dir);
   if (run_dir) *run_dir = dir;
+  const FolderLock lock(dir);  // one writer per run folder
   write_file_atomic(dir + "/config.yaml", to_yaml(config));
   setup_logging(config.logging.level, dir + "/train.log");
   Run run(config, dir, options, false);
@@ -289,6 +290,7 @@ int resume(const std::string& run_dir, const TrainOptions& options) {
   const std::string cfg_path = run_dir + "/config.yaml";
   if (!fs::exists(cfg_path))
     throw std::runtime_error("--resume '" + run_dir + "': not a run folder (no config.yaml)");
+  const FolderLock lock(run_dir);  // one writer per run folder
   const Config config = load_config(cfg_path);
   setup_logging(config.logging.level, run_dir + "/train.log");
   Run run(config, run_dir, options, true);

@@ -28,5 +28,15 @@ TEST(Files, AtomicWriteReplacesAndAFullDiskLeavesTheOldFile) {
   GEO_EXPECT_THROW_WITH(write_file_atomic(dir + "/missing/x.txt", "x"), dir + "/missing/x.txt", "No such file");
 }
 
+TEST(Files, OneLockHolderPerFolderAndReleasedWithIt) {
+  const auto dir = test::fresh_dir("lock");
+  {
+    const FolderLock first(dir);
+    GEO_EXPECT_THROW_WITH(FolderLock second(dir), dir, "is in use by process " + std::to_string(::getpid()),
+                          "one geo_train per run folder");
+  }
+  EXPECT_NO_THROW(FolderLock again(dir));  // released with its holder (a crashed process's too)
+}
+
 }  // namespace
 }  // namespace geo

@@ -3,6 +3,7 @@
 // NaN steps never reach a checkpoint; each stage keeps its own best checkpoint, chosen by what the
 // stage trains, and a run folder resolves to the best of its last stage; the TensorBoard file
 // holds the losses of metrics.csv.
+#include "core/files.h"
 #include "train/checkpoints.h"
 #include "train/data_source.h"
 #include "train/trainer.h"
@@ -221,6 +222,14 @@ TEST(TrainingData, PerTaskSplits) {
   test::write_text(world() + "/splits/stereo/test_scenes_stereo.txt", "2011_01_01_drive_0001\n");
   GEO_EXPECT_THROW_WITH(open_training_data(r), "all 7 entries", "are excluded", "test_scenes_stereo.txt");
   std::filesystem::remove_all(world() + "/splits/stereo");
+}
+
+TEST(Trainer, ASecondWriterOnARunFolderIsRefused) {
+  const auto dir = test::fresh_dir("locked") + "/run";
+  std::filesystem::create_directories(dir);
+  test::write_text(dir + "/config.yaml", to_yaml(tiny_config()));
+  const FolderLock running(dir);  // as if a geo_train were training in it
+  GEO_EXPECT_THROW_WITH(resume(dir, {}), dir, "is in use by process");
 }
 
 TEST(Trainer, ExplicitCudaWithoutCudaIsAnError) {
