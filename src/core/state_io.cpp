@@ -70,16 +70,22 @@ void save_state(const torch::nn::Module& module, const std::string& path) {
   if (ec) throw std::runtime_error(path + ": cannot rename temporary file into place: " + ec.message());
 }
 
-void load_state(torch::nn::Module& module, const std::string& path) {
+torch::serialize::InputArchive open_archive(const std::string& path) {
   if (!std::filesystem::is_regular_file(path))
     throw std::runtime_error(path + ": no such file");
   torch::serialize::InputArchive archive;
   try {
     archive.load_from(path);
   } catch (const c10::Error& e) {
-    throw std::runtime_error(path + ": not a readable geo/LibTorch state file (" +
-                             std::string(e.what_without_backtrace()) + ")");
+    std::string why = e.what_without_backtrace();
+    why = why.substr(0, why.find('\n'));
+    throw std::runtime_error(path + ": not a readable geo/LibTorch file, truncated or of another kind (" + why + ")");
   }
+  return archive;
+}
+
+void load_state(torch::nn::Module& module, const std::string& path) {
+  auto archive = open_archive(path);
   read_state(module, archive, path);
 }
 

@@ -15,6 +15,10 @@ void save_state(const torch::nn::Module& module, const std::string& path);
 // Loads `path` into `module`, copying onto the module's device and dtype.
 void load_state(torch::nn::Module& module, const std::string& path);
 
+// Opens a LibTorch archive (state file, checkpoint); a missing, truncated or foreign file throws
+// std::runtime_error naming the path (never LibTorch's stack trace).
+torch::serialize::InputArchive open_archive(const std::string& path);
+
 // Same, into / out of an archive under a key prefix (for checkpoints holding several networks).
 void write_state(const torch::nn::Module& module, torch::serialize::OutputArchive& archive);
 void read_state(torch::nn::Module& module, torch::serialize::InputArchive& archive,

@@ -2,6 +2,7 @@
 
 #include "geometry/pose.h"
 #include "core/runtime.h"
+#include "core/state_io.h"
 #include "train/checkpoints.h"
 
 #include <filesystem>
@@ -17,12 +18,7 @@ torch::Device choose(const std::string& name) { return select_device(name.empty(
 
 Predictor::Predictor(const std::string& checkpoint, const std::string& device)
     : path_(resolve_checkpoint(checkpoint)), device_(choose(device)) {
-  torch::serialize::InputArchive a;
-  try {
-    a.load_from(path_);
-  } catch (const c10::Error& e) {
-    throw std::runtime_error("cannot read checkpoint '" + path_ + "' (not a geo checkpoint or truncated)");
-  }
+  auto a = open_archive(path_);
   c10::IValue yaml;
   if (!a.try_read("config", yaml) || !yaml.isString())
     throw std::runtime_error(path_ + ": checkpoint has no config (not written by geo_train?)");

@@ -1,6 +1,7 @@
 #include "train/checkpoints.h"
 
 #include "core/files.h"
+#include "core/state_io.h"
 
 #include <algorithm>
 #include <cstdio>
@@ -105,6 +106,35 @@ std::string CheckpointManager::save(const std::string& stage, int64_t iteration,
 std::string CheckpointManager::latest() const {
   const std::string name = read_first_line(dir() + "/latest");
   return name.empty() ? "" : dir() + "/" + name;
+}
+
+void CheckpointManager::check_resumable(const std::string& path) const {
+  auto readable = [](const std::string& p, std::string* why) {
+    try {
+      auto a = open_archive(p);
+      read_train_state(a, p);
+      return true;
+    } catch (const std::exception& e) {
+      if (why) *why = e.what();
+      return false;
+    }
+  };
+  std::string why;
+  if (readable(path, &why)) return;
+  std::vector<std::pair<fs::file_time_type, std::string>> others;
+  for (const auto& e : fs::directory_iterator(dir()))
+    if (e.path().extension() == ".pt" && !is_best_name(e.path().filename().string()) && e.path().string() != path)
+      others.emplace_back(e.last_write_time(), e.path().filename().string());
+  std::sort(others.rbegin(), others.rend());
+  std::string offer = " No other checkpoint in " + dir() + " is readable.";
+  for (const auto& [t, name] : others)
+    if (readable(dir() + "/" + name, nullptr)) {
+      offer = " The newest readable checkpoint is " + name + ": to resume from it, write its name into " + dir() +
+              "/latest.";
+      break;
+    }
+  throw std::runtime_error("cannot resume: checkpoints/latest names a checkpoint that cannot be used: " + why + "." +
+                           offer);
 }
 
 std::string resolve_checkpoint(const std::string& path) {

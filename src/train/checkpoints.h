@@ -46,6 +46,9 @@ class CheckpointManager {
 
   // checkpoints/<latest>, or "" when no checkpoint was written yet.
   std::string latest() const;
+  // Throws unless `path` opens as a geo checkpoint; the message names the newest other checkpoint
+  // that does (a resume can continue from it).
+  void check_resumable(const std::string& path) const;
   std::string dir() const { return dir_ + "/checkpoints"; }
 
  private:

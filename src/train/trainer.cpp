@@ -3,6 +3,7 @@
 #include "core/files.h"
 #include "core/logging.h"
 #include "core/runtime.h"
+#include "core/state_io.h"
 #include "data/image_io.h"
 #include "data/loader.h"
 #include "train/data_source.h"
@@ -111,8 +112,8 @@ class Run {
     resume_from_ = checkpoints_.latest();
     if (resume_from_.empty())
       throw std::runtime_error(dir_ + ": no checkpoint to resume from (checkpoints/latest missing)");
-    torch::serialize::InputArchive a;
-    a.load_from(resume_from_);
+    checkpoints_.check_resumable(resume_from_);
+    auto a = open_archive(resume_from_);
     nets_.load(a, resume_from_, false);
     state_ = read_train_state(a, resume_from_);
     if (state_.stage >= static_cast<int64_t>(cfg_.stages.size()))
@@ -126,8 +127,7 @@ class Run {
     const std::string spec = state_.stage == 0 && !opts_.init.empty() ? opts_.init : s.init;
     if (spec.empty()) return;
     const std::string path = resolve_checkpoint(spec);
-    torch::serialize::InputArchive a;
-    a.load_from(path);
+    auto a = open_archive(path);
     nets_.load(a, path, true);
     spdlog::info("stage {}: networks initialised from {}", s.name, path);
   }
@@ -137,8 +137,8 @@ class Run {
     if (resume_from_.empty()) init_networks(s);
     TrainStep step(nets_, cfg_, s);
     if (!resume_from_.empty()) {
-      torch::serialize::InputArchive a, opt;
-      a.load_from(resume_from_);
+      auto a = open_archive(resume_from_);
+      torch::serialize::InputArchive opt;
       if (a.try_read("optimizer", opt)) step.optimizer().load(opt);
     }
     const LrSchedule lr = LrSchedule::of(s);

@@ -212,6 +212,20 @@ TEST(CheckpointManager, AFailedWriteKeepsTheLastCheckpointAndLatest) {
     EXPECT_EQ(e.path().string().find(".tmp"), std::string::npos) << e.path();
 }
 
+TEST(CheckpointManager, ATruncatedLatestNamesTheNewestReadableCheckpoint) {
+  const auto dir = test::fresh_dir("ckpt_trunc");
+  CheckpointManager m(dir, 5);
+  m.save("s1", 1, false, [](auto& a) { fill_state(a, 0, 1); });
+  const std::string last = m.save("s1", 2, false, [](auto& a) { fill_state(a, 0, 2); });
+  EXPECT_NO_THROW(m.check_resumable(last));
+  const std::string bytes = test::read_file(last);
+  test::write_text(last, bytes.substr(0, bytes.size() / 2));  // a kill in the middle of a copy
+  GEO_EXPECT_THROW_WITH(m.check_resumable(last), "cannot resume", last, "truncated",
+                        "The newest readable checkpoint is s1-00000001.pt");
+  test::write_text(dir + "/checkpoints/random.pt", "not a checkpoint");
+  GEO_EXPECT_THROW_WITH(m.check_resumable(dir + "/checkpoints/random.pt"), "random.pt", "s1-00000001.pt");
+}
+
 TEST(ResolveCheckpoint, FilesFoldersAndErrors) {
   const auto dir = test::fresh_dir("resolve");
   const std::string missing = dir + "/nothing";
