@@ -23,7 +23,8 @@ int main(int argc, char** argv) {
   bool force = false;
   app.add_option("--preset", preset, "tiny (64x208, for CI and tests) or kitti (375x1242, KITTI intrinsics)")
       ->check(CLI::IsMember({"tiny", "kitti"}));
-  app.add_option("--seed", seed, "world seed: the same seed writes the same files");
+  app.add_option("--seed", seed, "world seed (0 .. 2^63-1): the same seed writes the same files")
+      ->check(CLI::Range(uint64_t{0}, uint64_t{1} << 63));
   app.add_option("--out", out, "output root (created); holds raw/, kitti2015/, odometry/")->required();
   app.add_option("--drives", drives, "training drives (default: preset's)")->check(CLI::PositiveNumber);
   app.add_option("--test-drives", test_drives, "held-out test drives (default: preset's)")->check(CLI::PositiveNumber);

@@ -635,6 +635,7 @@ std::string resolve_config_path(const std::string& name) {
     return fs::is_regular_file(p);
   };
   if (exists(name)) return name;
+  if (fs::is_directory(name)) throw ConfigError("config '" + name + "' is a folder, not a YAML file");
   const fs::path dir = shipped_config_dir();
   const fs::path bare = fs::path(name).filename();
   if (exists(dir / bare)) return (dir / bare).string();

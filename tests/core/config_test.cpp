@@ -243,6 +243,8 @@ TEST(Config, ResolveNamesEveryPlaceTried) {
   }
   EXPECT_NE(msg.find("config 'nope.yaml' not found"), std::string::npos) << msg;
   EXPECT_NE(msg.find("configs/nope.yaml"), std::string::npos) << msg;
+  EXPECT_EQ(error_of([] { geo::resolve_config_path(geo::shipped_config_dir()); }),
+            "config '" + geo::shipped_config_dir() + "' is a folder, not a YAML file");
 }
 
 }  // namespace
