@@ -43,3 +43,4 @@ done
 echo
 echo "Pictures: $OUT/run/summaries (training), $OUT/infer (disparity, flow per frame, trajectory.txt)"
 echo "Metrics per iteration: $OUT/run/metrics.csv, validation: $OUT/run/val.csv"
+echo "TensorBoard (losses, learning rate, validation, summary images): tensorboard --logdir $OUT"
