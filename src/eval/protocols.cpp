@@ -66,6 +66,7 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
   vo.matlab_offset = o.matlab_offset;
   std::vector<double> sums(7, 0.0);
   int64_t images = 0, pixels = 0;
+  std::vector<std::string> without_gt;  // scans that give no valid pixel (empty, NaN, all out of range)
   // --export-gt without a model or predictions: write the ground truth only, no metrics.
   const bool gt_only = !pred && o.predictions.empty() && !o.trivial && !o.export_gt.empty();
   Progress progress("eigen", static_cast<int64_t>(entries.size()), 0, "images");
@@ -111,9 +112,15 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
       for (int k = 0; k < 7; ++k) sums[k] += v[k];
       ++images;
       pixels += err.pixels;
+    } else {
+      without_gt.push_back(velo);
     }
     progress.update(static_cast<int64_t>(i + 1));
   }
+  if (!without_gt.empty())
+    spdlog::warn("{} of {} test images have no usable ground truth (no finite Velodyne point in the evaluated "
+                 "region) and are left out of the means; first: {}",
+                 without_gt.size(), entries.size(), without_gt.front());
   EvalResult r;
   if (gt_only) {
     r.counts = {{"exported", images}, {"listed", static_cast<int64_t>(entries.size())}};
@@ -122,7 +129,8 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
   if (images == 0) throw std::runtime_error("no test image had valid ground-truth pixels");
   const char* names[7] = {"abs_rel", "sq_rel", "rmse", "rmse_log", "a1", "a2", "a3"};
   for (int k = 0; k < 7; ++k) r.metrics.emplace_back(names[k], sums[k] / static_cast<double>(images));
-  r.counts = {{"images", images}, {"pixels", pixels}, {"listed", static_cast<int64_t>(entries.size())}};
+  r.counts = {{"images", images}, {"pixels", pixels}, {"listed", static_cast<int64_t>(entries.size())},
+              {"images_without_ground_truth", static_cast<int64_t>(without_gt.size())}};
   return r;
 }
 
@@ -156,6 +164,7 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
   if (names.empty()) throw std::runtime_error("no flow pairs to evaluate under " + root);
   double epe_noc = 0, epe_occ = 0, fl_noc = 0, fl_occ = 0;
   int64_t px_noc = 0, px_occ = 0, with_previous = 0;
+  std::vector<std::string> without_gt;  // pairs whose flow_occ or flow_noc has no valid pixel
   Progress progress("kitti2015", static_cast<int64_t>(names.size()), 0, "pairs");
   for (size_t i = 0; i < names.size(); ++i) {
     const std::string t = root + "/training/image_2/" + names[i] + "_10.png";
@@ -190,6 +199,11 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
     const auto occ = read_flow_png(gocc), noc = read_flow_png(gnoc);
     const auto eo = flow_errors(occ.flow, occ.valid, flow, o.flow_resize);
     const auto en = flow_errors(noc.flow, noc.valid, flow, o.flow_resize);
+    if (eo.pixels == 0 || en.pixels == 0) {  // an all-invalid ground truth would count as EPE 0
+      without_gt.push_back(names[i]);
+      progress.update(static_cast<int64_t>(i + 1));
+      continue;
+    }
     epe_occ += eo.epe;
     fl_occ += eo.fl;
     epe_noc += en.epe;
@@ -198,10 +212,16 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
     px_noc += en.pixels;
     progress.update(static_cast<int64_t>(i + 1));
   }
-  const double n = static_cast<double>(names.size());
+  const int64_t scored = static_cast<int64_t>(names.size() - without_gt.size());
+  if (scored == 0) throw std::runtime_error("no flow pair under " + root + " has valid ground-truth pixels");
+  if (!without_gt.empty())
+    spdlog::warn("{} of {} pairs have no valid ground-truth pixel (flow_occ or flow_noc) and are left out of the "
+                 "means; first: {}", without_gt.size(), names.size(), without_gt.front());
+  const double n = static_cast<double>(scored);
   EvalResult r;
   r.metrics = {{"epe_all", epe_occ / n}, {"epe_noc", epe_noc / n}, {"fl_all", fl_occ / n}, {"fl_noc", fl_noc / n}};
-  r.counts = {{"pairs", static_cast<int64_t>(names.size())}, {"pixels_all", px_occ}, {"pixels_noc", px_noc}};
+  r.counts = {{"pairs", scored}, {"pixels_all", px_occ}, {"pixels_noc", px_noc},
+              {"pairs_without_ground_truth", static_cast<int64_t>(without_gt.size())}};
   if (pred) {
     r.counts.emplace_back("pairs_with_frame_09", with_previous);
     if (with_previous < static_cast<int64_t>(names.size()))
@@ -232,6 +252,10 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
     };
     std::vector<torch::Tensor> frames;
     for (int64_t f = 0; f < n; ++f) frames.push_back(image(f));
+    const std::string extra = seq + "/image_2/" + numbered("%06lld", static_cast<long long>(n)) + ".png";
+    if (fs::exists(extra))
+      throw std::runtime_error(gt_path + " holds " + std::to_string(n) + " poses but " + seq +
+                               "/image_2 has more images (" + extra + " exists): the ground truth does not match");
     std::vector<torch::Tensor> cam_to_world = {torch::eye(4, torch::kFloat64)};
     Progress progress("odometry " + o.sequence, n, 0, "frames");
     for (int64_t j = 0; j < n; ++j) {

@@ -60,6 +60,10 @@ std::string stage_of_checkpoint(const std::string& name) {
 CheckpointManager::CheckpointManager(std::string dir, int keep_last)
     : dir_(std::move(dir)), keep_last_(std::max(1, keep_last)) {
   fs::create_directories(this->dir());
+  // Temporary files of an interrupted write (the run folder's lock is held, so none is in use).
+  for (const auto& folder : {dir_, this->dir()})
+    for (const auto& e : fs::directory_iterator(folder))
+      if (e.is_regular_file() && e.path().filename().string().find(".tmp") != std::string::npos) fs::remove(e.path());
   std::vector<std::pair<fs::file_time_type, std::string>> found;
   for (const auto& e : fs::directory_iterator(this->dir())) {
     const std::string name = e.path().filename().string();

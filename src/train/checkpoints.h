@@ -35,7 +35,8 @@ std::string stage_of_checkpoint(const std::string& name);
 class CheckpointManager {
  public:
   // `dir`: the run folder (checkpoints/ is created). Existing checkpoints there (a resumed run) take
-  // part in rotation, oldest first.
+  // part in rotation, oldest first; temporary files left by an interrupted write are removed (hold
+  // the run folder's FolderLock first).
   CheckpointManager(std::string dir, int keep_last);
 
   // Writes checkpoints/<stage>-<iteration>.pt through a temporary file, makes it best-<stage>.pt

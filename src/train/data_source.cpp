@@ -99,10 +99,20 @@ TrainingData open_at(const DataConfig& d, TrainingData out) {
                       " are excluded (test scenes or static frames listed in " + fmt_list(out.exclusions) + ")");
   auto train = std::make_shared<SequenceDataset>(std::move(entries), so);
   out.dropped = train->dropped();
-  if (train->size() == 0)
+  if (train->size() == 0) {
+    // Name a frame that is really missing: the target, or the first absent neighbour.
+    const auto first = read_split(out.train_list).front();
+    std::string missing = first.image_path(d.root);
+    for (int64_t o = -d.seq_length / 2; o <= d.seq_length / 2; ++o)
+      if (first.frame + o < 0 || !fs::exists(first.image_path(d.root, o))) {
+        missing = first.frame + o < 0 ? "frame " + std::to_string(first.frame + o) + " of " + first.folder
+                                      : first.image_path(d.root, o);
+        break;
+      }
     throw ConfigError("data.root '" + d.root + "': none of the " + std::to_string(out.dropped) +
-                      " entries of " + out.train_list + " has its frames on disk (first missing: " +
-                      read_split(out.train_list).front().image_path(d.root) + ")");
+                      " entries of " + out.train_list + " has all its " + std::to_string(d.seq_length) +
+                      " frames on disk (first missing: " + missing + ")");
+  }
   out.train = train;
   if (!out.val_list.empty() && fs::exists(out.val_list)) {
     auto val_entries = read_split(out.val_list);

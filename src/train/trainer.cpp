@@ -76,6 +76,10 @@ class Run {
                  data_.excluded ? ", " + std::to_string(data_.excluded) + " excluded by " + fmt::format("{}", fmt::join(data_.exclusions, ", ")) : "",
                  data_.dropped ? ", " + std::to_string(data_.dropped) + " without neighbours" : "",
                  data_.val ? data_.val->size() : 0, fs::path(dir_).parent_path().string());
+    if (!data_.val && cfg_.logging.val_interval > 0)
+      spdlog::warn("no validation data ({}): nothing is validated, no best-<stage>.pt is kept, and a run folder "
+                   "resolves to its latest checkpoint", data_.format == "packed" ? "the cache has no val/"
+                                                                                   : "no validation list found");
     int64_t total = 0;
     for (const auto& s : cfg_.stages) total += s.iterations;
     if (static_cast<double>(total) * cfg_.model.bn_momentum < 5.0)
@@ -274,6 +278,7 @@ class Run {
 
 int train(const Config& config, const TrainOptions& options, std::string* run_dir) {
   std::string dir = options.run_dir;
+  bool created = dir.empty() || !fs::exists(dir);
   if (dir.empty()) dir = make_run_dir(config.run.dir, config.run.name);
   else if (fs::exists(dir + "/checkpoints/latest"))
     throw std::runtime_error("run folder '" + dir + "' already holds a run; use --resume " + dir + " or another --run-dir");
@@ -282,8 +287,19 @@ int train(const Config& config, const TrainOptions& options, std::string* run_di
   const FolderLock lock(dir);  // one writer per run folder
   write_file_atomic(dir + "/config.yaml", to_yaml(config));
   setup_logging(config.logging.level, dir + "/train.log");
-  Run run(config, dir, options, false);
-  return run.run();
+  std::unique_ptr<Run> run;
+  try {
+    run = std::make_unique<Run>(config, dir, options, false);
+  } catch (...) {
+    // A run that could not start (bad data root, ...) leaves no half-made folder behind.
+    if (created) {
+      setup_logging(config.logging.level);  // release train.log
+      std::error_code ec;
+      fs::remove_all(dir, ec);
+    }
+    throw;
+  }
+  return run->run();
 }
 
 int resume(const std::string& run_dir, const TrainOptions& options) {

@@ -179,6 +179,20 @@ TEST(Protocols, GroundTruthPredictionsScorePerfectlyOnASyntheticWorld) {
   f.predictions.clear();
   const auto r3 = evaluate(f, &three);
   EXPECT_EQ(r3.counts.back(), (std::pair<std::string, int64_t>{"pairs_with_frame_09", 1}));
+
+  // Ground truth that cannot score: an all-invalid flow map is left out and counted (it used to
+  // count as EPE 0), and a pose file shorter than the image sequence is an error.
+  const std::string occ1 = root + "/world/kitti2015/training/flow_occ/000001_10.png";
+  const auto gt1 = read_flow_png(occ1);
+  write_flow_png(occ1, gt1.flow, torch::zeros_like(gt1.valid));
+  f.predictions = root + "/world/kitti2015/training/flow_noc";
+  const auto partial = evaluate(f, nullptr);
+  EXPECT_EQ(partial.counts[0], (std::pair<std::string, int64_t>{"pairs", 1}));
+  EXPECT_EQ(partial.counts.back(), (std::pair<std::string, int64_t>{"pairs_without_ground_truth", 1}));
+  const std::string images = root + "/world/odometry/sequences/09/image_2/";
+  std::filesystem::copy_file(images + "000007.png", images + "000008.png");
+  p.predictions.clear();
+  GEO_EXPECT_THROW_WITH(evaluate(p, &three), "09.txt holds 8 poses", "000008.png exists");
 }
 
 }  // namespace

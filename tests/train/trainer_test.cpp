@@ -180,7 +180,7 @@ TEST(Trainer, BadConfigStopsBeforeTrainingNamingTheKey) {
   TrainOptions o;
   o.run_dir = test::fresh_dir("badroot") + "/run";
   GEO_EXPECT_THROW_WITH(train(cfg, o), "data.root", "/nonexistent/kitti");
-  EXPECT_FALSE(std::filesystem::exists(o.run_dir + "/checkpoints/latest"));
+  EXPECT_FALSE(std::filesystem::exists(o.run_dir));  // a run that could not start leaves no folder
   GEO_EXPECT_THROW_WITH(tiny_config("optimizer: {beta3: 1}\n"), "optimizer.beta3");
 }
 
@@ -222,6 +222,14 @@ TEST(TrainingData, PerTaskSplits) {
   test::write_text(world() + "/splits/stereo/test_scenes_stereo.txt", "2011_01_01_drive_0001\n");
   GEO_EXPECT_THROW_WITH(open_training_data(r), "all 7 entries", "are excluded", "test_scenes_stereo.txt");
   std::filesystem::remove_all(world() + "/splits/stereo");
+}
+
+TEST(TrainingData, AMissingNeighbourIsNamed) {
+  DataConfig d = tiny_config().data;
+  d.train_list = test::fresh_dir("neighbour") + "/list.txt";
+  test::write_text(d.train_list, "2011_01_01/2011_01_01_drive_0001_sync 9 l\n");  // the drive's last frame
+  GEO_EXPECT_THROW_WITH(open_training_data(d), "has all its 3 frames on disk",
+                        "image_02/data/0000000010.png");
 }
 
 TEST(Trainer, ASecondWriterOnARunFolderIsRefused) {
