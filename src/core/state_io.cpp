@@ -1,5 +1,7 @@
 #include "core/state_io.h"
 
+#include "core/files.h"
+
 #include <filesystem>
 #include <set>
 #include <stdexcept>
@@ -60,14 +62,21 @@ void read_state(torch::nn::Module& module, torch::serialize::InputArchive& archi
   for (auto& [name, target] : state) target.copy_(loaded[name]);
 }
 
+void save_archive(torch::serialize::OutputArchive& archive, const std::string& path) {
+  // Streamed through write_file_durable's checked writes: LibTorch's own file writer throws from a
+  // destructor when the disk fills up, which aborts the process.
+  write_file_durable(path, [&](const ChunkWriter& write) {
+    archive.save_to([&](const void* data, size_t n) {
+      write(data, n);
+      return n;
+    });
+  });
+}
+
 void save_state(const torch::nn::Module& module, const std::string& path) {
   torch::serialize::OutputArchive archive;
   write_state(module, archive);
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
-  archive.save_to(tmp);
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) throw std::runtime_error(path + ": cannot rename temporary file into place: " + ec.message());
+  save_archive(archive, path);
 }
 
 torch::serialize::InputArchive open_archive(const std::string& path) {

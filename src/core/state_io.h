@@ -9,11 +9,15 @@
 
 namespace geo {
 
-// Writes every named parameter and buffer of `module` to `path` (temporary file + rename).
+// Writes every named parameter and buffer of `module` to `path` (save_archive: durable, atomic).
 void save_state(const torch::nn::Module& module, const std::string& path);
 
 // Loads `path` into `module`, copying onto the module's device and dtype.
 void load_state(torch::nn::Module& module, const std::string& path);
+
+// Writes an archive to `path` durably (core/files.h: write_file_durable): a failed write names the
+// path and the OS error and leaves the file that stood there untouched.
+void save_archive(torch::serialize::OutputArchive& archive, const std::string& path);
 
 // Opens a LibTorch archive (state file, checkpoint); a missing, truncated or foreign file throws
 // std::runtime_error naming the path (never LibTorch's stack trace).

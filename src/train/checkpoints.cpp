@@ -79,14 +79,7 @@ std::string CheckpointManager::save(const std::string& stage, int64_t iteration,
   fill(archive);
   const std::string name = checkpoint_name(stage, iteration);
   const std::string path = dir() + "/" + name;
-  // Streamed through our own checked writes: LibTorch's file writer throws from a destructor when
-  // the disk fills up, which aborts the process.
-  write_file_durable(path, [&](const ChunkWriter& write) {
-    archive.save_to([&](const void* data, size_t n) {
-      write(data, n);
-      return n;
-    });
-  });
+  save_archive(archive, path);
   if (best) {
     // A new name for the same file, swapped into place: rotation deleting <stage>-<it>.pt later
     // leaves best-<stage>.pt whole, and no second copy of the weights is written.
