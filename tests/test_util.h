@@ -6,9 +6,26 @@
 #include <fstream>
 #include <iterator>
 #include <string>
+#include <system_error>
+#include <vector>
 #include <unistd.h>
 
 namespace geo::test {
+
+// Folders made by fresh_dir in this process, removed when it exits (checkpoints of the trainer
+// tests take gigabytes); GEO_KEEP_TEST_DIRS=1 keeps them for inspection.
+inline std::vector<std::string>& made_dirs() {
+  static std::vector<std::string> dirs;
+  return dirs;
+}
+inline void remove_made_dirs() {
+  const char* keep = std::getenv("GEO_KEEP_TEST_DIRS");
+  if (keep && std::string(keep) == "1") return;
+  for (const auto& d : made_dirs()) {
+    std::error_code ec;
+    std::filesystem::remove_all(d, ec);
+  }
+}
 
 // A new empty folder under the system temp dir, unique per process and name.
 inline std::string fresh_dir(const std::string& name) {
@@ -16,6 +33,8 @@ inline std::string fresh_dir(const std::string& name) {
                    ("geo_test_" + name + "_" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
+  if (made_dirs().empty()) std::atexit(remove_made_dirs);
+  made_dirs().push_back(dir.string());
   return dir.string();
 }
 
