@@ -18,7 +18,6 @@ class Progress {
   void update(int64_t done, const std::string& details = "");
   // Clears the in-place line (before other output on a terminal); no-op elsewhere.
   void clear() const;
-  double rate() const { return rate_; }  // items per second since the last log line
 
   // Whether progress is redrawn in place (stderr is a terminal; GEO_PROGRESS=lines forces lines).
   static bool interactive();
@@ -31,7 +30,7 @@ class Progress {
   bool interactive_;
   std::chrono::steady_clock::time_point last_log_time_, last_draw_;
   int64_t last_log_done_ = -1;
-  double rate_ = 0;
+  double rate_ = 0;  // items per second since the last log line
 };
 
 // "1h02m", "3m07s", "12s"; "?" for negative or absurd values.

@@ -80,8 +80,6 @@ void CsvSink::on_validation(const ValidationRecord& r) {
                      r.flow ? fmt::format("{:.9g}", *r.flow) : "", r.score));
 }
 
-void CsvSink::flush() {}  // every row is written through an ofstream that is closed at once
-
 // ---------------------------------------------------------------- TensorBoard
 
 TensorBoardSink::TensorBoardSink(const std::string& dir, int64_t resumed_at) : writer_(dir + "/tb") {

@@ -68,7 +68,6 @@ class CsvSink : public MetricsSink {
   void trim_after(int64_t stage_index, int64_t iteration);
   void on_step(const StepRecord& r) override;
   void on_validation(const ValidationRecord& r) override;
-  void flush() override;
 
  private:
   void append(const std::string& file, const std::string& header, const std::string& row);

@@ -39,7 +39,6 @@ class TrainStep {
   // tgt [B,3,H,W], srcs [B,N,3,H,W], K [B,3,3] on the networks' device.
   StepResult run(const torch::Tensor& tgt, const torch::Tensor& srcs, const torch::Tensor& K, double lr);
   torch::optim::Adam& optimizer() { return *adam_; }
-  const StageConfig& stage() const { return stage_; }
 
  private:
   Networks& nets_;

@@ -24,7 +24,6 @@ Validation validate(Networks& nets, std::shared_ptr<const SnippetSource> source,
   double rigid = 0, flow_sum = 0;
   for (int64_t k = 0; k < batches; ++k) {
     Batch b = loader.next();
-    v.skipped += b.skipped;
     const auto out = compute_losses(nets, b.tgt.to(device), b.srcs.to(device), b.K.to(device), stage, config);
     rigid += out.losses.rigid.item<double>();
     if (flow) flow_sum += out.losses.flow.item<double>();

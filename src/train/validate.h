@@ -19,7 +19,6 @@ struct Validation {
   // pose leave L_br constant).
   double score = 0;
   size_t snippets = 0;
-  int64_t skipped = 0;          // bad samples replaced (data.on_bad_sample: skip)
 };
 
 // Restores the stage's train/eval modes before returning.
