@@ -5,6 +5,7 @@
 #   GEO_BUILD_DIR   build folder (default: build)
 #   GEO_JOBS        parallel compile jobs (default: number of cores)
 #   GEO_WERROR=1    compiler warnings in geo's own code are errors (CI sets it)
+#   GEO_SETUP_PACKAGES_ONLY=1  install the packages, build nothing (scripts/fuzz.sh)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -30,6 +31,10 @@ if ((${#missing[@]})); then
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"
 else
   echo "geo setup: all packages present"
+fi
+
+if [ "${GEO_SETUP_PACKAGES_ONLY:-0}" = 1 ]; then
+  exit 0
 fi
 
 BUILD_DIR="${GEO_BUILD_DIR:-build}"

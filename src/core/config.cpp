@@ -121,7 +121,10 @@ struct ParseVisitor {
   void reject_unknown() const {
     std::map<std::string, int> seen;  // key -> line
     for (const auto& kv : node) {
-      const std::string key = kv.first.as<std::string>();
+      if (!kv.first.IsScalar())  // e.g. '{a: 1}: 2' or '[x]: 2'
+        throw ConfigError(ctx.where(prefix.empty() ? "<top level>" : prefix, kv.first) +
+                          ": a key must be a plain name, got a list or map");
+      const std::string key = kv.first.Scalar();
       const int line = kv.first.Mark().line + 1;
       if (!seen.emplace(key, line).second)
         throw ConfigError(ctx.where(join(prefix, key), kv.first) + ": key '" + join(prefix, key) +
@@ -610,7 +613,11 @@ Config parse_config(const std::string& yaml_text, const std::string& source,
     if (o.rfind("stages", 0) == 0) materialise_default_stages(root);
     apply_override(root, o, ctx);
   }
-  read_value(root, "", config, ctx);
+  try {
+    read_value(root, "", config, ctx);
+  } catch (const YAML::Exception& e) {  // anything the checks above did not foresee, with the file
+    throw ConfigError(source + (e.mark.is_null() ? "" : " line " + std::to_string(e.mark.line + 1)) + ": " + e.msg);
+  }
   config.validate();
   return config;
 }

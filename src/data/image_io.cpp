@@ -91,13 +91,26 @@ void write_image(const std::string& path, const torch::Tensor& image) {
 
 std::string encode_png(const torch::Tensor& image) { return encode(tensor_to_bgr8(image), ".png", "PNG"); }
 
+// "8-bit", "16-bit", "32-bit float", ...: what an image's pixels are, for error messages.
+static std::string pixel_depth_name(int depth) {
+  switch (depth) {
+    case CV_8U: return "8-bit";
+    case CV_8S: return "8-bit signed";
+    case CV_16U: return "16-bit";
+    case CV_16S: return "16-bit signed";
+    case CV_32S: return "32-bit integer";
+    case CV_32F: return "32-bit float";
+    case CV_64F: return "64-bit float";
+    default: return "depth " + std::to_string(depth);
+  }
+}
+
 FlowMap read_flow_png(const std::string& path) {
   cv::Mat m = read_raw(path, cv::IMREAD_UNCHANGED);
   if (m.depth() != CV_16U || m.channels() != 3)
     throw std::runtime_error("flow PNG '" + path +
                              "' must be 16-bit with 3 channels (KITTI flow format), got " +
-                             std::to_string(m.channels()) + " channel(s) of " +
-                             (m.depth() == CV_8U ? "8" : "other") + "-bit");
+                             std::to_string(m.channels()) + " channel(s) of " + pixel_depth_name(m.depth()));
   FlowMap out;
   out.flow = torch::empty({2, m.rows, m.cols}, torch::kFloat32);
   out.valid = torch::empty({1, m.rows, m.cols}, torch::kFloat32);
@@ -141,8 +154,7 @@ torch::Tensor read_depth_png(const std::string& path) {
   cv::Mat m = read_raw(path, cv::IMREAD_UNCHANGED);
   if (m.depth() != CV_16U || m.channels() != 1)
     throw std::runtime_error("depth PNG '" + path + "' must be 16-bit single-channel (value/256), got " +
-                             std::to_string(m.channels()) + " channel(s)" +
-                             (m.depth() == CV_16U ? "" : " of 8-bit"));
+                             std::to_string(m.channels()) + " channel(s) of " + pixel_depth_name(m.depth()));
   cv::Mat f;
   m.convertTo(f, CV_32F, 1.0 / 256.0);
   return torch::from_blob(f.data, {1, f.rows, f.cols}, torch::kFloat32).clone();

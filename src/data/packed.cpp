@@ -3,7 +3,10 @@
 #include "core/files.h"
 #include "data/text_io.h"
 
+#include <algorithm>
+#include <cmath>
 #include <filesystem>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
@@ -43,7 +46,7 @@ void PackedWriter::finish() {
   if (!frames_) throw std::runtime_error(dir_ + "/frames.bin.tmp: write failed");
   std::ostringstream idx;
   idx.precision(10);
-  idx << "geo-packed 1\nheight " << height_ << "\nwidth " << width_ << "\nseq_length "
+  idx << "geo-packed " << kPackedFormatVersion << "\nheight " << height_ << "\nwidth " << width_ << "\nseq_length "
       << seq_length_ << "\ncount " << ids_.size() << "\n";
   for (size_t i = 0; i < ids_.size(); ++i)
     idx << intrinsics_[i][0] << " " << intrinsics_[i][1] << " " << intrinsics_[i][2] << " "
@@ -59,13 +62,33 @@ PackedSnippets::PackedSnippets(const std::string& dir) : dir_(dir) {
   std::getline(in, line);
   if (line.rfind("geo-packed", 0) != 0)
     throw std::runtime_error(index + ": not a geo packed cache (first line '" + line + "')");
+  {
+    std::istringstream ls(line.substr(10));
+    int version = 0;
+    std::string rest;
+    if (!(ls >> version) || (ls >> rest))
+      throw std::runtime_error(index + ": malformed first line '" + line + "' (expected 'geo-packed " +
+                               std::to_string(kPackedFormatVersion) + "')");
+    if (version != kPackedFormatVersion)
+      throw std::runtime_error(index + ": packed cache format version " + std::to_string(version) + ", this geo reads " +
+                               std::to_string(kPackedFormatVersion) + " (re-run geo_prepare with this geo)");
+  }
   int64_t count = -1;
+  const char* keys[] = {"height", "width", "seq_length", "count"};
+  int k = 0;
   for (auto* field : {&height_, &width_, &seq_length_, &count}) {
     std::getline(in, line);
     std::istringstream ls(line);
-    if (!(ls >> key >> *field) || *field < 0)
-      throw std::runtime_error(index + ": malformed header line '" + line + "'");
+    if (!(ls >> key >> *field) || key != keys[k] || *field < 0)
+      throw std::runtime_error(index + ": malformed header line '" + line + "' (expected '" + keys[k] + " N')");
+    ++k;
   }
+  // Bounds that keep the record size arithmetic far from overflow: 16k x 16k images, 64 frames.
+  if (height_ < 1 || width_ < 1 || height_ > 16384 || width_ > 16384 || seq_length_ < 2 || seq_length_ > 64 ||
+      count > std::numeric_limits<int64_t>::max() / (seq_length_ * 3 * height_ * width_))
+    throw std::runtime_error(index + ": implausible header (height " + std::to_string(height_) + ", width " +
+                             std::to_string(width_) + ", seq_length " + std::to_string(seq_length_) + ", count " +
+                             std::to_string(count) + ")");
   int line_no = 5;
   while (std::getline(in, line)) {
     ++line_no;
@@ -76,6 +99,12 @@ PackedSnippets::PackedSnippets(const std::string& dir) : dir_(dir) {
       throw std::runtime_error(index + " line " + std::to_string(line_no) + ": expected 'fx fy cx cy id'");
     std::string id;
     std::getline(ls, id);
+    // Intrinsics of an image at most 16k pixels wide: positive focal lengths, finite values.
+    const bool plausible = k[0] > 0 && k[1] > 0 && std::all_of(k.begin(), k.end(), [](double x) {
+      return std::isfinite(x) && std::abs(x) < 1e6;
+    });
+    if (!plausible)
+      throw std::runtime_error(index + " line " + std::to_string(line_no) + ": implausible intrinsics '" + trim(line) + "'");
     intrinsics_.push_back(k);
     ids_.push_back(trim(id));
   }

@@ -16,6 +16,9 @@
 
 namespace geo {
 
+// The version in index.txt's first line; a cache of another version is refused with a message.
+constexpr int kPackedFormatVersion = 1;
+
 // True when `dir/index.txt` starts with the packed-cache header.
 bool is_packed_cache(const std::string& dir);
 

@@ -23,25 +23,40 @@ std::string SplitEntry::image_path(const std::string& root, int64_t offset) cons
   return root + "/" + folder + "/image_0" + std::to_string(camera()) + "/data/" + name;
 }
 
+namespace {
+
+// A frame number: 1 to 10 decimal digits (KITTI names frames with 10).
+int64_t parse_frame(const std::string& digits, const std::string& where, const std::string& line) {
+  const bool ok = !digits.empty() && digits.size() <= 10 &&
+                  std::all_of(digits.begin(), digits.end(), [](char c) { return c >= '0' && c <= '9'; });
+  if (!ok) throw std::runtime_error(where + ": frame number '" + digits + "' is not 1 to 10 digits in '" + line + "'");
+  return std::stoll(digits);
+}
+
+}  // namespace
+
 SplitEntry parse_split_line(const std::string& raw, const std::string& where) {
   SplitEntry e;
   e.line = trim(raw);
+  // std::regex recurses per character: a line far longer than any KITTI path is refused first.
+  if (e.line.size() > 1024)
+    throw std::runtime_error(where + ": line of " + std::to_string(e.line.size()) + " characters is not a split entry");
   static const std::regex path_re(R"((.+)/image_0([23])/data/(\d+)\.(png|jpg))");
   std::smatch m;
   if (std::regex_match(e.line, m, path_re)) {
     e.folder = m[1];
     e.side = m[2] == "3" ? 'r' : 'l';
-    e.frame = std::stoll(m[3]);
+    e.frame = parse_frame(m[3], where, e.line);
     return e;
   }
   std::istringstream in(e.line);
   std::string frame, side, extra;
   in >> e.folder >> frame >> side;
-  const bool numeric = !frame.empty() && std::all_of(frame.begin(), frame.end(), ::isdigit);
+  const bool numeric = !frame.empty() && std::all_of(frame.begin(), frame.end(), [](char c) { return c >= '0' && c <= '9'; });
   if (e.folder.empty() || !numeric || (side != "l" && side != "r") || (in >> extra))
     throw std::runtime_error(where + ": expected 'folder frame l|r' or '<folder>/image_02/data/"
                              "<frame>.png', got '" + e.line + "'");
-  e.frame = std::stoll(frame);
+  e.frame = parse_frame(frame, where, e.line);
   e.side = side[0];
   return e;
 }

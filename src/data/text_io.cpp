@@ -4,8 +4,10 @@
 
 #include <cerrno>
 #include <cstdlib>
+#include <cmath>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
@@ -66,6 +68,14 @@ torch::Tensor read_poses(const std::string& path) {
     if (v.size() != 12)
       throw std::runtime_error(where + ": expected 12 numbers (a 3x4 pose), got " +
                                std::to_string(v.size()));
+    for (double x : v)
+      if (!std::isfinite(x)) throw std::runtime_error(where + ": a pose holds NaN or infinity");
+    // The 3x3 part must be a rotation: an all-zero or scaled one cannot be inverted or chained.
+    const double det = v[0] * (v[5] * v[10] - v[6] * v[9]) - v[1] * (v[4] * v[10] - v[6] * v[8]) +
+                       v[2] * (v[4] * v[9] - v[5] * v[8]);
+    if (std::abs(det - 1.0) > 1e-2)
+      throw std::runtime_error(where + ": the rotation part has determinant " + std::to_string(det) +
+                               " (a rotation has 1): not a camera pose");
     all.insert(all.end(), v.begin(), v.end());
     all.insert(all.end(), {0.0, 0.0, 0.0, 1.0});
     ++n;
@@ -107,6 +117,54 @@ void write_velodyne(const std::string& path, const torch::Tensor& points) {
   auto p = points.to(torch::kFloat32).contiguous();
   write_file_atomic(path, std::string(reinterpret_cast<const char*>(p.data_ptr<float>()),
                                       static_cast<size_t>(p.numel()) * sizeof(float)));
+}
+
+torch::Tensor read_npy(const std::string& path) {
+  const std::string bytes = read_text_file(path);
+  if (bytes.size() < 10 || bytes.compare(0, 6, "\x93NUMPY") != 0)
+    throw std::runtime_error(path + ": not a NumPy .npy file");
+  const int major = static_cast<unsigned char>(bytes[6]);
+  if (major < 1 || major > 3)
+    throw std::runtime_error(path + ": NumPy format version " + std::to_string(major) + " is not supported (1 to 3)");
+  auto byte = [&](size_t i) { return static_cast<size_t>(static_cast<unsigned char>(bytes[i])); };
+  const size_t start = major == 1 ? 10 : 12;
+  if (bytes.size() < start) throw std::runtime_error(path + ": truncated header");
+  const size_t hlen = major == 1 ? (byte(8) | byte(9) << 8) : (byte(8) | byte(9) << 8 | byte(10) << 16 | byte(11) << 24);
+  if (hlen > bytes.size() - start)
+    throw std::runtime_error(path + ": header of " + std::to_string(hlen) + " bytes runs past the end of the file");
+  const std::string header = bytes.substr(start, hlen);
+  const bool f4 = header.find("'<f4'") != std::string::npos, f8 = header.find("'<f8'") != std::string::npos;
+  if (f4 == f8) throw std::runtime_error(path + ": only little-endian float32/float64 arrays are supported ('descr' '<f4' or '<f8')");
+  if (header.find("'fortran_order': True") != std::string::npos)
+    throw std::runtime_error(path + ": Fortran-order arrays are not supported");
+  const auto a = header.find('('), b = header.find(')', a == std::string::npos ? 0 : a);
+  if (a == std::string::npos || b == std::string::npos)
+    throw std::runtime_error(path + ": header has no 'shape' tuple");
+  std::vector<int64_t> shape;
+  std::istringstream dims(header.substr(a + 1, b - a - 1));
+  std::string tok;
+  const int64_t elem = f4 ? 4 : 8;
+  int64_t count = 1;
+  while (std::getline(dims, tok, ',')) {
+    tok = trim(tok);
+    if (tok.empty()) continue;
+    char* end = nullptr;
+    errno = 0;
+    const long long d = std::strtoll(tok.c_str(), &end, 10);
+    if (errno != 0 || *end != '\0' || d < 0 || shape.size() >= 8)
+      throw std::runtime_error(path + ": bad shape entry '" + tok + "' (non-negative integers, at most 8 dimensions)");
+    if (d > 0 && count > std::numeric_limits<int64_t>::max() / elem / d)
+      throw std::runtime_error(path + ": shape is too large");
+    count *= d;
+    shape.push_back(d);
+  }
+  const auto need = static_cast<size_t>(count * elem);
+  if (bytes.size() - start - hlen < need)
+    throw std::runtime_error(path + ": truncated array data (" + std::to_string(bytes.size() - start - hlen) +
+                             " bytes, the shape needs " + std::to_string(need) + ")");
+  auto t = torch::empty(shape, f4 ? torch::kFloat32 : torch::kFloat64);
+  if (need > 0) std::memcpy(t.data_ptr(), bytes.data() + start + hlen, need);
+  return t.to(torch::kFloat32);
 }
 
 }  // namespace geo

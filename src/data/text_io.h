@@ -1,5 +1,5 @@
 // Small text-file helpers shared by the KITTI readers: whole-file reads, number parsing with
-// messages that name the file and line, KITTI pose files and Velodyne scans.
+// messages that name the file and line, KITTI pose files, Velodyne scans and NumPy arrays.
 #pragma once
 
 #include <torch/torch.h>
@@ -27,6 +27,10 @@ void write_poses(const std::string& path, const torch::Tensor& poses);
 // 16 bytes is an error naming the file (truncated download).
 torch::Tensor read_velodyne(const std::string& path);
 void write_velodyne(const std::string& path, const torch::Tensor& points);
+
+// NumPy .npy (format 1 to 3) of little-endian float32 / float64, C order -> float32 tensor. Anything
+// else (other dtypes, Fortran order, a header or data running past the end) is an error naming the file.
+torch::Tensor read_npy(const std::string& path);
 
 // Text file as lines (trailing '\r' removed, blank lines dropped).
 std::vector<std::string> read_lines(const std::string& path);

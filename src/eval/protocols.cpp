@@ -67,6 +67,8 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
   std::vector<double> sums(7, 0.0);
   int64_t images = 0, pixels = 0;
   std::vector<std::string> without_gt;  // scans that give no valid pixel (empty, NaN, all out of range)
+  int64_t non_finite_points = 0, scans_with_non_finite = 0;  // NaN/Inf points are left out, counted
+  std::string first_non_finite;
   // --export-gt without a model or predictions: write the ground truth only, no metrics.
   const bool gt_only = !pred && o.predictions.empty() && !o.trivial && !o.export_gt.empty();
   Progress progress("eigen", static_cast<int64_t>(entries.size()), 0, "images");
@@ -104,7 +106,12 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
       }
     }
     require_finite(depth, "the depth prediction for line " + std::to_string(i + 1) + " (" + image + ")");
-    const auto gt = velodyne_depth(read_velodyne(velo), calib.img_from_velo(), H, W, vo);
+    const auto points = read_velodyne(velo);
+    if (const int64_t bad = count_non_finite_points(points); bad > 0) {
+      non_finite_points += bad;
+      if (scans_with_non_finite++ == 0) first_non_finite = velo;
+    }
+    const auto gt = velodyne_depth(points, calib.img_from_velo(), H, W, vo);
     if (!o.export_gt.empty()) write_depth_png(o.export_gt + "/" + numbered("%06lld", static_cast<long long>(i)) + ".png", gt);
     const auto err = eigen_image_errors(gt, depth.clamp_min(1e-3), eo);
     if (err.pixels > 0) {
@@ -121,6 +128,9 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
     spdlog::warn("{} of {} test images have no usable ground truth (no finite Velodyne point in the evaluated "
                  "region) and are left out of the means; first: {}",
                  without_gt.size(), entries.size(), without_gt.front());
+  if (non_finite_points > 0)
+    spdlog::warn("{} Velodyne points in {} of {} scans have a NaN or infinite coordinate and are left out of the "
+                 "ground truth; first: {}", non_finite_points, scans_with_non_finite, entries.size(), first_non_finite);
   EvalResult r;
   if (gt_only) {
     r.counts = {{"exported", images}, {"listed", static_cast<int64_t>(entries.size())}};
@@ -130,7 +140,8 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
   const char* names[7] = {"abs_rel", "sq_rel", "rmse", "rmse_log", "a1", "a2", "a3"};
   for (int k = 0; k < 7; ++k) r.metrics.emplace_back(names[k], sums[k] / static_cast<double>(images));
   r.counts = {{"images", images}, {"pixels", pixels}, {"listed", static_cast<int64_t>(entries.size())},
-              {"images_without_ground_truth", static_cast<int64_t>(without_gt.size())}};
+              {"images_without_ground_truth", static_cast<int64_t>(without_gt.size())},
+              {"velodyne_points_non_finite", non_finite_points}};
   return r;
 }
 
@@ -165,6 +176,8 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
   double epe_noc = 0, epe_occ = 0, fl_noc = 0, fl_occ = 0;
   int64_t px_noc = 0, px_occ = 0, with_previous = 0;
   std::vector<std::string> without_gt;  // pairs whose flow_occ or flow_noc has no valid pixel
+  int64_t predictions_resized = 0;      // --predictions files whose size differs from the ground truth
+  std::string resized;                  // the first of them
   Progress progress("kitti2015", static_cast<int64_t>(names.size()), 0, "pairs");
   for (size_t i = 0; i < names.size(); ++i) {
     const std::string t = root + "/training/image_2/" + names[i] + "_10.png";
@@ -197,6 +210,14 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
     }
     require_finite(flow, "the flow prediction for pair " + names[i]);
     const auto occ = read_flow_png(gocc), noc = read_flow_png(gnoc);
+    // A file-based prediction is meant at the ground truth's size (KITTI's devkit rejects others):
+    // geo rescales it like a model's output, loudly.
+    if (!pred && !o.trivial && (flow.size(1) != occ.flow.size(1) || flow.size(2) != occ.flow.size(2))) {
+      if (resized.empty())
+        resized = names[i] + " (" + std::to_string(flow.size(1)) + "x" + std::to_string(flow.size(2)) + " vs " +
+                  std::to_string(occ.flow.size(1)) + "x" + std::to_string(occ.flow.size(2)) + ")";
+      ++predictions_resized;
+    }
     const auto eo = flow_errors(occ.flow, occ.valid, flow, o.flow_resize);
     const auto en = flow_errors(noc.flow, noc.valid, flow, o.flow_resize);
     if (eo.pixels == 0 || en.pixels == 0) {  // an all-invalid ground truth would count as EPE 0
@@ -217,11 +238,16 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
   if (!without_gt.empty())
     spdlog::warn("{} of {} pairs have no valid ground-truth pixel (flow_occ or flow_noc) and are left out of the "
                  "means; first: {}", without_gt.size(), names.size(), without_gt.front());
+  if (predictions_resized > 0)
+    spdlog::warn("{} of {} flow predictions differ in size from their ground truth and were resized ({}, vectors "
+                 "scaled); first: {}", predictions_resized, names.size(),
+                 o.flow_resize == FlowResize::kNearest ? "nearest" : "bilinear", resized);
   const double n = static_cast<double>(scored);
   EvalResult r;
   r.metrics = {{"epe_all", epe_occ / n}, {"epe_noc", epe_noc / n}, {"fl_all", fl_occ / n}, {"fl_noc", fl_noc / n}};
   r.counts = {{"pairs", scored}, {"pixels_all", px_occ}, {"pixels_noc", px_noc},
               {"pairs_without_ground_truth", static_cast<int64_t>(without_gt.size())}};
+  if (!pred && !o.trivial) r.counts.emplace_back("predictions_resized", predictions_resized);
   if (pred) {
     r.counts.emplace_back("pairs_with_frame_09", with_previous);
     if (with_previous < static_cast<int64_t>(names.size()))
@@ -401,35 +427,6 @@ std::string format_results(const std::vector<EvalResult>& results, const std::ve
     s << "\n";
   }
   return s.str();
-}
-
-torch::Tensor read_npy(const std::string& path) {
-  const std::string bytes = read_text_file(path);
-  if (bytes.size() < 10 || bytes.compare(0, 6, "\x93NUMPY") != 0)
-    throw std::runtime_error(path + ": not a NumPy .npy file");
-  const int major = static_cast<unsigned char>(bytes[6]);
-  const size_t hlen = major == 1 ? (static_cast<unsigned char>(bytes[8]) | (static_cast<unsigned char>(bytes[9]) << 8))
-                                 : (static_cast<unsigned char>(bytes[8]) | (static_cast<unsigned char>(bytes[9]) << 8) |
-                                    (static_cast<size_t>(static_cast<unsigned char>(bytes[10])) << 16));
-  const size_t start = major == 1 ? 10 : 12;
-  const std::string header = bytes.substr(start, hlen);
-  const bool f4 = header.find("'<f4'") != std::string::npos, f8 = header.find("'<f8'") != std::string::npos;
-  if (!f4 && !f8) throw std::runtime_error(path + ": only little-endian float32/float64 arrays are supported");
-  if (header.find("'fortran_order': True") != std::string::npos)
-    throw std::runtime_error(path + ": Fortran-order arrays are not supported");
-  const auto a = header.find('('), b = header.find(')');
-  std::vector<int64_t> shape;
-  std::istringstream dims(header.substr(a + 1, b - a - 1));
-  std::string tok;
-  while (std::getline(dims, tok, ','))
-    if (!trim(tok).empty()) shape.push_back(std::stoll(trim(tok)));
-  int64_t count = 1;
-  for (auto d : shape) count *= d;
-  const size_t need = static_cast<size_t>(count) * (f4 ? 4 : 8);
-  if (bytes.size() - start - hlen < need) throw std::runtime_error(path + ": truncated array data");
-  auto t = torch::empty(shape, f4 ? torch::kFloat32 : torch::kFloat64);
-  std::memcpy(t.data_ptr(), bytes.data() + start + hlen, need);
-  return t.to(torch::kFloat32);
 }
 
 }  // namespace geo

@@ -47,7 +47,4 @@ std::string format_results(const std::vector<EvalResult>& results, const std::ve
 // Reads a results JSON written by EvalResult::json().
 EvalResult read_result(const std::string& path);
 
-// Minimal NumPy .npy reader for float32 / float64 arrays (C order) -> float32 tensor.
-torch::Tensor read_npy(const std::string& path);
-
 }  // namespace geo

@@ -9,6 +9,8 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
+
 #include "test_util.h"
 
 namespace geo {
@@ -111,6 +113,13 @@ TEST(TextFormats, PoseFileRoundTripAndErrors) {
   EXPECT_TRUE(torch::allclose(read_poses(dir + "/p.txt"), poses, 0, 1e-9));
   test::write_text(dir + "/bad.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1\n");
   GEO_EXPECT_THROW_WITH(read_poses(dir + "/bad.txt"), "bad.txt line 2", "expected 12 numbers");
+  // An all-zero pose (a failed prediction) cannot be inverted: rejected by line, not by linalg.inv.
+  test::write_text(dir + "/zero.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n0 0 0 0 0 0 0 0 0 0 0 0\n");
+  GEO_EXPECT_THROW_WITH(read_poses(dir + "/zero.txt"), "zero.txt line 2", "determinant 0.000000");
+  test::write_text(dir + "/scaled.txt", "2 0 0 0 0 2 0 0 0 0 2 0\n");
+  GEO_EXPECT_THROW_WITH(read_poses(dir + "/scaled.txt"), "scaled.txt line 1", "determinant 8.000000");
+  test::write_text(dir + "/nan.txt", "1 0 0 nan 0 1 0 0 0 0 1 0\n");
+  GEO_EXPECT_THROW_WITH(read_poses(dir + "/nan.txt"), "nan.txt line 1", "NaN or infinity");
 }
 
 TEST(TextFormats, VelodyneRoundTripAndTruncation) {
@@ -137,6 +146,21 @@ TEST(VelodyneDepth, EigenProtocolByHand) {
   VelodyneDepthOptions exact;
   exact.matlab_offset = false;
   EXPECT_EQ(velodyne_depth(pts, P, 4, 5, exact)[2][2].item<float>(), 4.0f);
+}
+
+TEST(VelodyneDepth, NonFiniteAndFarOffPointsAreLeftOutAndCounted) {
+  const auto P = torch::tensor({0.0, 10.0, 0.0, 0.0, 0.0, 0.0, 10.0, 0.0, 1.0, 0.0, 0.0, 0.0}, torch::kFloat64).view({3, 4});
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  const auto pts = torch::tensor({5.0f, 1.0f, 1.0f, 0.f,     // pixel (1,1), depth 5
+                                  nan, 1.0f, 1.0f, 0.f,      // NaN x
+                                  5.0f, inf, 1.0f, 0.f,      // infinite y
+                                  5.0f, 1.0f, 1.0f, nan,     // NaN reflectance: a usable point
+                                  1e-30f, 1e30f, 1e30f, 0.f})  // projects beyond int64: ignored, no UB
+                       .view({5, 4});
+  EXPECT_EQ(count_non_finite_points(pts), 2);
+  const auto d = velodyne_depth(pts, P, 4, 5);
+  EXPECT_EQ(d[1][1].item<float>(), 5.0f);
+  EXPECT_EQ((d > 0).sum().item<int64_t>(), 1);
 }
 
 // ---- real KITTI excerpts (skipped when ../shared/kitti_samples is absent) ----

@@ -43,7 +43,10 @@ TEST(ImageIo, BadFilesAreNamed) {
   GEO_EXPECT_THROW_WITH(read_image(dir + "/corrupt.png"), "corrupt.png", "cannot decode");
   write_image(dir + "/rgb.png", torch::zeros({3, 4, 4}));
   GEO_EXPECT_THROW_WITH(read_flow_png(dir + "/rgb.png"), "rgb.png", "16-bit");
-  GEO_EXPECT_THROW_WITH(read_depth_png(dir + "/rgb.png"), "rgb.png", "16-bit single-channel");
+  GEO_EXPECT_THROW_WITH(read_depth_png(dir + "/rgb.png"), "rgb.png", "got 3 channel(s) of 8-bit");
+  // A 16-bit grey PNG (a depth map) given as flow: the message says what it is.
+  write_depth_png(dir + "/grey16.png", torch::ones({1, 4, 4}));
+  GEO_EXPECT_THROW_WITH(read_flow_png(dir + "/grey16.png"), "grey16.png", "got 1 channel(s) of 16-bit");
 }
 
 TEST(KittiSamples, Flow2012GroundTruthWarpHalvesTheError) {

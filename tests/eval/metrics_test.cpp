@@ -82,6 +82,13 @@ TEST(PoseMetrics, SnippetAteIsScaleAndOffsetInvariantAndHandComputed) {
   EXPECT_NEAR(aligned_trajectory_rmse(traj, 2.5 * traj.matmul(R.t()) + 1.0), 0.0, 1e-9);
 }
 
+int64_t count_of(const EvalResult& r, const std::string& name) {
+  for (const auto& [key, value] : r.counts)
+    if (key == name) return value;
+  ADD_FAILURE() << "no count '" << name << "' in the result";
+  return -1;
+}
+
 TEST(Protocols, GroundTruthPredictionsScorePerfectlyOnASyntheticWorld) {
   const auto root = test::fresh_dir("protocols");
   std::filesystem::rename(test::write_small_world("protocols_world", 6, 2, 8), root + "/world");
@@ -110,6 +117,20 @@ TEST(Protocols, GroundTruthPredictionsScorePerfectlyOnASyntheticWorld) {
   const double exact = evaluate(e, nullptr).metrics[0].second;
   EXPECT_LT(exact, depth.metrics[0].second);
   std::printf("abs_rel of the dense truth: %.4f (reference pixel shift), %.4f (exact pixels)\n", depth.metrics[0].second, exact);
+  EXPECT_EQ(count_of(depth, "velodyne_points_non_finite"), 0);
+  // NaN points in a scan are left out of the ground truth and counted; the metrics do not move.
+  {
+    const auto d = tests[0].substr(0, tests[0].find("/image_02"));
+    const auto f = tests[0].substr(tests[0].rfind('/') + 1);
+    const std::string velo = root + "/world/raw/" + d + "/velodyne_points/data/" + f.substr(0, f.size() - 4) + ".bin";
+    const auto points = read_velodyne(velo);
+    auto nan_point = torch::full({2, 4}, std::nanf(""));
+    write_velodyne(velo, torch::cat({points, nan_point}));
+    const auto with_nan = evaluate(e, nullptr);
+    EXPECT_EQ(count_of(with_nan, "velodyne_points_non_finite"), 2);
+    EXPECT_EQ(with_nan.metrics[0].second, exact);
+    write_velodyne(velo, points);
+  }
   // Flow: the ground truth itself.
   EvalOptions f;
   f.split = "kitti2015";
@@ -118,6 +139,16 @@ TEST(Protocols, GroundTruthPredictionsScorePerfectlyOnASyntheticWorld) {
   const auto flow = evaluate(f, nullptr);
   EXPECT_NEAR(flow.metrics[0].second, 0.0, 1e-9);
   EXPECT_EQ(flow.counts[0].second, 2);
+  EXPECT_EQ(count_of(flow, "predictions_resized"), 0);
+  {  // A prediction of another size than its ground truth is resized and counted, not silently.
+    const std::string small = root + "/flow_small";
+    std::filesystem::copy(f.predictions, small);
+    const auto first = std::filesystem::directory_iterator(small)->path().string();
+    write_flow_png(first, torch::zeros({2, 4, 6}), torch::ones({1, 4, 6}));
+    EvalOptions fsmall = f;
+    fsmall.predictions = small;
+    EXPECT_EQ(count_of(evaluate(fsmall, nullptr), "predictions_resized"), 1);
+  }
   test::write_text(root + "/pairs.txt", "training/image_2/000001_10.png\n");
   f.split_file = root + "/pairs.txt";
   EXPECT_EQ(evaluate(f, nullptr).counts[0].second, 1);
@@ -139,7 +170,7 @@ TEST(Protocols, GroundTruthPredictionsScorePerfectlyOnASyntheticWorld) {
   nan_traj[3][0][3] = std::nan("");
   write_poses(root + "/nan.txt", nan_traj);
   p.predictions = root + "/nan.txt";
-  GEO_EXPECT_THROW_WITH(evaluate(p, nullptr), "nan.txt", "1 non-finite value");
+  GEO_EXPECT_THROW_WITH(evaluate(p, nullptr), "nan.txt line 4", "NaN or infinity");
   // Non-finite metrics are written as JSON null and read back as NaN.
   EvalResult with_nan = pose;
   with_nan.metrics[1].second = std::nan("");
@@ -188,7 +219,7 @@ TEST(Protocols, GroundTruthPredictionsScorePerfectlyOnASyntheticWorld) {
   f.predictions = root + "/world/kitti2015/training/flow_noc";
   const auto partial = evaluate(f, nullptr);
   EXPECT_EQ(partial.counts[0], (std::pair<std::string, int64_t>{"pairs", 1}));
-  EXPECT_EQ(partial.counts.back(), (std::pair<std::string, int64_t>{"pairs_without_ground_truth", 1}));
+  EXPECT_EQ(count_of(partial, "pairs_without_ground_truth"), 1);
   const std::string images = root + "/world/odometry/sequences/09/image_2/";
   std::filesystem::copy_file(images + "000007.png", images + "000008.png");
   p.predictions.clear();

@@ -4,6 +4,7 @@
 // stage trains, and a run folder resolves to the best of its last stage; the TensorBoard file
 // holds the losses of metrics.csv.
 #include "core/files.h"
+#include "data/synth_writer.h"
 #include "train/checkpoints.h"
 #include "train/data_source.h"
 #include "train/trainer.h"
@@ -230,6 +231,58 @@ TEST(TrainingData, AMissingNeighbourIsNamed) {
   test::write_text(d.train_list, "2011_01_01/2011_01_01_drive_0001_sync 9 l\n");  // the drive's last frame
   GEO_EXPECT_THROW_WITH(open_training_data(d), "has all its 3 frames on disk",
                         "image_02/data/0000000010.png");
+}
+
+TEST(Trainer, ValidationHonoursOnBadSampleSkip) {
+  // Validation on two snippets of the test drive, whose frames training never reads; the second
+  // snippet's last frame is corrupt.
+  const auto root = test::write_small_world("badval_world", 10, 0, 5) + "/raw";
+  const std::string drive = synth_drive_folder(2);
+  const std::string list = root + "/val_list.txt", bad = root + "/" + drive + "/image_02/data/0000000007.png";
+  test::write_text(list, drive + " 3 l\n" + drive + " 6 l\n");
+  test::write_text(bad, "not a png");
+  auto cfg = tiny_config();
+  cfg.data.root = root;
+  cfg.data.val_list = list;
+  cfg.stages.resize(1);
+  cfg.stages[0].iterations = 2;
+  cfg.logging.val_interval = 1;
+  TrainOptions o;
+  o.run_dir = test::fresh_dir("badval") + "/stop";
+  // stop (the default): the run ends naming the corrupt file.
+  GEO_EXPECT_THROW_WITH(train(cfg, o), bad, "cannot decode");
+  cfg.data.on_bad_sample = BadSample::kSkip;
+  o.run_dir = test::fresh_dir("badval") + "/skip";
+  ASSERT_EQ(train(cfg, o), 0);
+  EXPECT_EQ(val_scores(o.run_dir, "s1").size(), 2u);  // both validations ran, on the readable snippet
+}
+
+// Makes the checkpoints folder unwritable after `step` steps. A read-only folder does not stop
+// root (CI runs as root), so the folder is replaced by a plain file: the same failed write.
+struct BreakCheckpointsAtStep : MetricsSink {
+  BreakCheckpointsAtStep(std::string dir, int64_t n) : ck(std::move(dir) + "/checkpoints"), left(n) {}
+  void on_step(const StepRecord&) override {
+    if (--left != 0) return;
+    std::filesystem::rename(ck, ck + ".moved");
+    test::write_text(ck, "");
+  }
+  std::string ck;
+  int64_t left;
+};
+
+TEST(Trainer, AFailedCheckpointWriteNamesThePathAndResumeContinues) {
+  auto cfg = tiny_config();
+  cfg.stages.resize(1);
+  TrainOptions o;
+  o.run_dir = test::fresh_dir("ckfail") + "/run";
+  o.sinks.push_back(std::make_shared<BreakCheckpointsAtStep>(o.run_dir, 3));
+  GEO_EXPECT_THROW_WITH(train(cfg, o), o.run_dir + "/checkpoints/s1-00000003.pt", "Not a directory");
+  const std::string ck = o.run_dir + "/checkpoints";
+  std::filesystem::remove(ck);
+  std::filesystem::rename(ck + ".moved", ck);
+  EXPECT_EQ(state_of(resolve_checkpoint(o.run_dir)).iteration, 2);  // the earlier checkpoint is intact
+  ASSERT_EQ(resume(o.run_dir, {}), 0);
+  EXPECT_EQ(state_of(resolve_checkpoint(o.run_dir)).iteration, 3);
 }
 
 TEST(Trainer, ASecondWriterOnARunFolderIsRefused) {

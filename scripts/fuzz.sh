@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# The parsers' fuzz job (CI runs it after the test suite): builds tests/fuzz with AddressSanitizer
+# and UBSan into build-asan/ and feeds every reader of outside data (calibration, split lists, pose
+# files, Velodyne scans, flow/depth/image PNGs, packed cache, .npy, YAML) mutated inputs for a set
+# time. Any out-of-bounds access, undefined behaviour, crash, hang or non-geo error fails it.
+#   GEO_FUZZ_SECONDS     seconds per target (default 20; 13 targets)
+#   GEO_FUZZ_SEED        mutation seed (default fixed, so a failure reproduces)
+#   GEO_FUZZ_BUILD_DIR   build folder (default build-asan)
+#   GEO_JOBS             parallel compile jobs (default: number of cores)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+GEO_SETUP_PACKAGES_ONLY=1 scripts/setup.sh
+BUILD_DIR="${GEO_FUZZ_BUILD_DIR:-build-asan}"
+JOBS="${GEO_JOBS:-$(nproc)}"
+if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
+  cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release -DGEO_SANITIZE=address,undefined \
+    -DCMAKE_CXX_FLAGS_RELEASE="-O1 -g" -DGEO_WERROR="$([ "${GEO_WERROR:-0}" = 1 ] && echo ON || echo OFF)"
+fi
+echo "geo fuzz: building the sanitized fuzz tests in $BUILD_DIR with $JOBS jobs"
+cmake --build "$BUILD_DIR" -j "$JOBS" --target fuzz_tests
+# LibTorch allocates for the process lifetime: leak reports would be its, not geo's.
+export ASAN_OPTIONS="detect_leaks=0:abort_on_error=1:${ASAN_OPTIONS:-}"
+export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1:${UBSAN_OPTIONS:-}"
+export GEO_FUZZ_SECONDS="${GEO_FUZZ_SECONDS:-20}"
+export GEO_SHARED_DIR="${GEO_SHARED_DIR:-$PWD/../shared}"
+export GEO_CONFIG_DIR="$PWD/configs"
+echo "geo fuzz: $GEO_FUZZ_SECONDS s per target under ASan+UBSan"
+# A hang is a failure too: the whole job is bounded.
+timeout --signal=KILL $((GEO_FUZZ_SECONDS * 13 + 300)) "$BUILD_DIR/tests/fuzz_tests"
