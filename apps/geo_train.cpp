@@ -2,6 +2,8 @@
 //   geo_train --config configs/stage1.yaml [--run-dir DIR] [--set key=value ...] [--device auto|cpu|cuda]
 //   geo_train --config stage2.yaml --init runs/stage1-...      (stage 2 from stage 1's result)
 //   geo_train --resume RUN_DIR
+//   torchrun --no-python --nproc_per_node=N geo_train --config ...   (N processes, train/distributed.h)
+//   srun geo_train --config ... [--master-addr HOST]                  (SLURM)
 // A bare config name that is not a file here resolves to the shipped configs/.
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
@@ -28,6 +30,12 @@ int main(int argc, char** argv) {
   app.add_option("--init", opts.init, "start the first stage from this checkpoint or run folder");
   app.add_option("--device", opts.device,
                  "auto (CUDA when available), cpu, cuda or cuda:N (an error without CUDA); default: run.device");
+  app.add_option("--master-addr", opts.master_addr,
+                 "distributed under SLURM: the host of rank 0 when MASTER_ADDR is not set (torchrun sets it)");
+  app.footer("Distributed: launched by torchrun (RANK, WORLD_SIZE, LOCAL_RANK, MASTER_ADDR, MASTER_PORT) or srun "
+             "(SLURM_PROCID, SLURM_NTASKS, SLURM_LOCALID), geo_train is one process of a data-parallel group: "
+             "batch_size is per process, gradients are averaged, rank 0 writes the run folder. "
+             "run.distributed.{backend,timeout_s,shard_data,verify_interval} configure it.");
   CLI11_PARSE(app, argc, argv);
   geo::keep_freed_memory();
   try {

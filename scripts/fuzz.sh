@@ -13,8 +13,9 @@ GEO_SETUP_PACKAGES_ONLY=1 scripts/setup.sh
 BUILD_DIR="${GEO_FUZZ_BUILD_DIR:-build-asan}"
 JOBS="${GEO_JOBS:-$(nproc)}"
 if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
+  # No -Werror here: GCC 12 warns falsely (maybe-uninitialized in <regex>) under the sanitizers.
   cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release -DGEO_SANITIZE=address,undefined \
-    -DCMAKE_CXX_FLAGS_RELEASE="-O1 -g" -DGEO_WERROR="$([ "${GEO_WERROR:-0}" = 1 ] && echo ON || echo OFF)"
+    -DCMAKE_CXX_FLAGS_RELEASE="-O1 -g" -DGEO_WERROR=OFF
 fi
 echo "geo fuzz: building the sanitized fuzz tests in $BUILD_DIR with $JOBS jobs"
 cmake --build "$BUILD_DIR" -j "$JOBS" --target fuzz_tests

@@ -12,6 +12,7 @@ cd "$(dirname "$0")/.."
 PACKAGES=(
   libtorch-dev libopencv-dev libyaml-cpp-dev libcli11-dev libspdlog-dev
   libgtest-dev libgmock-dev
+  libgloo-dev  # the headers of LibTorch's Gloo backend: multi-process training (train/distributed.h)
   libopenblas0-pthread  # without it Debian's LibTorch uses the reference BLAS: 17-25x slower matmuls
   cmake g++ make ccache
 )

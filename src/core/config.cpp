@@ -555,6 +555,14 @@ void RunConfig::validate(Checker& c) const {
                       device.find_first_not_of("0123456789", 5) == std::string::npos;
   c.require(one_of(device, {"auto", "cpu", "cuda"}) || cuda_n, "device", device, "must be auto, cpu, cuda or cuda:N");
   c.require(threads >= 0 && threads <= 1024, "threads", threads, "must be in 0..1024 (0 = all cores)");
+  Checker::Scope s(c, "distributed");
+  distributed.validate(c);
+}
+
+void DistributedConfig::validate(Checker& c) const {
+  c.require(one_of(backend, {"auto", "nccl", "gloo"}), "backend", backend, "must be auto, nccl or gloo");
+  c.require(timeout_s >= 1 && timeout_s <= 86400, "timeout_s", timeout_s, "must be in 1..86400 seconds");
+  c.require(verify_interval >= 0, "verify_interval", verify_interval, "must be >= 0 (0 = never)");
 }
 
 void Config::validate() const {

@@ -274,12 +274,30 @@ struct LoggingConfig {
   void validate(Checker& c) const;
 };
 
+// Multi-process training on torch.distributed (c10d); used only when geo_train is launched with
+// torchrun's or SLURM's environment (train/distributed.h). batch_size is per process.
+struct DistributedConfig {
+  std::string backend = "auto";  // auto (nccl on CUDA, gloo on CPU) | nccl | gloo
+  int timeout_s = 1800;          // a collective waiting longer (a lost or hung peer) fails the run
+  bool shard_data = true;        // each process reads its own shard of the stream; false = all read it all
+  int64_t verify_interval = 0;   // every N steps compare a checksum of the weights across processes (0 = never)
+
+  template <class V> void fields(V& v) {
+    v("backend", backend);
+    v("timeout_s", timeout_s);
+    v("shard_data", shard_data);
+    v("verify_interval", verify_interval);
+  }
+  void validate(Checker& c) const;
+};
+
 struct RunConfig {
   std::string name = "geo";     // run folder prefix
   std::string dir = "runs";     // parent folder of run folders
   int64_t seed = 42;            // seeds torch and the data pipeline
   std::string device = "auto";  // auto | cpu | cuda | cuda:N (core/runtime.h: select_device)
   int threads = 0;              // intra-op threads; 0 = all cores
+  DistributedConfig distributed;
 
   template <class V> void fields(V& v) {
     v("name", name);
@@ -287,6 +305,7 @@ struct RunConfig {
     v("seed", seed);
     v("device", device);
     v("threads", threads);
+    v("distributed", distributed);
   }
   void validate(Checker& c) const;
 };

@@ -97,7 +97,7 @@ Batch BatchLoader::make(int64_t k) const {
   int64_t skipped = 0;
   // Per-epoch permutations are cheap to recompute for KITTI-sized lists (40k entries).
   for (int64_t j = 0; j < options_.batch_size; ++j) {
-    const int64_t pos = k * options_.batch_size + j;
+    const int64_t pos = (k * options_.world_size + options_.rank) * options_.batch_size + j;
     size_t idx = options_.shuffle ? sample_at(options_.seed, n, pos) : static_cast<size_t>(pos) % n;
     for (int attempt = 0;; ++attempt) {
       try {
@@ -111,7 +111,8 @@ Batch BatchLoader::make(int64_t k) const {
       }
     }
   }
-  Batch b = augment(collate(snippets), options_.augment, options_.seed * 7919ULL + static_cast<uint64_t>(k));
+  const auto draw = static_cast<uint64_t>(k * options_.world_size + options_.rank);  // k when not sharded
+  Batch b = augment(collate(snippets), options_.augment, options_.seed * 7919ULL + draw);
   b.index = k;
   b.skipped = skipped;
   return b;

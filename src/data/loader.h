@@ -45,6 +45,11 @@ struct LoaderOptions {
   bool shuffle = true;
   bool skip_bad = false;    // on_bad_sample: skip (log and use the next sample) vs stop (throw)
   AugmentConfig augment;    // augment.enabled = false: none
+  // Shard `rank` of `world_size` (distributed training): global batch k is the stream positions
+  // [k*B*W, (k+1)*B*W); this process takes its B positions r*B.. of it, and its own augmentation
+  // draw. world_size 1 is the single-process stream.
+  int rank = 0;
+  int world_size = 1;
 };
 
 class BatchLoader {

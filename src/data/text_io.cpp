@@ -107,7 +107,7 @@ torch::Tensor read_velodyne(const std::string& path) {
                              " bytes is not a multiple of 16 (float32 x,y,z,r; truncated?)");
   const int64_t n = static_cast<int64_t>(bytes.size() / 16);
   auto t = torch::empty({n, 4}, torch::kFloat32);
-  std::memcpy(t.data_ptr<float>(), bytes.data(), bytes.size());
+  if (n > 0) std::memcpy(t.data_ptr<float>(), bytes.data(), bytes.size());  // an empty tensor has no buffer
   return t;
 }
 

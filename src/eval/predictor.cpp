@@ -19,10 +19,9 @@ torch::Device choose(const std::string& name) { return select_device(name.empty(
 Predictor::Predictor(const std::string& checkpoint, const std::string& device)
     : path_(resolve_checkpoint(checkpoint)), device_(choose(device)) {
   auto a = open_archive(path_);
-  c10::IValue yaml;
-  if (!a.try_read("config", yaml) || !yaml.isString())
-    throw std::runtime_error(path_ + ": checkpoint has no config (not written by geo_train?)");
-  config_ = parse_config(yaml.toStringRef(), path_ + " [config]");
+  auto config = checkpoint_config(a, path_);
+  if (!config) throw std::runtime_error(path_ + ": checkpoint has no config (not written by geo_train?)");
+  config_ = *config;
   torch::serialize::InputArchive flow;
   nets_ = Networks::create(config_, a.try_read("flow", flow));
   nets_.load(a, path_, false);

@@ -57,8 +57,9 @@ std::string stage_of_checkpoint(const std::string& name) {
   return name.substr(0, dash);
 }
 
-CheckpointManager::CheckpointManager(std::string dir, int keep_last)
+CheckpointManager::CheckpointManager(std::string dir, int keep_last, bool read_only)
     : dir_(std::move(dir)), keep_last_(std::max(1, keep_last)) {
+  if (read_only) return;
   fs::create_directories(this->dir());
   // Temporary files of an interrupted write (the run folder's lock is held, so none is in use).
   for (const auto& folder : {dir_, this->dir()})

@@ -37,7 +37,8 @@ class CheckpointManager {
   // `dir`: the run folder (checkpoints/ is created). Existing checkpoints there (a resumed run) take
   // part in rotation, oldest first; temporary files left by an interrupted write are removed (hold
   // the run folder's FolderLock first).
-  CheckpointManager(std::string dir, int keep_last);
+  // `read_only` (the other ranks of a distributed run): nothing is created, removed or written.
+  CheckpointManager(std::string dir, int keep_last, bool read_only = false);
 
   // Writes checkpoints/<stage>-<iteration>.pt through a temporary file, makes it best-<stage>.pt
   // when `best`, then points `latest` at it, and deletes the oldest beyond keep_last. A crash at any

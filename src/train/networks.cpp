@@ -7,6 +7,7 @@
 #include "losses/photometric.h"
 #include "models/layers.h"
 
+#include <sstream>
 #include <stdexcept>
 
 namespace geo {
@@ -110,6 +111,35 @@ void Networks::load(torch::serialize::InputArchive& archive, const std::string& 
   if (!get("pose", *pose)) throw std::runtime_error(source + ": no PoseNet in this checkpoint");
   if (flow && !get("flow", *flow) && !allow_missing_flow)
     throw std::runtime_error(source + ": no FlowNet in this checkpoint");
+}
+
+std::string architecture_difference(const Config& trained, const Config& wanted) {
+  const auto& a = trained.model;
+  const auto& b = wanted.model;
+  std::string out;
+  auto cmp = [&out](const char* key, auto x, auto y) {
+    if (x == y) return;
+    std::ostringstream os;
+    os << std::boolalpha << (out.empty() ? "" : ", ") << key << " " << x << " (wanted " << y << ")";
+    out += os.str();
+  };
+  cmp("model.encoder_depth", a.encoder_depth, b.encoder_depth);
+  cmp("model.use_fr", a.use_fr, b.use_fr);
+  if (a.use_fr && b.use_fr) {
+    cmp("model.fr_encoder", a.fr_encoder, b.fr_encoder);
+    cmp("model.fr_decoder", a.fr_decoder, b.fr_decoder);
+    cmp("model.fr_ratio", a.fr_ratio, b.fr_ratio);
+    cmp("model.fr_spatial_bn", a.fr_spatial_bn, b.fr_spatial_bn);
+  }
+  cmp("model.bn_scale", a.bn_scale, b.bn_scale);
+  cmp("data.seq_length", trained.data.seq_length, wanted.data.seq_length);
+  return out;
+}
+
+std::optional<Config> checkpoint_config(torch::serialize::InputArchive& archive, const std::string& source) {
+  c10::IValue yaml;
+  if (!archive.try_read("config", yaml) || !yaml.isString()) return std::nullopt;
+  return parse_config(yaml.toStringRef(), source + " [config]");
 }
 
 void Networks::prepare_inference(bool fold) {

@@ -47,6 +47,14 @@ struct Networks {
   void load(torch::serialize::InputArchive& archive, const std::string& source, bool allow_missing_flow);
 };
 
+// The settings that decide the networks' weight shapes (model.encoder_depth, FR switches, ...,
+// data.seq_length) where `trained` and `wanted` differ, as "key A (wanted B), ..."; "" when the
+// weights of one fit the networks of the other.
+std::string architecture_difference(const Config& trained, const Config& wanted);
+
+// The config stored in a checkpoint by geo_train, or nullopt for files without one.
+std::optional<Config> checkpoint_config(torch::serialize::InputArchive& archive, const std::string& source);
+
 struct StepOutput {
   LossTerms losses;
   std::vector<torch::Tensor> tgt_disp;  // target disparity per scale

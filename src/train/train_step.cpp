@@ -41,15 +41,18 @@ StepResult TrainStep::run(const torch::Tensor& tgt, const torch::Tensor& srcs, c
   adam_->zero_grad();
   StepResult r;
   r.out = compute_losses(nets_, tgt, srcs, K, stage_, config_);
-  r.finite = std::isfinite(r.out.losses.total.item<double>());
-  if (r.finite) {
-    r.out.losses.total.backward();
+  const bool loss_finite = std::isfinite(r.out.losses.total.item<double>());
+  if (loss_finite) r.out.losses.total.backward();
+  // Distributed: every process takes part, finite or not; a non-finite one sends NaN, so the
+  // averaged gradients are non-finite everywhere and every process skips the step.
+  if (averager_) averager_->average(params_, !loss_finite);
+  if (loss_finite || averager_) {
     std::vector<torch::Tensor> norms;
     for (const auto& p : params_)
       if (p.grad().defined()) norms.push_back(p.grad().norm());
     r.grad_norm = norms.empty() ? 0.0 : torch::stack(norms).norm().item<double>();
-    r.finite = std::isfinite(r.grad_norm);
   }
+  r.finite = loss_finite && std::isfinite(r.grad_norm);
   if (!r.finite) {
     adam_->zero_grad();
     return r;

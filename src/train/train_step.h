@@ -4,6 +4,7 @@
 #pragma once
 
 #include "core/config.h"
+#include "train/distributed.h"
 #include "train/networks.h"
 
 #include <memory>
@@ -39,6 +40,9 @@ class TrainStep {
   // tgt [B,3,H,W], srcs [B,N,3,H,W], K [B,3,3] on the networks' device.
   StepResult run(const torch::Tensor& tgt, const torch::Tensor& srcs, const torch::Tensor& K, double lr);
   torch::optim::Adam& optimizer() { return *adam_; }
+  // Distributed training: gradients are averaged over the process group after backward, before
+  // the finiteness check, clipping and Adam (a non-finite step on any process is skipped by all).
+  void set_gradient_averager(GradientAverager* averager) { averager_ = averager; }
 
  private:
   Networks& nets_;
@@ -46,6 +50,7 @@ class TrainStep {
   StageConfig stage_;
   std::vector<torch::Tensor> params_;
   std::unique_ptr<torch::optim::Adam> adam_;
+  GradientAverager* averager_ = nullptr;
 };
 
 }  // namespace geo

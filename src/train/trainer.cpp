@@ -7,6 +7,7 @@
 #include "data/image_io.h"
 #include "data/loader.h"
 #include "train/data_source.h"
+#include "train/distributed.h"
 #include "train/networks.h"
 #include "train/train_step.h"
 #include "train/validate.h"
@@ -46,10 +47,13 @@ class SignalScope {
 
 class Run {
  public:
-  Run(Config config, std::string dir, const TrainOptions& options, bool resuming)
-      : cfg_(std::move(config)), dir_(std::move(dir)), opts_(options),
-        device_(select_device(options.device.empty() ? cfg_.run.device : options.device)),
-        checkpoints_(dir_, cfg_.logging.keep_last) {
+  // `group`: this process's distributed group (null: a single process). Only rank 0 writes to the
+  // run folder (checkpoints, logs, summaries) and validates.
+  Run(Config config, std::string dir, const TrainOptions& options, bool resuming, ProcessGroup* group = nullptr)
+      : cfg_(std::move(config)), dir_(std::move(dir)), opts_(options), group_(group),
+        writer_(!group || group->rank() == 0),
+        device_(process_device(options.device.empty() ? cfg_.run.device : options.device, group)),
+        checkpoints_(dir_, cfg_.logging.keep_last, !writer_) {
     const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
     if (cfg_.run.threads > cores)
       spdlog::warn("run.threads {} is more than this machine's {} cores: using {}", cfg_.run.threads, cores, cores);
@@ -60,11 +64,17 @@ class Run {
     for (const auto& s : cfg_.stages) with_flow = with_flow || s.uses_flow();
     nets_ = Networks::create(cfg_, with_flow);
     nets_.to(device_);
-    fs::create_directories(dir_ + "/summaries");
-    auto csv = std::make_shared<CsvSink>(dir_);
-    if (resuming) restore(*csv);
-    sinks_ = {csv, std::make_shared<TensorBoardSink>(dir_, resuming ? global_step() : -1),
-              std::make_shared<ProgressSink>(cfg_.logging.interval)};
+    if (group_) averager_ = std::make_unique<GradientAverager>(*group_);
+    if (resuming) restore();
+    else init_networks(stage());  // here, so that a bad --init stops the run before it starts
+    initialised_ = true;
+    if (writer_) {
+      fs::create_directories(dir_ + "/summaries");
+      auto csv = std::make_shared<CsvSink>(dir_);
+      if (resuming) csv->trim_after(state_.stage, state_.iteration);
+      sinks_ = {csv, std::make_shared<TensorBoardSink>(dir_, resuming ? global_step() : -1),
+                std::make_shared<ProgressSink>(cfg_.logging.interval)};
+    }
     sinks_.insert(sinks_.end(), opts_.sinks.begin(), opts_.sinks.end());
   }
 
@@ -87,6 +97,12 @@ class Run {
                    "has {} iterations: evaluation will see statistics close to their initial values (use "
                    "model.bn_momentum: 0.1 for short runs)",
                    cfg_.model.bn_momentum, 1.0 / cfg_.model.bn_momentum, total);
+    if (group_)
+      spdlog::info("distributed: {} processes ({}), this is rank {} on {}; batch_size is per process ({} in all); "
+                   "{}", group_->size(), group_->backend(), group_->rank(), device_.str(),
+                   stage().batch_size * group_->size(),
+                   cfg_.run.distributed.shard_data ? "each reads its own shard of the data stream"
+                                                   : "all read the same batches (run.distributed.shard_data false)");
     for (; state_.stage < static_cast<int64_t>(cfg_.stages.size()); next_stage()) {
       const int rc = run_stage(signals);
       if (rc != 0) return rc;
@@ -112,7 +128,7 @@ class Run {
   }
 
   // Resume: networks and train state from the latest checkpoint (Adam's state when its stage starts).
-  void restore(CsvSink& csv) {
+  void restore() {
     resume_from_ = checkpoints_.latest();
     if (resume_from_.empty())
       throw std::runtime_error(dir_ + ": no checkpoint to resume from (checkpoints/latest missing)");
@@ -123,7 +139,6 @@ class Run {
     if (state_.stage >= static_cast<int64_t>(cfg_.stages.size()))
       throw std::runtime_error(resume_from_ + ": stage index " + std::to_string(state_.stage) +
                                " beyond the config's stages");
-    csv.trim_after(state_.stage, state_.iteration);
     spdlog::info("resumed from {} (stage {}, iteration {})", resume_from_, stage().name, state_.iteration);
   }
 
@@ -132,14 +147,28 @@ class Run {
     if (spec.empty()) return;
     const std::string path = resolve_checkpoint(spec);
     auto a = open_archive(path);
+    // One line saying which setting differs, before the key-by-key comparison of the weights.
+    if (const auto trained = checkpoint_config(a, path)) {
+      const std::string diff = architecture_difference(*trained, cfg_);
+      if (!diff.empty())
+        throw std::runtime_error(path + ": its networks were trained with " + diff +
+                                 "; set those keys to match or initialise from another checkpoint");
+    }
     nets_.load(a, path, true);
     spdlog::info("stage {}: networks initialised from {}", s.name, path);
   }
 
   int run_stage(const SignalScope& signals) {
     const auto& s = stage();
-    if (resume_from_.empty()) init_networks(s);
+    if (resume_from_.empty() && !initialised_) init_networks(s);
+    initialised_ = false;
+    if (group_) {  // every process starts the stage from rank 0's weights
+      broadcast_module(*group_, *nets_.depth);
+      broadcast_module(*group_, *nets_.pose);
+      if (nets_.flow) broadcast_module(*group_, *nets_.flow);
+    }
     TrainStep step(nets_, cfg_, s);
+    step.set_gradient_averager(averager_.get());
     if (!resume_from_.empty()) {
       auto a = open_archive(resume_from_);
       torch::serialize::InputArchive opt;
@@ -152,6 +181,10 @@ class Run {
     lo.workers = cfg_.data.num_workers;
     lo.skip_bad = cfg_.data.on_bad_sample == BadSample::kSkip;
     lo.augment = cfg_.data.augment;
+    if (group_ && cfg_.run.distributed.shard_data) {
+      lo.rank = group_->rank();
+      lo.world_size = group_->size();
+    }
     BatchLoader loader(data_.train, lo, state_.iteration);
     spdlog::info("stage {} ({}/{}): training [{}] for {} iterations from {}, batch {}, lr {}", s.name,
                  state_.stage + 1, cfg_.stages.size(), fmt::join(s.train.names(), ", "), s.iterations, state_.iteration,
@@ -179,20 +212,34 @@ class Run {
       ++state_.iteration;
       report_step(r, lr.at(state_.iteration - 1));
       const auto due = [&](int64_t every) { return every > 0 && (state_.iteration % every == 0 || state_.iteration == s.iterations); };
-      if (due(log.summary_interval)) write_summaries(batch, r.out);
-      if (due(log.val_interval) && data_.val) pending_best = validate() || pending_best;
+      if (writer_ && due(log.summary_interval)) write_summaries(batch, r.out);
+      if (writer_ && due(log.val_interval) && data_.val) pending_best = validate() || pending_best;
+      const auto& dist = cfg_.run.distributed;
+      if (group_ && dist.verify_interval > 0 && state_.iteration % dist.verify_interval == 0)
+        verify_same_weights(*group_, nets_.trainable_parameters(), global_step());
+      const int signal = agreed_signal(signals);
       const bool checkpoint = due(log.checkpoint_interval);
-      if (checkpoint || signals.received()) {
+      if (writer_ && (checkpoint || signal)) {
         save(step, pending_best);
         pending_best = false;
       }
-      if (signals.received()) {
+      if (signal) {
         spdlog::warn("signal {} received: checkpoint written at stage {} iteration {}; continue with "
-                     "geo_train --resume {}", signals.received(), s.name, state_.iteration, dir_);
+                     "geo_train --resume {}", signal, s.name, state_.iteration, dir_);
         return 130;
       }
     }
     return 0;
+  }
+
+  // The signal (SIGINT/SIGTERM) any process received; distributed, all processes agree on it at the
+  // same step (one tiny all-reduce), so rank 0 checkpoints the step every process stops at.
+  int agreed_signal(const SignalScope& signals) {
+    if (!group_) return signals.received();
+    std::vector<torch::Tensor> flag{torch::full({1}, signals.received(), torch::TensorOptions(torch::kInt32).device(
+                                                                               group_->backend() == "nccl" ? device_ : torch::kCPU))};
+    group_->all_reduce_max(flag);
+    return flag[0].cpu().item<int>();
   }
 
   void report_step(const StepResult& r, double lr) {
@@ -261,9 +308,21 @@ class Run {
     }
   }
 
+  // cuda / auto with CUDA in a distributed run: this process's GPU, cuda:LOCAL_RANK.
+  static torch::Device process_device(const std::string& name, ProcessGroup* group) {
+    torch::Device d = select_device(name);
+    if (group && d.is_cuda() && (name == "auto" || name == "cuda")) {
+      d = select_device("cuda:" + std::to_string(group->local_rank()));
+    }
+    return d;
+  }
+
   Config cfg_;
   std::string dir_;
   TrainOptions opts_;
+  ProcessGroup* group_;
+  bool writer_;
+  std::unique_ptr<GradientAverager> averager_;
   torch::Device device_;
   CheckpointManager checkpoints_;
   TrainingData data_;
@@ -272,24 +331,56 @@ class Run {
   TrainState state_;
   std::string resume_from_;  // the checkpoint the current stage resumes from ("" = a fresh stage)
   int64_t skipped_ = 0;
+  bool initialised_ = false;  // the current stage's networks are already set (constructor)
 };
+
+// This process's group when geo_train was launched as one process of several (torchrun, srun);
+// null for a single process.
+std::unique_ptr<ProcessGroup> join_group(const Config& config, const TrainOptions& options) {
+  const LaunchInfo launch = launch_from_environment(nullptr, options.master_addr);
+  if (!launch.distributed()) return nullptr;
+  return ProcessGroup::connect(launch, config.run.distributed,
+                               select_device(options.device.empty() ? config.run.device : options.device));
+}
+
+// The other ranks of a distributed run: they read the run folder rank 0 set up and write nothing.
+int follow(const Config& config, const std::string& dir, const TrainOptions& options, ProcessGroup& group,
+           bool resuming) {
+  setup_logging(config.logging.level == "info" || config.logging.level == "debug" || config.logging.level == "trace"
+                    ? "warn" : config.logging.level);
+  Run run(config, dir, options, resuming, &group);
+  return run.run();
+}
 
 }  // namespace
 
 int train(const Config& config, const TrainOptions& options, std::string* run_dir) {
+  auto group = join_group(config, options);
+  if (group && group->rank() != 0) {
+    const std::string dir = group->share_from_rank0("run_dir", "");
+    if (run_dir) *run_dir = dir;
+    return follow(config, dir, options, *group, false);
+  }
   std::string dir = options.run_dir;
   bool created = dir.empty() || !fs::exists(dir);
-  if (dir.empty()) dir = make_run_dir(config.run.dir, config.run.name);
-  else if (fs::exists(dir + "/checkpoints/latest"))
-    throw std::runtime_error("run folder '" + dir + "' already holds a run; use --resume " + dir + " or another --run-dir");
-  fs::create_directories(dir);
+  std::unique_ptr<FolderLock> lock;
+  try {
+    if (dir.empty()) dir = make_run_dir(config.run.dir, config.run.name);
+    else if (fs::exists(dir + "/checkpoints/latest"))
+      throw std::runtime_error("run folder '" + dir + "' already holds a run; use --resume " + dir + " or another --run-dir");
+    fs::create_directories(dir);
+    lock = std::make_unique<FolderLock>(dir);  // one writer per run folder
+    write_file_atomic(dir + "/config.yaml", to_yaml(config));
+  } catch (const std::exception& e) {
+    if (group) group->share_from_rank0("run_dir", e.what(), true);
+    throw;
+  }
+  if (group) group->share_from_rank0("run_dir", dir);
   if (run_dir) *run_dir = dir;
-  const FolderLock lock(dir);  // one writer per run folder
-  write_file_atomic(dir + "/config.yaml", to_yaml(config));
   setup_logging(config.logging.level, dir + "/train.log");
   std::unique_ptr<Run> run;
   try {
-    run = std::make_unique<Run>(config, dir, options, false);
+    run = std::make_unique<Run>(config, dir, options, false, group.get());
   } catch (...) {
     // A run that could not start (bad data root, ...) leaves no half-made folder behind.
     if (created) {
@@ -306,10 +397,22 @@ int resume(const std::string& run_dir, const TrainOptions& options) {
   const std::string cfg_path = run_dir + "/config.yaml";
   if (!fs::exists(cfg_path))
     throw std::runtime_error("--resume '" + run_dir + "': not a run folder (no config.yaml)");
-  const FolderLock lock(run_dir);  // one writer per run folder
   const Config config = load_config(cfg_path);
+  auto group = join_group(config, options);
+  if (group && group->rank() != 0) {
+    group->share_from_rank0("resume", "");  // rank 0 holds the folder's lock
+    return follow(config, run_dir, options, *group, true);
+  }
+  std::unique_ptr<FolderLock> lock;
+  try {
+    lock = std::make_unique<FolderLock>(run_dir);  // one writer per run folder
+  } catch (const std::exception& e) {
+    if (group) group->share_from_rank0("resume", e.what(), true);
+    throw;
+  }
+  if (group) group->share_from_rank0("resume", run_dir);
   setup_logging(config.logging.level, run_dir + "/train.log");
-  Run run(config, run_dir, options, true);
+  Run run(config, run_dir, options, true, group.get());
   return run.run();
 }
 

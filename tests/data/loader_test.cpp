@@ -44,6 +44,35 @@ TEST(Loader, EveryEpochIsAPermutation) {
   for (int c : seen) EXPECT_EQ(c, 1);
 }
 
+TEST(Loader, ShardsOfAWorldPartitionTheSingleProcessStream) {
+  // Distributed: the W shards of batch k hold exactly the samples of the single-process stream's
+  // batch k with W times the batch size (the same global positions), each once.
+  auto src = std::make_shared<FakeSource>(10);
+  auto single = options(0);
+  single.batch_size = 6;
+  BatchLoader whole(src, single);
+  std::vector<std::unique_ptr<BatchLoader>> shards;
+  for (int r = 0; r < 2; ++r) {
+    auto o = options(r);  // rank 1 with a worker thread: sharding does not depend on threads
+    o.rank = r;
+    o.world_size = 2;
+    shards.push_back(std::make_unique<BatchLoader>(src, o));
+  }
+  for (int k = 0; k < 4; ++k) {  // across epochs (10 samples, 6 a global batch)
+    const auto w = whole.next();
+    const auto a = shards[0]->next(), b = shards[1]->next();
+    std::vector<std::string> joined = a.ids;
+    joined.insert(joined.end(), b.ids.begin(), b.ids.end());
+    EXPECT_EQ(joined, w.ids) << "batch " << k;
+    EXPECT_EQ(a.index, k);
+  }
+  // world_size 1 is the single-process stream itself.
+  auto o1 = options(0);
+  o1.world_size = 1;
+  BatchLoader plain(src, options(0)), one(src, o1);
+  EXPECT_EQ(plain.next().ids, one.next().ids);
+}
+
 TEST(Loader, SameBatchesWithWorkersAndAfterResume) {
   auto src = std::make_shared<FakeSource>(10);
   BatchLoader serial(src, options(0)), threaded(src, options(2));

@@ -285,6 +285,32 @@ TEST(Trainer, AFailedCheckpointWriteNamesThePathAndResumeContinues) {
   EXPECT_EQ(state_of(resolve_checkpoint(o.run_dir)).iteration, 3);
 }
 
+TEST(Trainer, InitFromAnotherArchitectureOrABrokenFileIsOneClearLine) {
+  auto cfg = tiny_config();
+  cfg.stages.resize(1);
+  cfg.stages[0].iterations = 1;
+  cfg.logging.checkpoint_interval = 1;
+  const auto base = test::fresh_dir("initarch");
+  TrainOptions o;
+  o.run_dir = base + "/r18";
+  ASSERT_EQ(train(cfg, o), 0);
+  const std::string ck = resolve_checkpoint(o.run_dir);
+  TrainOptions i;
+  i.init = o.run_dir;
+  i.run_dir = base + "/other";
+  auto other = cfg;
+  other.model.encoder_depth = 34;
+  other.model.use_fr = false;
+  GEO_EXPECT_THROW_WITH(train(other, i), ck + ": its networks were trained with model.encoder_depth 18 (wanted 34), "
+                                             "model.use_fr true (wanted false); set those keys");
+  EXPECT_FALSE(std::filesystem::exists(i.run_dir));  // a run that could not start leaves no folder
+  // A truncated file given to --init: named, no LibTorch stack trace.
+  std::filesystem::copy_file(ck, base + "/cut.pt");
+  std::filesystem::resize_file(base + "/cut.pt", 1000);
+  i.init = base + "/cut.pt";
+  GEO_EXPECT_THROW_WITH(train(cfg, i), base + "/cut.pt: not a readable geo/LibTorch file");
+}
+
 TEST(Trainer, ASecondWriterOnARunFolderIsRefused) {
   const auto dir = test::fresh_dir("locked") + "/run";
   std::filesystem::create_directories(dir);

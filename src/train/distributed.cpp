@@ -1,0 +1,355 @@
+#include "train/distributed.h"
+
+#include <spdlog/spdlog.h>
+
+#include <cerrno>
+#include <chrono>
+#include <limits>
+#include <cstdlib>
+#include <fstream>
+#include <optional>
+#include <stdexcept>
+
+#include <signal.h>
+#include <unistd.h>
+
+#ifdef GEO_WITH_C10D
+#include <torch/csrc/distributed/c10d/PrefixStore.hpp>
+#include <torch/csrc/distributed/c10d/ProcessGroupGloo.hpp>
+#include <torch/csrc/distributed/c10d/TCPStore.hpp>
+#ifdef USE_C10D_NCCL
+#include <torch/csrc/distributed/c10d/ProcessGroupNCCL.hpp>
+#endif
+#endif
+
+namespace geo {
+namespace {
+
+int env_int(const std::string& key, const std::string& value, int lo, int hi) {
+  char* end = nullptr;
+  errno = 0;
+  const long v = std::strtol(value.c_str(), &end, 10);
+  if (value.empty() || errno != 0 || *end != '\0' || v < lo || v > hi)
+    throw std::runtime_error("environment variable " + key + "='" + value + "' is not an integer in " +
+                             std::to_string(lo) + ".." + std::to_string(hi));
+  return static_cast<int>(v);
+}
+
+}  // namespace
+
+LaunchInfo launch_from_environment(const std::function<const char*(const char*)>& getenv_fn,
+                                   const std::string& master_addr) {
+  auto get = [&](const char* key) -> std::optional<std::string> {
+    const char* v = getenv_fn ? getenv_fn(key) : std::getenv(key);
+    if (!v || !*v) return std::nullopt;
+    return std::string(v);
+  };
+  LaunchInfo l;
+  const auto world = get("WORLD_SIZE"), rank = get("RANK");
+  if (world || rank) {
+    if (!world) throw std::runtime_error("RANK is set but WORLD_SIZE is not: launch with torchrun --no-python, or set both");
+    if (!rank) throw std::runtime_error("WORLD_SIZE is set but RANK is not: launch with torchrun --no-python, or set both");
+    l.world_size = env_int("WORLD_SIZE", *world, 1, 65536);
+    l.rank = env_int("RANK", *rank, 0, l.world_size - 1);
+    const auto local = get("LOCAL_RANK");
+    l.local_rank = local ? env_int("LOCAL_RANK", *local, 0, 65535) : l.rank;
+    l.launcher = "torchrun";
+  } else if (const auto ntasks = get("SLURM_NTASKS")) {
+    l.world_size = env_int("SLURM_NTASKS", *ntasks, 1, 65536);
+    const auto procid = get("SLURM_PROCID");
+    if (!procid) throw std::runtime_error("SLURM_NTASKS is set but SLURM_PROCID is not: start geo_train with srun");
+    l.rank = env_int("SLURM_PROCID", *procid, 0, l.world_size - 1);
+    const auto local = get("SLURM_LOCALID");
+    l.local_rank = local ? env_int("SLURM_LOCALID", *local, 0, 65535) : 0;
+    l.launcher = "slurm";
+  }
+  if (!l.distributed()) return l;
+  const auto addr = get("MASTER_ADDR");
+  l.master_addr = addr ? *addr : master_addr;
+  if (l.master_addr.empty())
+    throw std::runtime_error("MASTER_ADDR is not set (torchrun sets it; under SLURM export MASTER_ADDR=$(scontrol show "
+                             "hostnames \"$SLURM_JOB_NODELIST\" | head -n1) or give --master-addr)");
+  if (const auto port = get("MASTER_PORT")) l.master_port = env_int("MASTER_PORT", *port, 1, 65535);
+  return l;
+}
+
+#ifdef GEO_WITH_C10D
+
+bool distributed_available() { return true; }
+#ifdef USE_C10D_NCCL
+bool nccl_available() { return torch::cuda::is_available(); }
+#else
+bool nccl_available() { return false; }
+#endif
+
+namespace {
+
+std::string message_of(const std::exception& e) {
+  if (const auto* c = dynamic_cast<const c10::Error*>(&e)) return c->what_without_backtrace();
+  return e.what();
+}
+
+// False for a PID that no longer runs: gone, or a zombie its parent has not collected yet.
+bool process_alive(pid_t pid) {
+  if (::kill(pid, 0) != 0 && errno == ESRCH) return false;
+  std::ifstream stat("/proc/" + std::to_string(pid) + "/stat");
+  std::string line;
+  if (!std::getline(stat, line)) return true;  // no /proc: assume it runs
+  const auto close = line.rfind(')');
+  return close == std::string::npos || close + 2 >= line.size() || line[close + 2] != 'Z';
+}
+
+class C10dGroup : public ProcessGroup {
+ public:
+  C10dGroup(const LaunchInfo& l, const DistributedConfig& config, const torch::Device& device)
+      : rank_(l.rank), size_(l.world_size), local_rank_(l.local_rank), timeout_s_(config.timeout_s),
+        master_(l.master_addr + ":" + std::to_string(l.master_port)) {
+    const auto timeout = std::chrono::milliseconds(int64_t{1000} * config.timeout_s);
+    const std::string where = l.master_addr + ":" + std::to_string(l.master_port);
+    c10d::TCPStoreOptions so;
+    so.port = static_cast<std::uint16_t>(l.master_port);
+    so.isServer = l.rank == 0;
+    so.numWorkers = static_cast<size_t>(l.world_size);
+    so.waitWorkers = true;
+    so.timeout = timeout;
+    try {
+      store_ = c10::make_intrusive<c10d::TCPStore>(l.master_addr, so);
+    } catch (const std::exception& e) {
+      throw std::runtime_error(
+          l.rank == 0 ? "rank 0 could not open the rendezvous at " + where + " (MASTER_ADDR:MASTER_PORT; port in use?) " +
+                            "or not all " + std::to_string(l.world_size) + " processes arrived within " +
+                            std::to_string(config.timeout_s) + " s: " + message_of(e)
+                      : "rank " + std::to_string(l.rank) + " could not reach the rendezvous at " + where +
+                            " within run.distributed.timeout_s (" + std::to_string(config.timeout_s) + " s): " + message_of(e));
+    }
+    // Who is who, for naming a lost process later (set before the group forms, so every key exists).
+    try {
+      char host[256] = {0};
+      ::gethostname(host, sizeof host - 1);
+      const std::string me = std::string(host) + " " + std::to_string(::getpid());
+      store_->set("geo/proc/" + std::to_string(rank_), std::vector<uint8_t>(me.begin(), me.end()));
+    } catch (const std::exception& e) {
+      throw std::runtime_error("rank " + std::to_string(rank_) + ": the rendezvous at " + where + " failed: " + message_of(e));
+    }
+    std::string backend = config.backend;
+    if (backend == "auto") backend = device.is_cuda() && nccl_available() ? "nccl" : "gloo";
+    backend_ = backend;
+    auto pg_store = c10::make_intrusive<c10d::PrefixStore>("pg", store_);
+    try {
+      if (backend == "nccl") {
+#ifdef USE_C10D_NCCL
+        auto o = c10d::ProcessGroupNCCL::Options::create();
+        o->timeout = timeout;
+        nccl_ = c10::make_intrusive<c10d::ProcessGroupNCCL>(pg_store, l.rank, l.world_size, o);
+#else
+        throw std::runtime_error("run.distributed.backend is nccl but this LibTorch has no NCCL (use gloo)");
+#endif
+      } else {
+        auto o = c10d::ProcessGroupGloo::Options::create(timeout);
+        const char* ifname = std::getenv("GLOO_SOCKET_IFNAME");
+        if (ifname && *ifname) o->devices.push_back(c10d::ProcessGroupGloo::createDeviceForInterface(ifname));
+        else if (l.master_addr == "127.0.0.1" || l.master_addr == "localhost")
+          o->devices.push_back(c10d::ProcessGroupGloo::createDeviceForHostname("127.0.0.1"));
+        else o->devices.push_back(c10d::ProcessGroupGloo::createDefaultDevice());
+        o->threads = 2;
+        gloo_ = c10::make_intrusive<c10d::ProcessGroupGloo>(pg_store, l.rank, l.world_size, o);
+      }
+    } catch (const std::exception& e) {
+      throw std::runtime_error("rank " + std::to_string(l.rank) + ": could not form the " + backend + " process group of " +
+                               std::to_string(l.world_size) + " at " + where + ": " + message_of(e));
+    }
+  }
+
+  int rank() const override { return rank_; }
+  int size() const override { return size_; }
+  int local_rank() const override { return local_rank_; }
+  std::string backend() const override { return backend_; }
+
+  void broadcast(std::vector<torch::Tensor>& tensors, int root) override {
+    c10d::BroadcastOptions o;
+    o.rootRank = root;
+    for (auto& t : tensors) {
+      std::vector<torch::Tensor> one{t};
+      guarded("broadcast", [&](auto& pg) { pg.broadcast(one, o)->wait(); });
+    }
+  }
+  void all_reduce_sum(std::vector<torch::Tensor>& tensors) override { all_reduce(tensors, c10d::ReduceOp::SUM, "all-reduce"); }
+  void all_reduce_max(std::vector<torch::Tensor>& tensors) override { all_reduce(tensors, c10d::ReduceOp::MAX, "all-reduce (max)"); }
+
+  std::string share_from_rank0(const std::string& key, const std::string& value, bool failed) override {
+    const std::string k = "geo/" + key;
+    try {
+      if (rank_ == 0) {
+        std::string v = (failed ? "1" : "0") + value;
+        store_->set(k, std::vector<uint8_t>(v.begin(), v.end()));
+        return value;
+      }
+      const auto bytes = store_->get(k);
+      const std::string v(bytes.begin(), bytes.end());
+      if (v.empty() || v[0] == '1')
+        throw std::runtime_error("rank 0 failed to start: " + (v.empty() ? std::string("?") : v.substr(1)));
+      return v.substr(1);
+    } catch (const std::runtime_error& e) {
+      if (std::string(e.what()).rfind("rank 0 failed", 0) == 0) throw;
+      throw std::runtime_error("rank " + std::to_string(rank_) + ": waiting for '" + key + "' from rank 0 failed: " + message_of(e));
+    }
+  }
+
+ private:
+  void all_reduce(std::vector<torch::Tensor>& tensors, c10d::ReduceOp op, const char* what) {
+    c10d::AllreduceOptions o;
+    o.reduceOp = op;
+    // One tensor per call: Gloo and NCCL reduce a list across its elements too (one per device).
+    std::vector<c10::intrusive_ptr<c10d::Work>> works;
+    guarded(what, [&](auto& pg) {
+      for (auto& t : tensors) {
+        std::vector<torch::Tensor> one{t};
+        works.push_back(pg.allreduce(one, o));
+      }
+      for (auto& w : works) w->wait();
+    });
+  }
+
+  template <class F> void guarded(const char* what, F&& f) {
+    try {
+#ifdef USE_C10D_NCCL
+      if (nccl_) return f(*nccl_);
+#endif
+      f(*gloo_);
+    } catch (const std::exception& e) {
+      throw std::runtime_error("rank " + std::to_string(rank_) + " of " + std::to_string(size_) + ": " + what +
+                               " failed: " + lost_processes() + " (or did not answer within run.distributed.timeout_s, " +
+                               std::to_string(timeout_s_) + " s): " + message_of(e));
+    }
+  }
+
+  // Which processes are gone: those on this host are checked by PID; rank 0 gone takes the
+  // rendezvous with it.
+  std::string lost_processes() {
+    char host[256] = {0};
+    ::gethostname(host, sizeof host - 1);
+    std::string gone, unknown;
+    for (int r = 0; r < size_; ++r) {
+      if (r == rank_) continue;
+      try {
+        const auto bytes = store_->get("geo/proc/" + std::to_string(r));
+        const std::string v(bytes.begin(), bytes.end());
+        const auto space = v.rfind(' ');
+        const std::string h = v.substr(0, space);
+        const pid_t pid = static_cast<pid_t>(std::atol(v.c_str() + space + 1));
+        if (h != host) unknown += (unknown.empty() ? "" : ", ") + std::to_string(r);
+        else if (!process_alive(pid))
+          gone += (gone.empty() ? "" : ", ") + std::to_string(r) + " (pid " + std::to_string(pid) + ")";
+      } catch (const std::exception&) {
+        return "rank 0 (the rendezvous host, " + master_ + ") is gone";
+      }
+    }
+    if (!gone.empty()) return "rank " + gone + " exited";
+    if (!unknown.empty()) return "a process exited or hung (ranks on other hosts: " + unknown + ")";
+    return "another process exited or hung";
+  }
+
+  int rank_, size_, local_rank_, timeout_s_;
+  std::string master_;
+  std::string backend_;
+  c10::intrusive_ptr<c10d::Store> store_;
+  c10::intrusive_ptr<c10d::ProcessGroupGloo> gloo_;
+#ifdef USE_C10D_NCCL
+  c10::intrusive_ptr<c10d::ProcessGroupNCCL> nccl_;
+#endif
+};
+
+}  // namespace
+
+std::unique_ptr<ProcessGroup> ProcessGroup::connect(const LaunchInfo& launch, const DistributedConfig& config,
+                                                    const torch::Device& device) {
+  spdlog::info("rank {} of {} ({}): joining the process group at {}:{}", launch.rank, launch.world_size,
+               launch.launcher, launch.master_addr, launch.master_port);
+  return std::make_unique<C10dGroup>(launch, config, device);
+}
+
+#else  // no c10d in this LibTorch
+
+bool distributed_available() { return false; }
+bool nccl_available() { return false; }
+
+std::unique_ptr<ProcessGroup> ProcessGroup::connect(const LaunchInfo& launch, const DistributedConfig&,
+                                                    const torch::Device&) {
+  throw std::runtime_error("launched as rank " + std::to_string(launch.rank) + " of " +
+                           std::to_string(launch.world_size) + " (" + launch.launcher +
+                           ") but this geo was built without torch.distributed (c10d and gloo headers not found "
+                           "at configure time; install libgloo-dev or use a LibTorch that ships them)");
+}
+
+#endif
+
+void GradientAverager::average(const std::vector<torch::Tensor>& parameters, bool poison) {
+  // Every process flattens the same parameters in the same order (a gradient that is missing here
+  // is zeros); gradients are written back only where this process has one.
+  std::vector<torch::Tensor> bucket_items;
+  buckets_ = 0;
+  bytes_ = 0;
+  const double world = static_cast<double>(group_.size());
+  auto flush = [&](std::vector<torch::Tensor>& items, std::vector<torch::Tensor>& owners) {
+    if (items.empty()) return;
+    auto flat = torch::cat(items);
+    if (poison) flat.fill_(std::numeric_limits<float>::quiet_NaN());
+    std::vector<torch::Tensor> one{flat};
+    group_.all_reduce_sum(one);
+    flat.div_(world);
+    int64_t at = 0;
+    for (auto& p : owners) {
+      const int64_t n = p.numel();
+      if (p.grad().defined()) p.mutable_grad().view(-1).copy_(flat.slice(0, at, at + n));
+      at += n;
+    }
+    ++buckets_;
+    bytes_ += flat.numel() * static_cast<int64_t>(flat.element_size());
+    items.clear();
+    owners.clear();
+  };
+  std::vector<torch::Tensor> owners;
+  int64_t size = 0;
+  for (const auto& p : parameters) {
+    const auto g = p.grad().defined() ? p.grad().detach().reshape(-1) : torch::zeros({p.numel()}, p.options());
+    if (size > 0 && (size + g.numel()) * static_cast<int64_t>(g.element_size()) > bucket_bytes_) {
+      flush(bucket_items, owners);
+      size = 0;
+    }
+    bucket_items.push_back(g);
+    owners.push_back(p);
+    size += g.numel();
+  }
+  flush(bucket_items, owners);
+}
+
+void broadcast_module(ProcessGroup& group, torch::nn::Module& module) {
+  torch::NoGradGuard no_grad;
+  std::vector<torch::Tensor> tensors;
+  for (const auto& p : module.parameters()) tensors.push_back(p.data());
+  for (const auto& b : module.buffers()) tensors.push_back(b);
+  group.broadcast(tensors, 0);
+}
+
+void verify_same_weights(ProcessGroup& group, const std::vector<torch::Tensor>& parameters, int64_t step) {
+  torch::NoGradGuard no_grad;
+  double sum = 0, sq = 0;
+  for (const auto& p : parameters) {
+    const auto d = p.detach().to(torch::kCPU, torch::kFloat64);
+    sum += d.sum().item<double>();
+    sq += d.pow(2).sum().item<double>();
+  }
+  auto hi = torch::tensor({sum, sq}, torch::kFloat64);
+  if (!parameters.empty() && parameters[0].is_cuda()) hi = hi.to(parameters[0].device());  // NCCL reduces on the GPU
+  auto lo = -hi;
+  std::vector<torch::Tensor> both{hi, lo};
+  group.all_reduce_max(both);
+  hi = hi.cpu();
+  lo = lo.cpu();
+  if (hi[0].item<double>() != -lo[0].item<double>() || hi[1].item<double>() != -lo[1].item<double>())
+    throw std::runtime_error("rank " + std::to_string(group.rank()) + ": the weights differ across processes at step " +
+                             std::to_string(step) + " (run.distributed.verify_interval): checksums range over [" +
+                             std::to_string(-lo[0].item<double>()) + ", " + std::to_string(hi[0].item<double>()) + "]");
+}
+
+}  // namespace geo

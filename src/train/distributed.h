@@ -1,0 +1,101 @@
+// Data-parallel training across processes on torch.distributed's C++ engine (c10d): a TCPStore for
+// rendezvous, ProcessGroupGloo on CPUs and ProcessGroupNCCL on GPUs. geo_train becomes one process of
+// a group when launched the way PyTorch users launch DDP jobs:
+//   torchrun --no-python --nproc_per_node=N geo_train --config ...   (RANK, WORLD_SIZE, LOCAL_RANK,
+//                                                                      MASTER_ADDR, MASTER_PORT)
+//   srun geo_train --config ...                                      (SLURM_PROCID, SLURM_NTASKS,
+//                                                                      SLURM_LOCALID; MASTER_ADDR and
+//                                                                      MASTER_PORT from the environment)
+// Without those variables (or with a world size of 1) geo_train is the single-process trainer.
+//
+// Semantics, as PyTorch's DistributedDataParallel: batch_size is per process; every process starts
+// from rank 0's weights; gradients are averaged over processes (all-reduce on flattened buckets), so
+// the weights stay bit-identical; BatchNorm uses each process's own batch statistics (running
+// statistics saved are rank 0's); each process reads its own disjoint shard of the deterministic
+// stream (run.distributed.shard_data). Only rank 0 writes the run folder and validates.
+// LibTorch only; c10d parts are compiled when LibTorch ships them (GEO_WITH_C10D).
+#pragma once
+
+#include "core/config.h"
+
+#include <torch/torch.h>
+
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace geo {
+
+// Where this process stands in a launch. world_size 1 = not distributed.
+struct LaunchInfo {
+  int rank = 0;
+  int world_size = 1;
+  int local_rank = 0;          // the GPU this process uses (cuda:local_rank)
+  std::string master_addr;     // the rendezvous host (rank 0 listens there)
+  int master_port = 29500;
+  std::string launcher;        // "torchrun", "slurm" or "" (single process)
+  bool distributed() const { return world_size > 1; }
+};
+
+// Reads torchrun's variables (RANK, WORLD_SIZE, LOCAL_RANK, MASTER_ADDR, MASTER_PORT), else SLURM's
+// (SLURM_PROCID, SLURM_NTASKS, SLURM_LOCALID, with MASTER_ADDR/MASTER_PORT from the environment or
+// `master_addr`). Incomplete or inconsistent variables are an error naming them.
+LaunchInfo launch_from_environment(const std::function<const char*(const char*)>& getenv_fn = nullptr,
+                                   const std::string& master_addr = "");
+
+// True when this build can run distributed (LibTorch's c10d with Gloo); NCCL additionally needs a
+// CUDA LibTorch built with it.
+bool distributed_available();
+bool nccl_available();
+
+// One process group. Every call is collective: all processes make it, in the same order. A peer
+// that exits or stops responding makes the call fail within run.distributed.timeout_s with a
+// std::runtime_error naming this rank and the operation.
+class ProcessGroup {
+ public:
+  // Connects (rank 0 listens on master_addr:master_port). backend "auto": NCCL for a CUDA device
+  // when available, else Gloo.
+  static std::unique_ptr<ProcessGroup> connect(const LaunchInfo& launch, const DistributedConfig& config,
+                                               const torch::Device& device);
+  virtual ~ProcessGroup() = default;
+
+  virtual int rank() const = 0;
+  virtual int size() const = 0;
+  virtual int local_rank() const = 0;  // the GPU index on this machine (LOCAL_RANK, SLURM_LOCALID)
+  virtual std::string backend() const = 0;
+  // Tensors of rank `root` copied into everyone's (in place).
+  virtual void broadcast(std::vector<torch::Tensor>& tensors, int root = 0) = 0;
+  // Element-wise sum / maximum over processes, in place.
+  virtual void all_reduce_sum(std::vector<torch::Tensor>& tensors) = 0;
+  virtual void all_reduce_max(std::vector<torch::Tensor>& tensors) = 0;
+  // A short string shared from rank 0 (e.g. the run folder); rank 0 passes it, the others get it.
+  // `failed` on rank 0 makes the others throw with `value` as the reason.
+  virtual std::string share_from_rank0(const std::string& key, const std::string& value, bool failed = false) = 0;
+};
+
+// Averages gradients over the group on flattened buckets of at most `bucket_bytes` (one all-reduce
+// per bucket instead of one per tensor), in place. Parameters without a gradient contribute zeros.
+class GradientAverager {
+ public:
+  GradientAverager(ProcessGroup& group, int64_t bucket_bytes = 25 << 20) : group_(group), bucket_bytes_(bucket_bytes) {}
+  // `poison`: this process's step is not finite; its contribution is NaN so that every process
+  // sees a non-finite average and skips the same step.
+  void average(const std::vector<torch::Tensor>& parameters, bool poison = false);
+  int64_t buckets() const { return buckets_; }  // of the last call
+  int64_t bytes() const { return bytes_; }      // of the last call
+
+ private:
+  ProcessGroup& group_;
+  int64_t bucket_bytes_;
+  int64_t buckets_ = 0, bytes_ = 0;
+};
+
+// rank 0's parameters and buffers copied into every process's module.
+void broadcast_module(ProcessGroup& group, torch::nn::Module& module);
+
+// A checksum of the parameters that is equal across processes exactly when the weights are (sum
+// and sum of squares, in float64); compared with all_reduce_max/min, a difference is an error.
+void verify_same_weights(ProcessGroup& group, const std::vector<torch::Tensor>& parameters, int64_t step);
+
+}  // namespace geo

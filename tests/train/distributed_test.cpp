@@ -1,0 +1,360 @@
+// Data-parallel training on c10d with Gloo, as users run it: geo_train processes on 127.0.0.1 with
+// torchrun's environment. Two processes given the same batches train exactly as one process does
+// (averaging identical gradients is exact); sharded processes stay identical (checked every step by
+// run.distributed.verify_interval); a SIGKILL of both is resumed exactly; a SIGKILL of one stops the
+// other with a message; a SIGTERM to one stops both at the same step with a checkpoint; launch
+// errors are messages, not hangs. Also the launch-environment rules and the gradient averager.
+#include "core/config.h"
+#include "train/checkpoints.h"
+#include "train/distributed.h"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <csignal>
+#include <cstring>
+#include <filesystem>
+#include <map>
+#include <thread>
+
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <spawn.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "synth_world.h"
+
+extern char** environ;
+
+namespace geo {
+namespace {
+
+namespace fs = std::filesystem;
+
+// ---- the launch environment ----
+
+LaunchInfo launch_of(const std::map<std::string, std::string>& env, const std::string& master = "") {
+  return launch_from_environment(
+      [&](const char* k) -> const char* {
+        auto it = env.find(k);
+        return it == env.end() ? nullptr : it->second.c_str();
+      },
+      master);
+}
+
+TEST(Launch, TorchrunSlurmAndSingle) {
+  EXPECT_FALSE(launch_of({}).distributed());
+  const auto t = launch_of({{"RANK", "3"}, {"WORLD_SIZE", "4"}, {"LOCAL_RANK", "1"}, {"MASTER_ADDR", "node7"},
+                            {"MASTER_PORT", "29999"}});
+  EXPECT_EQ(t.rank, 3);
+  EXPECT_EQ(t.world_size, 4);
+  EXPECT_EQ(t.local_rank, 1);
+  EXPECT_EQ(t.master_addr, "node7");
+  EXPECT_EQ(t.master_port, 29999);
+  EXPECT_EQ(t.launcher, "torchrun");
+  const auto s = launch_of({{"SLURM_NTASKS", "8"}, {"SLURM_PROCID", "5"}, {"SLURM_LOCALID", "1"}}, "head");
+  EXPECT_EQ(s.rank, 5);
+  EXPECT_EQ(s.world_size, 8);
+  EXPECT_EQ(s.local_rank, 1);
+  EXPECT_EQ(s.master_addr, "head");  // --master-addr when MASTER_ADDR is unset
+  EXPECT_EQ(s.master_port, 29500);
+  EXPECT_EQ(s.launcher, "slurm");
+  EXPECT_FALSE(launch_of({{"SLURM_NTASKS", "1"}, {"SLURM_PROCID", "0"}}).distributed());  // one task: single
+  EXPECT_FALSE(launch_of({{"RANK", "0"}, {"WORLD_SIZE", "1"}}).distributed());
+}
+
+TEST(Launch, IncompleteOrInconsistentEnvironmentsAreNamed) {
+  GEO_EXPECT_THROW_WITH(launch_of({{"WORLD_SIZE", "2"}}), "WORLD_SIZE is set but RANK is not");
+  GEO_EXPECT_THROW_WITH(launch_of({{"RANK", "0"}}), "RANK is set but WORLD_SIZE is not");
+  GEO_EXPECT_THROW_WITH(launch_of({{"RANK", "2"}, {"WORLD_SIZE", "2"}, {"MASTER_ADDR", "h"}}), "RANK='2'", "0..1");
+  GEO_EXPECT_THROW_WITH(launch_of({{"RANK", "0"}, {"WORLD_SIZE", "two"}}), "WORLD_SIZE='two'");
+  GEO_EXPECT_THROW_WITH(launch_of({{"RANK", "0"}, {"WORLD_SIZE", "2"}}), "MASTER_ADDR is not set");
+  GEO_EXPECT_THROW_WITH(launch_of({{"RANK", "0"}, {"WORLD_SIZE", "2"}, {"MASTER_ADDR", "h"}, {"MASTER_PORT", "70000"}}),
+                        "MASTER_PORT='70000'", "1..65535");
+  GEO_EXPECT_THROW_WITH(launch_of({{"SLURM_NTASKS", "2"}}), "SLURM_PROCID is not");
+}
+
+// ---- the gradient averager, on an in-process group of identical processes ----
+
+// `size` processes that all hold this process's tensors: a sum is size x the tensor.
+class MirrorGroup : public ProcessGroup {
+ public:
+  explicit MirrorGroup(int size) : size_(size) {}
+  int rank() const override { return 0; }
+  int size() const override { return size_; }
+  int local_rank() const override { return 0; }
+  std::string backend() const override { return "mirror"; }
+  void broadcast(std::vector<torch::Tensor>&, int) override {}
+  void all_reduce_sum(std::vector<torch::Tensor>& t) override {
+    for (auto& x : t) x.mul_(size_);
+    calls += static_cast<int>(t.size());
+  }
+  void all_reduce_max(std::vector<torch::Tensor>&) override {}
+  std::string share_from_rank0(const std::string&, const std::string& v, bool) override { return v; }
+  int calls = 0;
+
+ private:
+  int size_;
+};
+
+TEST(GradientAverager, AveragesInBucketsAndPoisonsNonFiniteSteps) {
+  MirrorGroup group(2);
+  auto a = torch::zeros({3}, torch::requires_grad()), b = torch::zeros({2, 2}, torch::requires_grad()),
+       unused = torch::zeros({5}, torch::requires_grad());
+  a.mutable_grad() = torch::tensor({1.f, 2.f, 3.f});
+  b.mutable_grad() = torch::tensor({4.f, 5.f, 6.f, 7.f}).view({2, 2});
+  GradientAverager avg(group, 4 * sizeof(float));  // 4 floats a bucket: a | b | unused
+  avg.average({a, b, unused});
+  EXPECT_EQ(avg.buckets(), 3);
+  EXPECT_EQ(group.calls, 3);
+  EXPECT_EQ(avg.bytes(), 12 * 4);
+  EXPECT_TRUE(torch::equal(a.grad(), torch::tensor({1.f, 2.f, 3.f})));  // (g + g) / 2 == g exactly
+  EXPECT_TRUE(torch::equal(b.grad(), torch::tensor({4.f, 5.f, 6.f, 7.f}).view({2, 2})));
+  EXPECT_FALSE(unused.grad().defined());  // no gradient here stays none
+  GradientAverager big(group);
+  big.average({a, b, unused});
+  EXPECT_EQ(big.buckets(), 1);
+  big.average({a, b, unused}, true);  // this process's step was not finite
+  EXPECT_TRUE(torch::isnan(a.grad()).all().item<bool>());
+  EXPECT_TRUE(torch::isnan(b.grad()).all().item<bool>());
+}
+
+// ---- real processes ----
+
+const std::string& world() {
+  static const std::string root = test::write_small_world("dist_world", 12, 0, 5) + "/raw";
+  return root;
+}
+
+std::string geo_train() {
+  const char* dir = std::getenv("GEO_APPS_DIR");
+  return std::string(dir ? dir : "apps") + "/geo_train";
+}
+
+// A port nobody listens on now, different per test process.
+int free_port() {
+  const int s = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  a.sin_port = 0;
+  ::bind(s, reinterpret_cast<sockaddr*>(&a), sizeof a);
+  socklen_t n = sizeof a;
+  ::getsockname(s, reinterpret_cast<sockaddr*>(&a), &n);
+  ::close(s);
+  return ntohs(a.sin_port);
+}
+
+struct Proc {
+  pid_t pid = -1;
+  std::string log;
+};
+
+// geo_train `args` with `env` added to this process's environment; output to `log`.
+Proc spawn(const std::vector<std::string>& args, const std::map<std::string, std::string>& env, const std::string& log) {
+  std::vector<std::string> envs;
+  for (char** e = environ; *e; ++e) {
+    const std::string kv = *e;
+    if (!env.count(kv.substr(0, kv.find('=')))) envs.push_back(kv);
+  }
+  for (const auto& [k, v] : env) envs.push_back(k + "=" + v);
+  std::vector<char*> argv, envp;
+  std::vector<std::string> all = {geo_train()};
+  all.insert(all.end(), args.begin(), args.end());
+  for (auto& a : all) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  for (auto& e : envs) envp.push_back(e.data());
+  envp.push_back(nullptr);
+  posix_spawn_file_actions_t fa;
+  posix_spawn_file_actions_init(&fa);
+  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_adddup2(&fa, 1, 2);
+  Proc p;
+  p.log = log;
+  const int rc = posix_spawn(&p.pid, argv[0], &fa, nullptr, argv.data(), envp.data());
+  posix_spawn_file_actions_destroy(&fa);
+  EXPECT_EQ(rc, 0) << "cannot start " << argv[0] << ": " << std::strerror(rc);
+  return p;
+}
+
+// Exit code (128 + signal when killed); -1 and the process killed after `seconds`.
+int wait_for(Proc& p, double seconds) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  for (;;) {
+    int status = 0;
+    const pid_t r = ::waitpid(p.pid, &status, WNOHANG);
+    if (r == p.pid) return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    if (std::chrono::steady_clock::now() > end) {
+      ::kill(p.pid, SIGKILL);
+      ::waitpid(p.pid, &status, 0);
+      return -1;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+}
+
+std::string config_file(const std::string& dir, int iterations, bool shard, int checkpoint_interval = 2) {
+  const std::string path = dir + "/c.yaml";
+  test::write_text(path, "model: {encoder_depth: 18, bn_momentum: 0.1}\n"
+                         "data: {root: " + world() + ", height: 64, width: 208, num_workers: 1, augment: {enabled: true}}\n"
+                         "stages:\n  - {name: s1, iterations: " + std::to_string(iterations) +
+                         ", train: [depth, pose], batch_size: 1}\n"
+                         "logging: {interval: 1, summary_interval: 0, checkpoint_interval: " +
+                         std::to_string(checkpoint_interval) + ", val_interval: 0, keep_last: 20}\n"
+                         "run: {threads: 1, seed: 3, distributed: {verify_interval: 1, timeout_s: 20, shard_data: " +
+                         (shard ? "true" : "false") + "}}\n");
+  return path;
+}
+
+// Starts `n` ranks of one group; rank r logs to <dir>/rank<r>.log.
+std::vector<Proc> launch(int n, const std::vector<std::string>& args, const std::string& dir, int port) {
+  std::vector<Proc> procs;
+  for (int r = 0; r < n; ++r)
+    procs.push_back(spawn(args, {{"RANK", std::to_string(r)}, {"WORLD_SIZE", std::to_string(n)}, {"LOCAL_RANK", std::to_string(r)},
+                                 {"MASTER_ADDR", "127.0.0.1"}, {"MASTER_PORT", std::to_string(port)}},
+                          dir + "/rank" + std::to_string(r) + ".log"));
+  return procs;
+}
+
+void expect_all_exit(std::vector<Proc>& procs, int code, double seconds = 120) {
+  for (auto& p : procs) EXPECT_EQ(wait_for(p, seconds), code) << test::read_file(p.log);
+}
+
+// metrics.csv without the last column (lr is the same anyway; kept simple): the loss rows.
+std::string losses(const std::string& run) { return test::read_file(run + "/metrics.csv"); }
+
+std::map<std::string, torch::Tensor> weights(const std::string& checkpoint) {
+  torch::serialize::InputArchive a;
+  a.load_from(checkpoint);
+  std::map<std::string, torch::Tensor> out;
+  for (const char* net : {"depth", "pose"}) {
+    torch::serialize::InputArchive sub;
+    a.read(net, sub);
+    for (const auto& k : sub.keys()) {
+      torch::Tensor t;
+      sub.read(k, t);
+      out[std::string(net) + "." + k] = t;
+    }
+  }
+  return out;
+}
+
+bool bit_identical(const std::map<std::string, torch::Tensor>& a, const std::map<std::string, torch::Tensor>& b) {
+  if (a.size() != b.size()) return false;
+  for (const auto& [k, t] : a)
+    if (!b.count(k) || !torch::equal(t, b.at(k))) {
+      ADD_FAILURE() << "tensor " << k << " differs";
+      return false;
+    }
+  return true;
+}
+
+class Distributed : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!distributed_available()) GTEST_SKIP() << "this geo was built without c10d/gloo";
+    if (!fs::exists(geo_train())) GTEST_SKIP() << geo_train() << " not built";
+  }
+};
+
+TEST_F(Distributed, TwoProcessesOnTheSameBatchesTrainExactlyAsOne) {
+  const auto dir = test::fresh_dir("dist_same");
+  const auto cfg = config_file(dir, 3, false);
+  Proc single = spawn({"--config", cfg, "--run-dir", dir + "/single"}, {}, dir + "/single.log");
+  ASSERT_EQ(wait_for(single, 120), 0) << test::read_file(single.log);
+  auto two = launch(2, {"--config", cfg, "--run-dir", dir + "/two"}, dir, free_port());
+  expect_all_exit(two, 0);
+  EXPECT_EQ(losses(dir + "/two"), losses(dir + "/single"));
+  EXPECT_TRUE(bit_identical(weights(resolve_checkpoint(dir + "/two")), weights(resolve_checkpoint(dir + "/single"))));
+  // Only rank 0 wrote the folder; rank 1 said nothing above warnings.
+  EXPECT_NE(test::read_file(dir + "/rank0.log").find("distributed: 2 processes (gloo)"), std::string::npos);
+  EXPECT_EQ(test::read_file(dir + "/rank1.log").find("[info] s1"), std::string::npos) << test::read_file(dir + "/rank1.log");
+}
+
+TEST_F(Distributed, ShardedProcessesStayIdenticalAndAKillOfBothResumesExactly) {
+  const auto dir = test::fresh_dir("dist_shard");
+  const auto cfg = config_file(dir, 6, true);
+  // Uninterrupted; verify_interval 1 compares the weights of both ranks after every step.
+  auto whole = launch(2, {"--config", cfg, "--run-dir", dir + "/whole"}, dir, free_port());
+  expect_all_exit(whole, 0);
+  // The same run killed (SIGKILL, both) once a checkpoint exists, then resumed by two processes.
+  auto killed = launch(2, {"--config", cfg, "--run-dir", dir + "/killed"}, dir, free_port());
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+  while (!fs::exists(dir + "/killed/checkpoints/latest") && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  for (auto& p : killed) ::kill(p.pid, SIGKILL);
+  expect_all_exit(killed, 128 + SIGKILL);
+  auto resumed = launch(2, {"--resume", dir + "/killed"}, dir, free_port());
+  expect_all_exit(resumed, 0);
+  EXPECT_EQ(losses(dir + "/killed"), losses(dir + "/whole"));
+  EXPECT_TRUE(bit_identical(weights(resolve_checkpoint(dir + "/killed")), weights(resolve_checkpoint(dir + "/whole"))));
+}
+
+TEST_F(Distributed, ALostProcessStopsTheOtherWithAMessage) {
+  const auto dir = test::fresh_dir("dist_lost");
+  auto procs = launch(2, {"--config", config_file(dir, 100000, true, 100000), "--run-dir", dir + "/run"}, dir, free_port());
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+  while (losses(dir + "/run").find("\n0,s1,2,") == std::string::npos && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  ::kill(procs[1].pid, SIGKILL);
+  const auto t0 = std::chrono::steady_clock::now();
+  EXPECT_EQ(wait_for(procs[0], 60), 1) << test::read_file(procs[0].log);
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 30);  // timeout_s 20
+  EXPECT_NE(test::read_file(procs[0].log).find("rank 0 of 2: all-reduce"), std::string::npos)
+      << test::read_file(procs[0].log);
+  EXPECT_NE(test::read_file(procs[0].log).find("failed: rank 1 (pid " + std::to_string(procs[1].pid) + ") exited"),
+            std::string::npos);
+  wait_for(procs[1], 5);
+}
+
+TEST_F(Distributed, ASigtermToOneStopsAllAtTheSameStepWithACheckpoint) {
+  const auto dir = test::fresh_dir("dist_term");
+  auto procs = launch(2, {"--config", config_file(dir, 100000, true, 100000), "--run-dir", dir + "/run"}, dir, free_port());
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+  while (losses(dir + "/run").find("\n0,s1,2,") == std::string::npos && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  ::kill(procs[1].pid, SIGTERM);  // as a scheduler would, to any one of them
+  expect_all_exit(procs, 130, 60);
+  const std::string latest = resolve_checkpoint(dir + "/run");
+  torch::serialize::InputArchive a;
+  a.load_from(latest);
+  EXPECT_GE(read_train_state(a, latest).iteration, 2);
+}
+
+TEST_F(Distributed, LaunchErrorsAreMessagesNotHangs) {
+  const auto dir = test::fresh_dir("dist_err");
+  const auto cfg = config_file(dir, 2, true);
+  Proc half = spawn({"--config", cfg, "--run-dir", dir + "/a"}, {{"WORLD_SIZE", "2"}}, dir + "/half.log");
+  EXPECT_EQ(wait_for(half, 30), 1);
+  EXPECT_NE(test::read_file(dir + "/half.log").find("WORLD_SIZE is set but RANK is not"), std::string::npos);
+  // Rank 1 with nobody listening: an error after timeout_s (20 s here), not a hang.
+  Proc lonely = spawn({"--config", cfg, "--set", "run.distributed.timeout_s=2", "--run-dir", dir + "/b"},
+                      {{"RANK", "1"}, {"WORLD_SIZE", "2"}, {"MASTER_ADDR", "127.0.0.1"}, {"MASTER_PORT", std::to_string(free_port())}},
+                      dir + "/lonely.log");
+  EXPECT_EQ(wait_for(lonely, 60), 1);
+  EXPECT_NE(test::read_file(dir + "/lonely.log").find("rank 1 could not reach the rendezvous at 127.0.0.1:"), std::string::npos)
+      << test::read_file(dir + "/lonely.log");
+  // Rank 0 on a port another program holds.
+  const int s = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ::bind(s, reinterpret_cast<sockaddr*>(&a), sizeof a);
+  ::listen(s, 1);
+  socklen_t n = sizeof a;
+  ::getsockname(s, reinterpret_cast<sockaddr*>(&a), &n);
+  Proc busy = spawn({"--config", cfg, "--set", "run.distributed.timeout_s=2", "--run-dir", dir + "/c"},
+                    {{"RANK", "0"}, {"WORLD_SIZE", "2"}, {"MASTER_ADDR", "127.0.0.1"}, {"MASTER_PORT", std::to_string(ntohs(a.sin_port))}},
+                    dir + "/busy.log");
+  EXPECT_EQ(wait_for(busy, 60), 1);
+  EXPECT_NE(test::read_file(dir + "/busy.log").find("rank 0 could not open the rendezvous"), std::string::npos)
+      << test::read_file(dir + "/busy.log");
+  ::close(s);
+  EXPECT_FALSE(fs::exists(dir + "/c"));  // nothing was created
+}
+
+}  // namespace
+}  // namespace geo
