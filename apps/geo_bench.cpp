@@ -20,8 +20,15 @@
 #ifdef __GLIBC__
 #include <malloc.h>
 #endif
+#include <algorithm>
 #include <chrono>
 #include <ctime>
+#include <mutex>
+
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
 #include <fstream>
 #include <functional>
 #include <map>
@@ -36,6 +43,7 @@
 #include "data/loader.h"
 #include "data/packed.h"
 #include "geometry/camera.h"
+#include "train/distributed.h"
 #include "train/networks.h"
 #include "train/train_step.h"
 #ifdef GEO_BENCH_PNG
@@ -212,6 +220,78 @@ std::pair<geo::Config, geo::Networks> networks_with_fr(const geo::Config& config
   return {c, nets};
 }
 
+// The gradient all-reduce of one training step of `stage` between `world` processes (threads of
+// this process, each a rank of a Gloo group on 127.0.0.1): what data-parallel training adds per
+// step on top of the step itself. ms: median over `iters` after `warmup`, as seen by rank 0.
+Row time_allreduce(const geo::Config& config, const geo::StageConfig& stage, bool fr, int world, int warmup, int iters) {
+  auto made = networks_with_fr(config, fr, stage.uses_flow(), torch::kCPU);
+  made.second.set_trainable(stage);
+  const auto params = made.second.trainable_parameters();
+  int64_t elements = 0;
+  for (const auto& p : params) elements += p.numel();
+  Row row{"comm", stage.name + " grads " + std::to_string(world) + "x gloo", fr ? "on" : "off", world, elements};
+  geo::DistributedConfig dc;
+  dc.timeout_s = 120;
+  // A free port: bind to 0 and let the store take it over.
+  int port = 0;
+  {
+    const int sock = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    ::bind(sock, reinterpret_cast<sockaddr*>(&a), sizeof a);
+    socklen_t n = sizeof a;
+    ::getsockname(sock, reinterpret_cast<sockaddr*>(&a), &n);
+    port = ntohs(a.sin_port);
+    ::close(sock);
+  }
+  std::vector<double> times;
+  int64_t buckets = 0, bytes = 0;
+  std::vector<std::thread> threads;
+  std::exception_ptr error;
+  std::mutex error_mutex;
+  for (int r = 0; r < world; ++r) {
+    threads.emplace_back([&, r] {
+      try {
+        geo::LaunchInfo l;
+        l.rank = r;
+        l.world_size = world;
+        l.master_addr = "127.0.0.1";
+        l.master_port = port;
+        l.launcher = "geo_bench";
+        auto group = geo::ProcessGroup::connect(l, dc, torch::kCPU);
+        std::vector<torch::Tensor> mine;
+        for (const auto& p : params) {
+          auto q = p.detach().clone().requires_grad_(true);
+          q.mutable_grad() = torch::randn_like(q);
+          mine.push_back(q);
+        }
+        geo::GradientAverager avg(*group);
+        for (int i = 0; i < warmup + iters; ++i) {
+          const auto t0 = std::chrono::steady_clock::now();
+          avg.average(mine);
+          const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+          if (r == 0 && i >= warmup) times.push_back(ms);
+        }
+        if (r == 0) {
+          buckets = avg.buckets();
+          bytes = avg.bytes();
+        }
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(error_mutex);
+        if (!error) error = std::current_exception();
+      }
+    });
+  }
+  for (auto& t : threads) t.join();
+  if (error) std::rethrow_exception(error);
+  std::sort(times.begin(), times.end());
+  row.ms = times[times.size() / 2];
+  row.name += ", " + std::to_string(buckets) + " bucket" + (buckets == 1 ? "" : "s") + ", " +
+              fmt::format("{:.0f}", static_cast<double>(bytes) / (1 << 20)) + " MB";
+  return row;
+}
+
 std::vector<geo::StageConfig> stages_to_time(const geo::Config& config, bool config_given) {
   if (config_given) return config.stages;
   geo::StageConfig s1;  // the paper's schedule: stage 1 depth + pose, stage 2 all three jointly
@@ -270,7 +350,7 @@ int main(int argc, char** argv) {
   CLI::App app{"geo_bench: parameter counts, FLOPs, inference and training-step timings, loader throughput"};
   std::string config_path, device_name = "cpu", json_path, fr_mode = "both", data_root;
   std::vector<int> batches = {1, 4};
-  bool summary = false, no_infer = false, no_train = false, no_fold = false;
+  bool summary = false, no_infer = false, no_train = false, no_fold = false, no_comm = false;
   int warmup = 10, iters = 5, train_warmup = 2, train_iters = 5, threads = 0, train_batch = 0, loader_batches = 20,
       profile_top = 0;
   bool profile_shapes = false;
@@ -290,6 +370,7 @@ int main(int argc, char** argv) {
   app.add_option("--loader-batches", loader_batches, "batches timed for the loader")->check(CLI::PositiveNumber);
   app.add_flag("--no-infer", no_infer, "skip the inference timings");
   app.add_flag("--no-train", no_train, "skip the training-step timings");
+  app.add_flag("--no-comm", no_comm, "skip the gradient all-reduce timings (data-parallel training's cost per step)");
   app.add_flag("--no-fold", no_fold, "inference with BatchNorm as separate layers (default: folded into the convolutions)");
   app.add_option("--json", json_path, "also write every row as JSON to this file");
   std::string markdown_path;
@@ -423,6 +504,14 @@ int main(int argc, char** argv) {
             print_profile(fmt::format("{}, FR {}, batch {}", trainees[k]->row.name, trainees[k]->row.fr, b),
                           calls[k].second, profile_top, profile_shapes);
         }
+      }
+    }
+
+    // Data-parallel training: the gradient all-reduce each step adds (2 ranks, Gloo, loopback).
+    if (!summary && !no_train && !no_comm && geo::distributed_available()) {
+      for (const auto& stage : stages_to_time(config, !config_path.empty())) {
+        spdlog::info("gradient all-reduce of {} between 2 ranks (Gloo, 127.0.0.1) ...", stage.name);
+        rows.push_back(time_allreduce(config, stage, frs.front(), 2, train_warmup, train_iters));
       }
     }
 

@@ -23,8 +23,6 @@ cmake --build "$BUILD_DIR" -j "$JOBS" --target fuzz_tests
 export ASAN_OPTIONS="detect_leaks=0:abort_on_error=1:${ASAN_OPTIONS:-}"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1:${UBSAN_OPTIONS:-}"
 export GEO_FUZZ_SECONDS="${GEO_FUZZ_SECONDS:-20}"
-export GEO_SHARED_DIR="${GEO_SHARED_DIR:-$PWD/../shared}"
-export GEO_CONFIG_DIR="$PWD/configs"
 echo "geo fuzz: $GEO_FUZZ_SECONDS s per target under ASan+UBSan"
 # A hang is a failure too: the whole job is bounded.
 timeout --signal=KILL $((GEO_FUZZ_SECONDS * 13 + 300)) "$BUILD_DIR/tests/fuzz_tests"

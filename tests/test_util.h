@@ -48,11 +48,24 @@ inline std::string read_file(const std::string& path) {
   return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
 }
 
-// ../shared/kitti_samples (GEO_SHARED_DIR set by ctest), or "" when absent.
+#ifndef GEO_TEST_SHARED_DIR
+#define GEO_TEST_SHARED_DIR "../shared"
+#endif
+#ifndef GEO_TEST_APPS_DIR
+#define GEO_TEST_APPS_DIR "apps"
+#endif
+
+// ../shared/kitti_samples (GEO_SHARED_DIR, else the folder beside the source tree), or "" when absent.
 inline std::string kitti_samples() {
   const char* env = std::getenv("GEO_SHARED_DIR");
-  const std::string dir = std::string(env ? env : "../shared") + "/kitti_samples";
+  const std::string dir = std::string(env ? env : GEO_TEST_SHARED_DIR) + "/kitti_samples";
   return std::filesystem::exists(dir + "/README.md") ? dir : "";
+}
+
+// The built tools (geo_train, ...): GEO_APPS_DIR, else the build tree's apps/.
+inline std::string apps_dir() {
+  const char* env = std::getenv("GEO_APPS_DIR");
+  return env ? env : GEO_TEST_APPS_DIR;
 }
 
 }  // namespace geo::test

@@ -136,6 +136,13 @@ class Run {
     auto a = open_archive(resume_from_);
     nets_.load(a, resume_from_, false);
     state_ = read_train_state(a, resume_from_);
+    c10::IValue world;
+    const int64_t was = a.try_read("world_size", world) && world.isInt() ? world.toInt() : 1;
+    const int64_t now = group_ ? group_->size() : 1;
+    if (was != now && writer_)
+      spdlog::warn("{} was written by a run of {} process(es), this one has {}: training continues from it with the "
+                   "data stream re-sharded for {} (the samples after this point differ from an uninterrupted run's)",
+                   resume_from_, was, now, now);
     if (state_.stage >= static_cast<int64_t>(cfg_.stages.size()))
       throw std::runtime_error(resume_from_ + ": stage index " + std::to_string(state_.stage) +
                                " beyond the config's stages");
@@ -283,6 +290,7 @@ class Run {
       a.write("optimizer", opt);
       write_train_state(a, state_);
       a.write("config", c10::IValue(to_yaml(cfg_)));
+      a.write("world_size", c10::IValue(static_cast<int64_t>(group_ ? group_->size() : 1)));
     });
     spdlog::info("checkpoint {}{}", path, best ? " (best of stage " + stage().name + ")" : "");
   }

@@ -129,10 +129,7 @@ const std::string& world() {
   return root;
 }
 
-std::string geo_train() {
-  const char* dir = std::getenv("GEO_APPS_DIR");
-  return std::string(dir ? dir : "apps") + "/geo_train";
-}
+std::string geo_train() { return test::apps_dir() + "/geo_train"; }
 
 // A port nobody listens on now, different per test process.
 int free_port() {
