@@ -25,10 +25,6 @@
 #include <ctime>
 #include <mutex>
 
-#include <arpa/inet.h>
-#include <netinet/in.h>
-#include <sys/socket.h>
-#include <unistd.h>
 #include <fstream>
 #include <functional>
 #include <map>
@@ -232,19 +228,7 @@ Row time_allreduce(const geo::Config& config, const geo::StageConfig& stage, boo
   Row row{"comm", stage.name + " grads " + std::to_string(world) + "x gloo", fr ? "on" : "off", world, elements};
   geo::DistributedConfig dc;
   dc.timeout_s = 120;
-  // A free port: bind to 0 and let the store take it over.
-  int port = 0;
-  {
-    const int sock = ::socket(AF_INET, SOCK_STREAM, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    ::bind(sock, reinterpret_cast<sockaddr*>(&a), sizeof a);
-    socklen_t n = sizeof a;
-    ::getsockname(sock, reinterpret_cast<sockaddr*>(&a), &n);
-    port = ntohs(a.sin_port);
-    ::close(sock);
-  }
+  const int port = geo::free_local_port();
   std::vector<double> times;
   int64_t buckets = 0, bytes = 0;
   std::vector<std::thread> threads;

@@ -10,7 +10,10 @@
 #include <optional>
 #include <stdexcept>
 
+#include <arpa/inet.h>
+#include <netinet/in.h>
 #include <signal.h>
+#include <sys/socket.h>
 #include <unistd.h>
 
 #ifdef GEO_WITH_C10D
@@ -36,6 +39,20 @@ int env_int(const std::string& key, const std::string& value, int lo, int hi) {
 }
 
 }  // namespace
+
+int free_local_port() {
+  const int sock = ::socket(AF_INET, SOCK_STREAM, 0);
+  if (sock < 0) throw std::runtime_error("cannot open a socket to find a free port");
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t n = sizeof a;
+  const bool ok = ::bind(sock, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
+                  ::getsockname(sock, reinterpret_cast<sockaddr*>(&a), &n) == 0;
+  ::close(sock);
+  if (!ok) throw std::runtime_error("cannot find a free TCP port on 127.0.0.1");
+  return ntohs(a.sin_port);
+}
 
 LaunchInfo launch_from_environment(const std::function<const char*(const char*)>& getenv_fn,
                                    const std::string& master_addr) {

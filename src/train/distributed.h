@@ -44,6 +44,10 @@ struct LaunchInfo {
 LaunchInfo launch_from_environment(const std::function<const char*(const char*)>& getenv_fn = nullptr,
                                    const std::string& master_addr = "");
 
+// A TCP port on 127.0.0.1 that nobody listens on now (asked from the OS), for single-machine groups
+// (tests, geo_bench).
+int free_local_port();
+
 // True when this build can run distributed (LibTorch's c10d with Gloo); NCCL additionally needs a
 // CUDA LibTorch built with it.
 bool distributed_available();

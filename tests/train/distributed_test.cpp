@@ -131,20 +131,6 @@ const std::string& world() {
 
 std::string geo_train() { return test::apps_dir() + "/geo_train"; }
 
-// A port nobody listens on now, different per test process.
-int free_port() {
-  const int s = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  a.sin_port = 0;
-  ::bind(s, reinterpret_cast<sockaddr*>(&a), sizeof a);
-  socklen_t n = sizeof a;
-  ::getsockname(s, reinterpret_cast<sockaddr*>(&a), &n);
-  ::close(s);
-  return ntohs(a.sin_port);
-}
-
 struct Proc {
   pid_t pid = -1;
   std::string log;
@@ -249,6 +235,14 @@ bool bit_identical(const std::map<std::string, torch::Tensor>& a, const std::map
   return true;
 }
 
+// Waits (up to 2 minutes) until rank 0 has logged iteration `n` of stage s1 in metrics.csv.
+void wait_until_logged(const std::string& run, int n) {
+  const std::string row = "\n0,s1," + std::to_string(n) + ",";
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+  while (losses(run).find(row) == std::string::npos && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+}
+
 class Distributed : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -262,7 +256,7 @@ TEST_F(Distributed, TwoProcessesOnTheSameBatchesTrainExactlyAsOne) {
   const auto cfg = config_file(dir, 3, false);
   Proc single = spawn({"--config", cfg, "--run-dir", dir + "/single"}, {}, dir + "/single.log");
   ASSERT_EQ(wait_for(single, 120), 0) << test::read_file(single.log);
-  auto two = launch(2, {"--config", cfg, "--run-dir", dir + "/two"}, dir, free_port());
+  auto two = launch(2, {"--config", cfg, "--run-dir", dir + "/two"}, dir, free_local_port());
   expect_all_exit(two, 0);
   EXPECT_EQ(losses(dir + "/two"), losses(dir + "/single"));
   EXPECT_TRUE(bit_identical(weights(resolve_checkpoint(dir + "/two")), weights(resolve_checkpoint(dir + "/single"))));
@@ -275,16 +269,16 @@ TEST_F(Distributed, ShardedProcessesStayIdenticalAndAKillOfBothResumesExactly) {
   const auto dir = test::fresh_dir("dist_shard");
   const auto cfg = config_file(dir, 6, true);
   // Uninterrupted; verify_interval 1 compares the weights of both ranks after every step.
-  auto whole = launch(2, {"--config", cfg, "--run-dir", dir + "/whole"}, dir, free_port());
+  auto whole = launch(2, {"--config", cfg, "--run-dir", dir + "/whole"}, dir, free_local_port());
   expect_all_exit(whole, 0);
   // The same run killed (SIGKILL, both) once a checkpoint exists, then resumed by two processes.
-  auto killed = launch(2, {"--config", cfg, "--run-dir", dir + "/killed"}, dir, free_port());
+  auto killed = launch(2, {"--config", cfg, "--run-dir", dir + "/killed"}, dir, free_local_port());
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
   while (!fs::exists(dir + "/killed/checkpoints/latest") && std::chrono::steady_clock::now() < deadline)
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   for (auto& p : killed) ::kill(p.pid, SIGKILL);
   expect_all_exit(killed, 128 + SIGKILL);
-  auto resumed = launch(2, {"--resume", dir + "/killed"}, dir, free_port());
+  auto resumed = launch(2, {"--resume", dir + "/killed"}, dir, free_local_port());
   expect_all_exit(resumed, 0);
   EXPECT_EQ(losses(dir + "/killed"), losses(dir + "/whole"));
   EXPECT_TRUE(bit_identical(weights(resolve_checkpoint(dir + "/killed")), weights(resolve_checkpoint(dir + "/whole"))));
@@ -292,10 +286,8 @@ TEST_F(Distributed, ShardedProcessesStayIdenticalAndAKillOfBothResumesExactly) {
 
 TEST_F(Distributed, ALostProcessStopsTheOtherWithAMessage) {
   const auto dir = test::fresh_dir("dist_lost");
-  auto procs = launch(2, {"--config", config_file(dir, 100000, true, 100000), "--run-dir", dir + "/run"}, dir, free_port());
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
-  while (losses(dir + "/run").find("\n0,s1,2,") == std::string::npos && std::chrono::steady_clock::now() < deadline)
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  auto procs = launch(2, {"--config", config_file(dir, 100000, true, 100000), "--run-dir", dir + "/run"}, dir, free_local_port());
+  wait_until_logged(dir + "/run", 2);
   ::kill(procs[1].pid, SIGKILL);
   const auto t0 = std::chrono::steady_clock::now();
   EXPECT_EQ(wait_for(procs[0], 60), 1) << test::read_file(procs[0].log);
@@ -309,10 +301,8 @@ TEST_F(Distributed, ALostProcessStopsTheOtherWithAMessage) {
 
 TEST_F(Distributed, ASigtermToOneStopsAllAtTheSameStepWithACheckpoint) {
   const auto dir = test::fresh_dir("dist_term");
-  auto procs = launch(2, {"--config", config_file(dir, 100000, true, 100000), "--run-dir", dir + "/run"}, dir, free_port());
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
-  while (losses(dir + "/run").find("\n0,s1,2,") == std::string::npos && std::chrono::steady_clock::now() < deadline)
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  auto procs = launch(2, {"--config", config_file(dir, 100000, true, 100000), "--run-dir", dir + "/run"}, dir, free_local_port());
+  wait_until_logged(dir + "/run", 2);
   ::kill(procs[1].pid, SIGTERM);  // as a scheduler would, to any one of them
   expect_all_exit(procs, 130, 60);
   const std::string latest = resolve_checkpoint(dir + "/run");
@@ -329,7 +319,7 @@ TEST_F(Distributed, LaunchErrorsAreMessagesNotHangs) {
   EXPECT_NE(test::read_file(dir + "/half.log").find("WORLD_SIZE is set but RANK is not"), std::string::npos);
   // Rank 1 with nobody listening: an error after timeout_s (20 s here), not a hang.
   Proc lonely = spawn({"--config", cfg, "--set", "run.distributed.timeout_s=2", "--run-dir", dir + "/b"},
-                      {{"RANK", "1"}, {"WORLD_SIZE", "2"}, {"MASTER_ADDR", "127.0.0.1"}, {"MASTER_PORT", std::to_string(free_port())}},
+                      {{"RANK", "1"}, {"WORLD_SIZE", "2"}, {"MASTER_ADDR", "127.0.0.1"}, {"MASTER_PORT", std::to_string(free_local_port())}},
                       dir + "/lonely.log");
   EXPECT_EQ(wait_for(lonely, 60), 1);
   EXPECT_NE(test::read_file(dir + "/lonely.log").find("rank 1 could not reach the rendezvous at 127.0.0.1:"), std::string::npos)
