@@ -220,7 +220,7 @@ class Run {
       report_step(r, lr.at(state_.iteration - 1));
       const auto due = [&](int64_t every) { return every > 0 && (state_.iteration % every == 0 || state_.iteration == s.iterations); };
       if (writer_ && due(log.summary_interval)) write_summaries(batch, r.out);
-      if (writer_ && due(log.val_interval) && data_.val) pending_best = validate() || pending_best;
+      if (writer_ && due(log.val_interval) && data_.val) pending_best = validate(signals) || pending_best;
       const auto& dist = cfg_.run.distributed;
       if (group_ && dist.verify_interval > 0 && state_.iteration % dist.verify_interval == 0)
         verify_same_weights(*group_, nets_.trainable_parameters(), global_step());
@@ -263,9 +263,15 @@ class Run {
     for (auto& sink : sinks_) sink->on_step(rec);
   }
 
-  // Validates the stage; true when the score is the stage's best so far.
-  bool validate() {
-    const Validation v = geo::validate(nets_, data_.val, stage(), cfg_, device_);
+  // Validates the stage; true when the score is the stage's best so far. A signal ends the pass
+  // early, unrecorded (the checkpoint that follows matters more than the score).
+  bool validate(const SignalScope& signals) {
+    const Validation v = geo::validate(nets_, data_.val, stage(), cfg_, device_, [&] { return signals.received() != 0; });
+    if (v.interrupted) {
+      spdlog::warn("validation at {} {} interrupted by signal {}: not recorded", stage().name, state_.iteration,
+                   signals.received());
+      return false;
+    }
     ValidationRecord rec;
     rec.stage_index = state_.stage;
     rec.stage = stage().name;

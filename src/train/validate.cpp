@@ -5,7 +5,7 @@
 namespace geo {
 
 Validation validate(Networks& nets, std::shared_ptr<const SnippetSource> source, const StageConfig& stage,
-                    const Config& config, const torch::Device& device) {
+                    const Config& config, const torch::Device& device, const std::function<bool()>& stop) {
   torch::NoGradGuard no_grad;
   nets.depth->eval();
   nets.pose->eval();
@@ -23,12 +23,17 @@ Validation validate(Networks& nets, std::shared_ptr<const SnippetSource> source,
   const bool flow = stage.uses_flow();
   double rigid = 0, flow_sum = 0;
   for (int64_t k = 0; k < batches; ++k) {
+    if (stop && stop()) {
+      v.interrupted = true;
+      break;
+    }
     Batch b = loader.next();
     const auto out = compute_losses(nets, b.tgt.to(device), b.srcs.to(device), b.K.to(device), stage, config);
     rigid += out.losses.rigid.item<double>();
     if (flow) flow_sum += out.losses.flow.item<double>();
   }
   nets.set_modes(stage);
+  if (v.interrupted) return v;
   const double n = static_cast<double>(std::max<int64_t>(batches, 1));
   v.rigid = rigid / n;
   if (flow) v.flow = flow_sum / n;

@@ -6,6 +6,7 @@
 #include "data/snippets.h"
 #include "train/networks.h"
 
+#include <functional>
 #include <memory>
 #include <optional>
 
@@ -19,10 +20,13 @@ struct Validation {
   // pose leave L_br constant).
   double score = 0;
   size_t snippets = 0;
+  bool interrupted = false;     // `stop` said so before the pass ended: no score
 };
 
-// Restores the stage's train/eval modes before returning.
+// Restores the stage's train/eval modes before returning. `stop`, asked before every batch, ends
+// the pass early (a SIGTERM must not wait for a long validation: schedulers kill soon after it).
 Validation validate(Networks& nets, std::shared_ptr<const SnippetSource> source, const StageConfig& stage,
-                    const Config& config, const torch::Device& device);
+                    const Config& config, const torch::Device& device,
+                    const std::function<bool()>& stop = nullptr);
 
 }  // namespace geo

@@ -11,6 +11,7 @@
 
 #include <gtest/gtest.h>
 
+#include <csignal>
 #include <fstream>
 #include <map>
 #include <sstream>
@@ -309,6 +310,32 @@ TEST(Trainer, InitFromAnotherArchitectureOrABrokenFileIsOneClearLine) {
   std::filesystem::resize_file(base + "/cut.pt", 1000);
   i.init = base + "/cut.pt";
   GEO_EXPECT_THROW_WITH(train(cfg, i), base + "/cut.pt: not a readable geo/LibTorch file");
+}
+
+// Sends this process SIGTERM (as a cluster scheduler would) after `n` steps: just before validation.
+struct TermAtStep : MetricsSink {
+  explicit TermAtStep(int64_t n) : left(n) {}
+  void on_step(const StepRecord&) override {
+    if (--left == 0) std::raise(SIGTERM);
+  }
+  int64_t left;
+};
+
+TEST(Trainer, ASigtermDuringValidationEndsItAndCheckpointsAtOnce) {
+  auto cfg = tiny_config();
+  cfg.stages.resize(1);
+  cfg.stages[0].iterations = 5;
+  cfg.logging.val_interval = 1;
+  cfg.logging.checkpoint_interval = 100;
+  TrainOptions o;
+  o.run_dir = test::fresh_dir("termval") + "/run";
+  o.sinks.push_back(std::make_shared<TermAtStep>(2));
+  EXPECT_EQ(train(cfg, o), 130);
+  // Iteration 1 was validated; iteration 2's validation stopped at its first batch, unrecorded.
+  const auto scores = val_scores(o.run_dir, "s1");
+  EXPECT_EQ(scores.size(), 1u);
+  EXPECT_EQ(scores.count(1), 1u);
+  EXPECT_EQ(state_of(resolve_checkpoint(o.run_dir)).iteration, 2);
 }
 
 TEST(Trainer, ASecondWriterOnARunFolderIsRefused) {
