@@ -25,8 +25,13 @@ std::string list(const std::vector<std::string>& names, size_t max_shown = 20) {
 }
 }  // namespace
 
-void write_state(const torch::nn::Module& module, torch::serialize::OutputArchive& archive) {
-  for (const auto& [name, tensor] : state_of(module)) archive.write(name, tensor.detach().cpu());
+void write_state(const torch::nn::Module& module, torch::serialize::OutputArchive& archive,
+                 std::optional<torch::ScalarType> floating) {
+  for (const auto& [name, tensor] : state_of(module)) {
+    auto t = tensor.detach().cpu();
+    if (floating && t.is_floating_point()) t = t.to(*floating);
+    archive.write(name, t);
+  }
 }
 
 void read_state(torch::nn::Module& module, torch::serialize::InputArchive& archive,

@@ -5,6 +5,7 @@
 
 #include <torch/torch.h>
 
+#include <optional>
 #include <string>
 
 namespace geo {
@@ -24,7 +25,10 @@ void save_archive(torch::serialize::OutputArchive& archive, const std::string& p
 torch::serialize::InputArchive open_archive(const std::string& path);
 
 // Same, into / out of an archive under a key prefix (for checkpoints holding several networks).
-void write_state(const torch::nn::Module& module, torch::serialize::OutputArchive& archive);
+// `floating`: store floating-point tensors in this type (e.g. kHalf for small exported models);
+// read_state converts them back to the module's type.
+void write_state(const torch::nn::Module& module, torch::serialize::OutputArchive& archive,
+                 std::optional<torch::ScalarType> floating = std::nullopt);
 void read_state(torch::nn::Module& module, torch::serialize::InputArchive& archive,
                 const std::string& what);
 

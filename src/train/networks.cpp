@@ -88,10 +88,10 @@ std::vector<torch::Tensor> Networks::trainable_parameters() const {
   return out;
 }
 
-void Networks::save(torch::serialize::OutputArchive& archive) const {
+void Networks::save(torch::serialize::OutputArchive& archive, std::optional<torch::ScalarType> floating) const {
   auto put = [&](const char* key, const torch::nn::Module& m) {
     torch::serialize::OutputArchive sub;
-    write_state(m, sub);
+    write_state(m, sub, floating);
     archive.write(key, sub);
   };
   put("depth", *depth);

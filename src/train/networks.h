@@ -43,7 +43,8 @@ struct Networks {
   void prepare_inference(bool fold = true);
   // Checkpoint I/O: one nested archive per network ("depth", "pose", "flow"). Loading is strict per
   // network; a network absent from the archive is an error unless `allow_missing_flow` and it is flow.
-  void save(torch::serialize::OutputArchive& archive) const;
+  // `floating`: the type floating-point tensors are stored in (geo_export --half); default as they are.
+  void save(torch::serialize::OutputArchive& archive, std::optional<torch::ScalarType> floating = std::nullopt) const;
   void load(torch::serialize::InputArchive& archive, const std::string& source, bool allow_missing_flow);
 };
 

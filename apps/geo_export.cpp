@@ -1,0 +1,46 @@
+// geo_export: a deployable model file from a training checkpoint or run folder: the networks'
+// weights and what is needed to use them (input size, sequence length, architecture, the FlowNet
+// input's settings), without the optimiser state and the training config. geo::Model::load (and so
+// geo_infer and any program on include/geo/geo.h) reads it; BatchNorm is folded when loaded.
+//   geo_export --checkpoint runs/stage2 --out model.pt [--half]
+#include <CLI/CLI.hpp>
+
+#include <cstdio>
+#include <filesystem>
+
+#include "geo/geo.h"
+
+namespace fs = std::filesystem;
+
+int main(int argc, char** argv) {
+  CLI::App app{"geo_export: weights-only model file (for geo::Model, geo_infer) from a geo_train checkpoint"};
+  std::string checkpoint, out;
+  bool half = false;
+  app.add_option("--checkpoint", checkpoint, "checkpoint file or run folder (its best checkpoint)")->required();
+  app.add_option("--out", out, "model file to write")->required();
+  app.add_flag("--half", half, "store the weights as float16 (half the size; computed in float32 when loaded)");
+  CLI11_PARSE(app, argc, argv);
+  try {
+    const geo::Model model = geo::Model::load(checkpoint);
+    model.save(out, half);
+    // Check what was written: the same depth from both on a fixed image.
+    const geo::Model back = geo::Model::load(out);
+    const auto& s = model.spec();
+    auto image = torch::linspace(0, 1, 3 * s.height * s.width).view({3, s.height, s.width});
+    const double diff = (model.depth(image) - back.depth(image)).abs().max().item<double>();
+    const double scale = model.depth(image).abs().max().item<double>();
+    const auto in_size = fs::file_size(s.source), out_size = fs::file_size(out);
+    std::printf("%s: %s -> %s\n", "geo_export", s.source.c_str(), out.c_str());
+    std::printf("  %lld x %lld input, %lld-frame PoseNet, ResNet-%d, FR %s, FlowNet %s, %s weights\n",
+                static_cast<long long>(s.height), static_cast<long long>(s.width), static_cast<long long>(s.seq_length),
+                s.encoder_depth, s.feature_refinement ? "on" : "off", s.has_flow ? "yes" : "no",
+                half ? "float16" : "float32");
+    std::printf("  %.1f MB -> %.1f MB (%.0f%%); depth from the written file differs by at most %.3g (%.2g relative)\n",
+                static_cast<double>(in_size) / 1e6, static_cast<double>(out_size) / 1e6,
+                100.0 * static_cast<double>(out_size) / static_cast<double>(in_size), diff, diff / scale);
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "geo_export: %s\n", e.what());
+    return 1;
+  }
+}

@@ -1,0 +1,52 @@
+// depth_from_camera: depth statistics and the camera path of a folder of frames, with geo as a
+// library. The frames are read by this program (OpenCV here; any RGB buffer works).
+//   depth_from_camera MODEL FRAMES_DIR [OUT_DIR]   (OUT_DIR: <frame>-depth.png as geo_infer writes them)
+#include <geo/geo.h>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+int main(int argc, char** argv) {
+  if (argc < 3) {
+    std::fprintf(stderr, "usage: %s MODEL FRAMES_DIR [OUT_DIR]\n", argv[0]);
+    return 2;
+  }
+  try {
+    const geo::Model model = geo::Model::load(argv[1]);
+    std::vector<std::filesystem::path> files;
+    for (const auto& e : std::filesystem::directory_iterator(argv[2]))
+      if (e.path().extension() == ".png" || e.path().extension() == ".jpg") files.push_back(e.path());
+    std::sort(files.begin(), files.end());
+    torch::Tensor previous, camera_to_world = torch::eye(4);
+    for (const auto& f : files) {
+      cv::Mat bgr = cv::imread(f.string(), cv::IMREAD_COLOR), rgb;
+      if (bgr.empty()) throw std::runtime_error("cannot read " + f.string());
+      cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
+      const torch::Tensor image = geo::rgb8_image(rgb.data, rgb.rows, rgb.cols, static_cast<int64_t>(rgb.step));
+      const torch::Tensor depth = model.depth(image).cpu();  // [H,W], up to scale
+      if (previous.defined())  // points in the previous camera -> this one; chained into a path
+        camera_to_world = camera_to_world.matmul(torch::inverse(model.relative_pose(previous, image).cpu()));
+      previous = image;
+      const auto median = depth.flatten().median().item<float>();
+      std::printf("%s depth min %.3f median %.3f max %.3f camera at (%.3f, %.3f, %.3f)\n", f.filename().c_str(),
+                  depth.min().item<float>(), median, depth.max().item<float>(), camera_to_world[0][3].item<float>(),
+                  camera_to_world[1][3].item<float>(), camera_to_world[2][3].item<float>());
+      if (argc > 3) {  // 16-bit PNG, depth x 256, as geo_infer's <frame>-depth.png
+        const auto q = (depth.clamp(0, 65535.0 / 256.0) * 256).round().to(torch::kInt32).contiguous();
+        cv::Mat m(static_cast<int>(q.size(0)), static_cast<int>(q.size(1)), CV_32S, q.data_ptr<int32_t>()), m16;
+        m.convertTo(m16, CV_16U);
+        cv::imwrite(std::string(argv[3]) + "/" + f.stem().string() + "-depth.png", m16);
+      }
+    }
+    return 0;
+  } catch (const std::exception& e) {  // geo::Error and anything else
+    std::fprintf(stderr, "depth_from_camera: %s\n", e.what());
+    return 1;
+  }
+}

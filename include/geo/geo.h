@@ -1,0 +1,87 @@
+// geo's C++ inference API: depth, camera motion and optical flow from a trained geo model, inside
+// your own program. Link geo::geo (find_package(geo)); LibTorch is its only public dependency.
+//
+//   #include <geo/geo.h>
+//   geo::LoadOptions options;
+//   options.device = "cuda";
+//   geo::Model model = geo::Model::load("model.pt", options);  // a geo_export file or a training checkpoint
+//   torch::Tensor depth = model.depth(image);             // [H,W] depth (up to scale) at the image's size
+//   torch::Tensor motion = model.relative_pose(prev, cur); // [4,4]: points in prev's camera -> cur's camera
+//   torch::Tensor flow = model.flow(prev, cur);            // [2,H,W] pixels, prev -> cur
+//
+// Images: torch::Tensor [3,H,W] (or [B,3,H,W]), RGB, uint8 (0..255) or floating point in [0,1],
+// any size: resized to the model's input and outputs resized back; or raw interleaved RGB bytes
+// through geo::rgb8_image. Intrinsics ([3,3], pixels of the given image) are optional: without them
+// KITTI's proportions are assumed (fx = 0.58 W, fy = 1.92 H, principal point at the centre).
+//
+// A Model is cheap to copy (shared weights) and safe to call from several threads at once; loading
+// and calling touch no global state (no seeds; thread counts only when LoadOptions::threads asks).
+// Every failure is a geo::Error naming what was wrong.
+#pragma once
+
+#include <torch/types.h>
+
+#include <cstdint>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace geo {
+
+class Error : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct LoadOptions {
+  std::string device = "cpu";  // cpu, cuda, cuda:N, or auto (CUDA when available)
+  int threads = 0;             // > 0: set LibTorch's intra-op threads (process-wide); 0: leave them
+};
+
+// What a model expects and has (read from the file).
+struct ModelSpec {
+  int64_t height = 0, width = 0;   // network input size
+  int64_t seq_length = 0;          // frames the PoseNet takes (3 or 5)
+  int encoder_depth = 0;           // ResNet depth of DepthNet and FlowNet
+  bool feature_refinement = false; // FR attention blocks (the paper)
+  bool has_flow = false;           // a FlowNet (else flow() is the rigid flow of depth and motion)
+  std::string source;              // the file it was loaded from
+};
+
+// [3,H,W] uint8 tensor from interleaved RGB bytes (row stride in bytes; 0 = 3 * width). Copies.
+torch::Tensor rgb8_image(const uint8_t* rgb, int64_t height, int64_t width, int64_t stride = 0);
+
+class Model {
+ public:
+  // A file written by geo_export, or a training checkpoint / run folder of geo_train.
+  static Model load(const std::string& path, const LoadOptions& options = {});
+
+  const ModelSpec& spec() const;
+  torch::Device device() const;
+
+  // Depth of each image, at the image's size: [H,W] for [3,H,W], [B,H,W] for [B,3,H,W].
+  torch::Tensor depth(const torch::Tensor& image) const;
+  // Camera motion from `from` to `to`: the [4,4] transform of points in `from`'s camera frame into
+  // `to`'s (translation up to the depth's scale). [B,4,4] for batches.
+  torch::Tensor relative_pose(const torch::Tensor& from, const torch::Tensor& to,
+                              const torch::Tensor& intrinsics = {}) const;
+  // The PoseNet on a whole snippet of spec().seq_length frames (target = the middle one): [L-1,4,4]
+  // transforms from the target's camera into each other frame's, in order.
+  torch::Tensor pose(const std::vector<torch::Tensor>& frames) const;
+  // Optical flow from `from` to `to` in pixels of the given images: [2,H,W] ([B,2,H,W]): the rigid
+  // flow of depth and motion plus the FlowNet's residual when the model has one.
+  torch::Tensor flow(const torch::Tensor& from, const torch::Tensor& to, const torch::Tensor& intrinsics = {}) const;
+
+  // Writes the weights only (no optimiser, no training config) with the spec: geo_export.
+  // `half`: weights stored as float16 (half the size; loaded back as float32).
+  void save(const std::string& path, bool half = false) const;
+
+  struct Impl;
+
+ private:
+  explicit Model(std::shared_ptr<Impl> impl) : impl_(std::move(impl)) {}
+  std::shared_ptr<Impl> impl_;  // shared by copies; the networks are only read after loading
+};
+
+}  // namespace geo

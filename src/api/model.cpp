@@ -1,0 +1,250 @@
+// geo::Model (include/geo/geo.h): the networks of a checkpoint or exported model file behind an
+// inference-only API. Built on the training layers' Networks and predict_pair, so inference is the
+// same computation geo_eval scores.
+#include "geo/geo.h"
+
+#include "core/config.h"
+#include "core/files.h"
+#include "core/runtime.h"
+#include "core/state_io.h"
+#include "geometry/pose.h"
+#include "train/checkpoints.h"
+#include "train/networks.h"
+
+#include <ATen/CPUGeneratorImpl.h>
+#include <torch/torch.h>
+#include <yaml-cpp/yaml.h>
+
+#include <filesystem>
+#include <mutex>
+#include <sstream>
+
+namespace geo {
+
+struct Model::Impl {
+  Config config;
+  Networks nets;
+  torch::Device device = torch::kCPU;
+  ModelSpec spec;
+};
+
+namespace {
+
+namespace fs = std::filesystem;
+namespace F = torch::nn::functional;
+
+constexpr const char* kFormat = "geo-model 1";
+
+// Runs `f`, turning any failure into a geo::Error that says what was being done.
+template <class Fn> auto guarded(const std::string& what, Fn&& f) -> decltype(f()) {
+  try {
+    return f();
+  } catch (const Error&) {
+    throw;
+  } catch (const c10::Error& e) {
+    std::string why = e.what_without_backtrace();
+    throw Error(what + ": " + why.substr(0, why.find('\n')));
+  } catch (const std::exception& e) {
+    throw Error(what + ": " + e.what());
+  }
+}
+
+// The part of a config a model needs to be used: model.*, the input size and sequence length, and
+// what the FlowNet's input depends on (loss.ssim_alpha, image_range, sampler). Nothing of training.
+std::string spec_yaml(const Config& c) {
+  const YAML::Node all = YAML::Load(to_yaml(c));
+  YAML::Node out;
+  out["model"] = all["model"];
+  for (const char* k : {"height", "width", "seq_length"}) out["data"][k] = all["data"][k];
+  for (const char* k : {"ssim_alpha", "image_range", "sampler"}) out["loss"][k] = all["loss"][k];
+  YAML::Emitter e;
+  e << out;
+  return e.c_str();
+}
+
+// Networks are created with random weights that the file then replaces: the process's random
+// generator is left as it was (a library must not move its user's seeds).
+Networks create_quietly(const Config& config, bool with_flow) {
+  auto gen = at::detail::getDefaultCPUGenerator();
+  at::Tensor state;
+  {
+    std::lock_guard<std::mutex> lock(gen.mutex());  // not held while creating: that draws from it
+    state = gen.get_state();
+  }
+  Networks n = Networks::create(config, with_flow);
+  std::lock_guard<std::mutex> lock(gen.mutex());
+  gen.set_state(state);
+  return n;
+}
+
+// image [3,H,W] / [B,3,H,W], uint8 or float in [0,1] -> [B,3,h,w] float on the model's device.
+torch::Tensor prepare(const Model::Impl& m, const torch::Tensor& image, int64_t* H, int64_t* W, bool* batched,
+                      const char* what) {
+  if (!image.defined()) throw Error(std::string(what) + ": the image tensor is undefined");
+  if (!(image.dim() == 3 || image.dim() == 4) || image.size(-3) != 3)
+    throw Error(std::string(what) + ": expected an RGB image [3,H,W] or a batch [B,3,H,W], got " + c10::str(image.sizes()));
+  if (image.size(-1) < 1 || image.size(-2) < 1) throw Error(std::string(what) + ": the image is empty " + c10::str(image.sizes()));
+  *batched = image.dim() == 4;
+  auto x = *batched ? image : image.unsqueeze(0);
+  *H = x.size(2);
+  *W = x.size(3);
+  if (x.scalar_type() == torch::kUInt8) x = x.to(m.device, torch::kFloat32).div_(255);
+  else if (x.is_floating_point()) x = x.to(m.device, torch::kFloat32);
+  else throw Error(std::string(what) + ": pixels must be uint8 or floating point, got " + c10::toString(x.scalar_type()));
+  if (*H != m.spec.height || *W != m.spec.width)
+    x = F::interpolate(x, F::InterpolateFuncOptions()
+                              .size(std::vector<int64_t>{m.spec.height, m.spec.width})
+                              .mode(torch::kBilinear)
+                              .align_corners(false));
+  return x.contiguous();
+}
+
+// [B,3,3] intrinsics at the network's size from ones at H x W (or KITTI's proportions).
+torch::Tensor network_K(const Model::Impl& m, const torch::Tensor& K, int64_t B, int64_t H, int64_t W) {
+  const double h = static_cast<double>(m.spec.height), w = static_cast<double>(m.spec.width);
+  torch::Tensor k;
+  if (!K.defined()) {
+    k = torch::tensor({0.58 * w, 0.0, 0.5 * w, 0.0, 1.92 * h, 0.5 * h, 0.0, 0.0, 1.0}, torch::kFloat64).view({3, 3});
+  } else {
+    if (!((K.dim() == 2 && K.size(0) == 3 && K.size(1) == 3) || (K.dim() == 3 && K.size(1) == 3 && K.size(2) == 3)))
+      throw Error("intrinsics must be [3,3] or [B,3,3], got " + c10::str(K.sizes()));
+    k = K.to(torch::kCPU, torch::kFloat64).clone();
+    if (!torch::isfinite(k).all().item<bool>()) throw Error("intrinsics hold NaN or infinity");
+    auto fx = k.select(-2, 0).select(-1, 0), fy = k.select(-2, 1).select(-1, 1);
+    if ((fx <= 0).any().item<bool>() || (fy <= 0).any().item<bool>()) throw Error("intrinsics: fx and fy must be > 0");
+    k.select(-2, 0).mul_(w / static_cast<double>(W));
+    k.select(-2, 1).mul_(h / static_cast<double>(H));
+  }
+  if (k.dim() == 2) k = k.unsqueeze(0).expand({B, 3, 3});
+  return k.to(m.device, torch::kFloat32).contiguous();
+}
+
+// [B,C,h,w] -> [B,C,H,W] (bilinear).
+torch::Tensor to_size(const torch::Tensor& x, int64_t H, int64_t W) {
+  if (x.size(2) == H && x.size(3) == W) return x;
+  return F::interpolate(x, F::InterpolateFuncOptions().size(std::vector<int64_t>{H, W}).mode(torch::kBilinear).align_corners(false));
+}
+
+}  // namespace
+
+torch::Tensor rgb8_image(const uint8_t* rgb, int64_t height, int64_t width, int64_t stride) {
+  if (!rgb) throw Error("rgb8_image: null pixel pointer");
+  if (height < 1 || width < 1) throw Error("rgb8_image: size " + std::to_string(height) + "x" + std::to_string(width));
+  if (stride == 0) stride = 3 * width;
+  if (stride < 3 * width) throw Error("rgb8_image: row stride " + std::to_string(stride) + " < 3 x width");
+  auto hwc = torch::from_blob(const_cast<uint8_t*>(rgb), {height, width, 3}, {stride, 3, 1}, torch::kUInt8);
+  return hwc.permute({2, 0, 1}).contiguous();
+}
+
+Model Model::load(const std::string& path, const LoadOptions& options) {
+  return guarded("loading geo model '" + path + "'", [&] {
+    const std::string file = fs::is_directory(path) ? resolve_checkpoint(path) : path;
+    auto archive = open_archive(file);
+    auto impl = std::make_shared<Impl>();
+    c10::IValue format;
+    if (archive.try_read("geo_model_format", format)) {
+      if (!format.isString() || format.toStringRef() != kFormat)
+        throw Error(file + ": model file format '" + (format.isString() ? format.toStringRef() : "?") + "', this geo reads '" +
+                    kFormat + "'");
+      c10::IValue spec;
+      if (!archive.try_read("spec", spec) || !spec.isString()) throw Error(file + ": model file without its spec");
+      impl->config = parse_config(spec.toStringRef(), file + " [spec]");
+    } else {
+      auto config = checkpoint_config(archive, file);
+      if (!config) throw Error(file + ": neither a geo_export model nor a geo_train checkpoint (no spec, no config)");
+      impl->config = *config;
+    }
+    torch::serialize::InputArchive flow;
+    const bool has_flow = archive.try_read("flow", flow);
+    impl->nets = create_quietly(impl->config, has_flow);
+    impl->nets.load(archive, file, false);
+    if (options.threads > 0) torch::set_num_threads(options.threads);
+    impl->device = select_device(options.device);
+    impl->nets.to(impl->device);
+    impl->nets.prepare_inference(true);  // eval mode, BatchNorm folded into the convolutions
+    const auto& c = impl->config;
+    impl->spec = ModelSpec{c.data.height, c.data.width, c.data.seq_length, c.model.encoder_depth, c.model.use_fr,
+                           has_flow, file};
+    return Model(impl);
+  });
+}
+
+const ModelSpec& Model::spec() const { return impl_->spec; }
+torch::Device Model::device() const { return impl_->device; }
+
+torch::Tensor Model::depth(const torch::Tensor& image) const {
+  return guarded("geo::Model::depth", [&] {
+    torch::InferenceMode guard;
+    int64_t H = 0, W = 0;
+    bool batched = false;
+    const auto x = prepare(*impl_, image, &H, &W, &batched, "depth");
+    const auto disp = impl_->nets.depth->forward(x).disp[0];  // [B,1,h,w]
+    auto depth = to_size(1.0 / disp, H, W).squeeze(1);
+    return batched ? depth : depth[0];
+  });
+}
+
+torch::Tensor Model::pose(const std::vector<torch::Tensor>& frames) const {
+  return guarded("geo::Model::pose", [&] {
+    const auto L = static_cast<size_t>(impl_->spec.seq_length);
+    if (frames.size() != L)
+      throw Error("the PoseNet of this model takes " + std::to_string(L) + " frames, got " + std::to_string(frames.size()));
+    torch::InferenceMode guard;
+    std::vector<torch::Tensor> x;
+    int64_t H = 0, W = 0;
+    bool batched = false;
+    for (const auto& f : frames) x.push_back(prepare(*impl_, f, &H, &W, &batched, "pose"));
+    const size_t k = L / 2;
+    std::vector<torch::Tensor> srcs;
+    for (size_t i = 0; i < L; ++i)
+      if (i != k) srcs.push_back(x[i]);
+    const auto vec = impl_->nets.pose->forward(x[k], srcs);  // [B,L-1,6]
+    const int64_t B = vec.size(0), N = vec.size(1);
+    const auto T = pose_vec_to_matrix(vec.reshape({B * N, 6})).view({B, N, 4, 4});
+    return batched ? T : T[0];
+  });
+}
+
+torch::Tensor Model::relative_pose(const torch::Tensor& from, const torch::Tensor& to, const torch::Tensor& intrinsics) const {
+  (void)intrinsics;  // the PoseNet sees images only; kept for symmetry with flow()
+  return guarded("geo::Model::relative_pose", [&] {
+    // A snippet with `from` as the target, repeated before it, and `to` after it.
+    const auto L = impl_->spec.seq_length, k = L / 2;
+    std::vector<torch::Tensor> snippet;
+    for (int64_t i = 0; i < L; ++i) snippet.push_back(i <= k ? from : to);
+    const auto T = pose(snippet);
+    return T.select(T.dim() == 4 ? 1 : 0, k);  // the first frame after the target: `to`
+  });
+}
+
+torch::Tensor Model::flow(const torch::Tensor& from, const torch::Tensor& to, const torch::Tensor& intrinsics) const {
+  return guarded("geo::Model::flow", [&] {
+    torch::InferenceMode guard;
+    int64_t H = 0, W = 0, H2 = 0, W2 = 0;
+    bool batched = false, batched2 = false;
+    const auto a = prepare(*impl_, from, &H, &W, &batched, "flow (from)");
+    const auto b = prepare(*impl_, to, &H2, &W2, &batched2, "flow (to)");
+    if (H != H2 || W != W2 || a.size(0) != b.size(0))
+      throw Error("the two images differ in size: " + c10::str(from.sizes()) + " and " + c10::str(to.sizes()));
+    const auto K = network_K(*impl_, intrinsics, a.size(0), H, W);
+    auto f = predict_pair(impl_->nets, a, b, K, impl_->config.loss).flow;  // [B,2,h,w]
+    if (f.size(2) != H || f.size(3) != W) {
+      f = to_size(f, H, W);
+      f.select(1, 0).mul_(static_cast<double>(W) / static_cast<double>(impl_->spec.width));
+      f.select(1, 1).mul_(static_cast<double>(H) / static_cast<double>(impl_->spec.height));
+    }
+    return batched ? f : f[0];
+  });
+}
+
+void Model::save(const std::string& path, bool half) const {
+  guarded("writing geo model '" + path + "'", [&] {
+    torch::serialize::OutputArchive a;
+    a.write("geo_model_format", c10::IValue(std::string(kFormat)));
+    a.write("spec", c10::IValue(spec_yaml(impl_->config)));
+    impl_->nets.save(a, half ? std::optional<torch::ScalarType>(torch::kHalf) : std::nullopt);
+    save_archive(a, path);
+  });
+}
+
+}  // namespace geo

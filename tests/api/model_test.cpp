@@ -1,0 +1,143 @@
+// The C++ inference API (include/geo/geo.h): the same numbers as the evaluation path (Predictor) on a
+// training checkpoint, exported files that give exactly the checkpoint's outputs (float16: stated
+// bound), any input size, thread-safe concurrent calls, the process's random generator untouched,
+// and geo::Error for every misuse.
+#include "geo/geo.h"
+
+#include "core/config.h"
+#include "core/state_io.h"
+#include "eval/predictor.h"
+#include "train/networks.h"
+
+#include <gtest/gtest.h>
+
+#include <thread>
+
+#include "test_util.h"
+
+namespace geo {
+namespace {
+
+// A training checkpoint as geo_train writes one (networks + config), with untrained weights.
+const std::string& checkpoint() {
+  static const std::string path = [] {
+    const Config c = parse_config("model: {encoder_depth: 18}\ndata: {height: 64, width: 208}\n", "api.yaml");
+    torch::manual_seed(1);
+    Networks nets = Networks::create(c, true);
+    torch::serialize::OutputArchive a;
+    nets.save(a);
+    a.write("config", c10::IValue(to_yaml(c)));
+    const std::string p = test::fresh_dir("api") + "/ckpt.pt";
+    save_archive(a, p);
+    return p;
+  }();
+  return path;
+}
+
+torch::Tensor image(int64_t H, int64_t W, double shift = 0) {
+  return (torch::linspace(0, 1, 3 * H * W).view({3, H, W}) + shift).remainder(1.0);
+}
+
+TEST(Api, SameDepthPoseAndFlowAsTheEvaluationPath) {
+  const Model m = Model::load(checkpoint());
+  Predictor p(checkpoint(), "cpu");
+  EXPECT_EQ(m.spec().height, 64);
+  EXPECT_EQ(m.spec().seq_length, 3);
+  EXPECT_TRUE(m.spec().has_flow);
+  const auto a = image(64, 208), b = image(64, 208, 0.1);
+  EXPECT_TRUE(torch::equal(m.depth(a), p.depth(a.unsqueeze(0))[0][0]));
+  const auto K = torch::tensor({100.f, 0.f, 104.f, 0.f, 100.f, 32.f, 0.f, 0.f, 1.f}).view({3, 3});
+  EXPECT_TRUE(torch::equal(m.flow(a, b, K), p.flow(a.unsqueeze(0), b.unsqueeze(0), K.unsqueeze(0))[0]));
+  EXPECT_TRUE(torch::equal(m.relative_pose(a, b), p.pose(a.unsqueeze(0), {a.unsqueeze(0), b.unsqueeze(0)})[0][1]));
+  EXPECT_EQ(m.pose({b, a, b}).sizes(), (torch::IntArrayRef{2, 4, 4}));
+  // uint8 pixels are the same image as float / 255.
+  const auto u8 = (a * 255).round().to(torch::kUInt8);
+  EXPECT_TRUE(torch::allclose(m.depth(u8), m.depth(u8.to(torch::kFloat32) / 255), 0, 0));
+}
+
+TEST(Api, AnyInputSizeAndBatches) {
+  const Model m = Model::load(checkpoint());
+  EXPECT_EQ(m.depth(image(100, 300)).sizes(), (torch::IntArrayRef{100, 300}));
+  EXPECT_EQ(m.depth(torch::stack({image(64, 208), image(64, 208, 0.2)})).sizes(), (torch::IntArrayRef{2, 64, 208}));
+  // Flow at twice the model's size is in pixels of that size: the model's flow resized and doubled.
+  const auto a = image(64, 208), b = image(64, 208, 0.1);
+  const auto small = m.flow(a, b);
+  namespace F = torch::nn::functional;
+  auto up = [](const torch::Tensor& x) {
+    return F::interpolate(x.unsqueeze(0), F::InterpolateFuncOptions().size(std::vector<int64_t>{128, 416})
+                                              .mode(torch::kBilinear).align_corners(false))[0];
+  };
+  const auto big = m.flow(up(a), up(b));
+  EXPECT_EQ(big.sizes(), (torch::IntArrayRef{2, 128, 416}));
+  // The resized inputs come back to exactly the small ones (bilinear halving of a bilinear doubling
+  // is not exact in general, so compare the flow's scale only on the mean).
+  EXPECT_NEAR(big.abs().mean().item<double>() / small.abs().mean().item<double>(), 2.0, 0.1);
+}
+
+TEST(Api, ExportedFilesGiveTheCheckpointsOutputs) {
+  const Model m = Model::load(checkpoint());
+  const auto dir = test::fresh_dir("api_export");
+  m.save(dir + "/m.pt");
+  m.save(dir + "/m16.pt", true);
+  const Model e = Model::load(dir + "/m.pt"), h = Model::load(dir + "/m16.pt");
+  const auto a = image(64, 208), b = image(64, 208, 0.1);
+  EXPECT_TRUE(torch::equal(e.depth(a), m.depth(a)));
+  EXPECT_TRUE(torch::equal(e.flow(a, b), m.flow(a, b)));
+  EXPECT_TRUE(torch::equal(e.relative_pose(a, b), m.relative_pose(a, b)));
+  const double rel = ((h.depth(a) - m.depth(a)).abs().max() / m.depth(a).abs().max()).item<double>();
+  EXPECT_LT(rel, 1e-3) << "float16 weights";
+  std::printf("float16 export: depth differs by %.2g relative\n", rel);
+  EXPECT_LT(std::filesystem::file_size(dir + "/m.pt"), std::filesystem::file_size(checkpoint()) + 1);
+  // float16: half the bytes, plus the archive's per-tensor records (under 1 % here).
+  EXPECT_LT(static_cast<double>(std::filesystem::file_size(dir + "/m16.pt")) * 2,
+            static_cast<double>(std::filesystem::file_size(dir + "/m.pt")) * 1.01);
+}
+
+TEST(Api, ConcurrentCallsAndNoGlobalState) {
+  torch::manual_seed(5);
+  const auto expected = torch::rand({4});
+  torch::manual_seed(5);
+  const Model m = Model::load(checkpoint());
+  EXPECT_TRUE(torch::equal(torch::rand({4}), expected)) << "loading moved the process's random generator";
+  const auto a = image(64, 208);
+  const auto serial = m.depth(a);
+  std::vector<torch::Tensor> out(4);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 4; ++t) threads.emplace_back([&, t] { out[t] = m.depth(a); });
+  for (auto& t : threads) t.join();
+  for (const auto& o : out) EXPECT_TRUE(torch::equal(o, serial));
+}
+
+TEST(Api, MisuseIsAGeoErrorThatSaysWhat) {
+  const Model m = Model::load(checkpoint());
+  auto expect_error = [](const std::function<void()>& f, const std::string& fragment) {
+    try {
+      f();
+      ADD_FAILURE() << "no error; expected '" << fragment << "'";
+    } catch (const geo::Error& e) {
+      EXPECT_NE(std::string(e.what()).find(fragment), std::string::npos) << e.what();
+    }
+  };
+  expect_error([&] { m.depth(torch::zeros({1, 64, 208})); }, "expected an RGB image [3,H,W]");
+  expect_error([&] { m.depth(torch::zeros({3, 64, 208}, torch::kInt32)); }, "uint8 or floating point");
+  expect_error([&] { m.pose({image(64, 208)}); }, "takes 3 frames, got 1");
+  expect_error([&] { m.flow(image(64, 208), image(32, 208)); }, "differ in size");
+  expect_error([&] { m.flow(image(64, 208), image(64, 208), torch::zeros({3, 3})); }, "fx and fy must be > 0");
+  expect_error([] { Model::load("/nonexistent/model.pt"); }, "/nonexistent/model.pt: no such file");
+  const auto dir = test::fresh_dir("api_bad");
+  test::write_text(dir + "/x.pt", "not a model");
+  expect_error([&] { Model::load(dir + "/x.pt"); }, "not a readable geo/LibTorch file");
+  expect_error([] { rgb8_image(nullptr, 2, 2); }, "null pixel pointer");
+}
+
+TEST(Api, Rgb8ImagesWithRowPadding) {
+  const uint8_t px[] = {1, 2, 3, 4, 5, 6, 0, 0,  // row 0: two pixels, 2 bytes of padding
+                        7, 8, 9, 10, 11, 12, 0, 0};
+  const auto t = rgb8_image(px, 2, 2, 8);
+  EXPECT_EQ(t.sizes(), (torch::IntArrayRef{3, 2, 2}));
+  EXPECT_EQ(t[0][1][0].item<int>(), 7);   // R of row 1, column 0
+  EXPECT_EQ(t[2][0][1].item<int>(), 6);   // B of row 0, column 1
+}
+
+}  // namespace
+}  // namespace geo
