@@ -1,5 +1,5 @@
 // geo_infer: what a trained model sees, for an image, a folder of frames or a video.
-//   geo_infer --checkpoint runs/x --input frame.png|frames/|clip.mp4 --output out/
+//   geo_infer --checkpoint runs/x|model.pt --input frame.png|frames/|clip.mp4 --output out/
 // Writes per frame <name>-disp.png (colour-mapped disparity) and <name>-depth.png (uint16, depth x
 // 256 in the network's scale, which monocular training leaves unknown); for consecutive frames also
 // <name>-flow.png (colour wheel, full flow to the next frame) and trajectory.txt (KITTI pose file,
@@ -19,7 +19,7 @@
 #include "data/calib.h"
 #include "data/image_io.h"
 #include "data/text_io.h"
-#include "eval/predictor.h"
+#include "geo/geo.h"
 
 namespace fs = std::filesystem;
 
@@ -28,7 +28,7 @@ int main(int argc, char** argv) {
   std::string checkpoint, input, output, device = "auto";
   std::vector<double> intrinsics;
   int64_t max_frames = 0;
-  app.add_option("--checkpoint", checkpoint, "checkpoint file or run folder")->required();
+  app.add_option("--checkpoint", checkpoint, "checkpoint file, run folder or geo_export model file")->required();
   app.add_option("--input", input, "an image, a folder of frames (sorted by name) or a video file")->required();
   app.add_option("--output", output, "output folder (created)")->required();
   app.add_option("--device", device, "auto (CUDA when available), cpu, cuda or cuda:N (an error without CUDA)");
@@ -40,8 +40,10 @@ int main(int argc, char** argv) {
   geo::keep_freed_memory();
   try {
     geo::setup_logging("info");
-    geo::Predictor model(checkpoint, device);
-    const int64_t h = model.height(), w = model.width();
+    geo::LoadOptions load;
+    load.device = device;
+    const geo::Model model = geo::Model::load(checkpoint, load);  // the library's inference path
+    const int64_t h = model.spec().height, w = model.spec().width;
     // Frames as (name, image [1,3,h,w]) in order; the original size is kept for the intrinsics.
     std::vector<std::pair<std::string, torch::Tensor>> frames;
     int64_t H0 = 0, W0 = 0;
@@ -98,18 +100,18 @@ int main(int argc, char** argv) {
       K = torch::tensor({intrinsics[0] * sx, 0.0, intrinsics[2] * sx, 0.0, intrinsics[1] * sy, intrinsics[3] * sy,
                          0.0, 0.0, 1.0}).view({1, 3, 3});
     }
-    K = K.to(torch::kFloat32);
+    K = K.to(torch::kFloat32)[0];
     std::vector<torch::Tensor> trajectory = {torch::eye(4, torch::kFloat64)};
     for (size_t i = 0; i < frames.size(); ++i) {
       const auto& [name, img] = frames[i];
-      const auto depth = model.depth(img)[0].cpu();
+      const auto depth = model.depth(img[0]).cpu();
       geo::write_image(output + "/" + name + "-disp.png", geo::colorize_disparity(1.0 / depth));
       geo::write_depth_png(output + "/" + name + "-depth.png", depth);
       if (i + 1 < frames.size()) {
         const auto& next = frames[i + 1].second;
-        if (model.config().data.seq_length == 3) {
-          geo::write_image(output + "/" + name + "-flow.png", geo::colorize_flow(model.flow(img, next, K)[0].cpu()));
-          const auto T = model.pose(img, {i > 0 ? frames[i - 1].second : img, next})[0][1].cpu().to(torch::kFloat64);
+        if (model.spec().seq_length == 3) {
+          geo::write_image(output + "/" + name + "-flow.png", geo::colorize_flow(model.flow(img[0], next[0], K).cpu()));
+          const auto T = model.pose({i > 0 ? frames[i - 1].second[0] : img[0], img[0], next[0]})[1].cpu().to(torch::kFloat64);
           trajectory.push_back(trajectory.back().matmul(torch::inverse(T)));
         }
       }
