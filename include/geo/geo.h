@@ -70,8 +70,11 @@ class Model {
   // transforms from the target's camera into each other frame's, in order.
   torch::Tensor pose(const std::vector<torch::Tensor>& frames) const;
   // Optical flow from `from` to `to` in pixels of the given images: [2,H,W] ([B,2,H,W]): the rigid
-  // flow of depth and motion plus the FlowNet's residual when the model has one.
-  torch::Tensor flow(const torch::Tensor& from, const torch::Tensor& to, const torch::Tensor& intrinsics = {}) const;
+  // flow of depth and motion plus the FlowNet's residual when the model has one. `previous`
+  // (optional): the frame before `from`, so that the PoseNet sees a real snippet (previous, from, to)
+  // instead of (from, from, to).
+  torch::Tensor flow(const torch::Tensor& from, const torch::Tensor& to, const torch::Tensor& intrinsics = {},
+                     const torch::Tensor& previous = {}) const;
 
   // Writes the weights only (no optimiser, no training config) with the spec: geo_export.
   // `half`: weights stored as float16 (half the size; loaded back as float32).
@@ -80,6 +83,7 @@ class Model {
   struct Impl;
 
  private:
+  friend struct ModelAccess;  // geo's own tools (evaluation) reach the networks' config through it
   explicit Model(std::shared_ptr<Impl> impl) : impl_(std::move(impl)) {}
   std::shared_ptr<Impl> impl_;  // shared by copies; the networks are only read after loading
 };

@@ -3,6 +3,8 @@
 // same computation geo_eval scores.
 #include "geo/geo.h"
 
+#include "api/model_access.h"
+
 #include "core/config.h"
 #include "core/files.h"
 #include "core/runtime.h"
@@ -136,6 +138,23 @@ torch::Tensor rgb8_image(const uint8_t* rgb, int64_t height, int64_t width, int6
   return hwc.permute({2, 0, 1}).contiguous();
 }
 
+const Config& ModelAccess::config(const Model& m) { return m.impl_->config; }
+
+Model ModelAccess::untrained(const Config& config, const std::string& device) {
+  return guarded("an untrained model", [&] {
+    auto impl = std::make_shared<Model::Impl>();
+    impl->config = config;
+    impl->nets = Networks::create(config, true);  // the caller seeds (run.seed)
+    impl->device = select_device(device);
+    impl->nets.to(impl->device);
+    impl->nets.prepare_inference(true);
+    const auto& c = impl->config;
+    impl->spec = ModelSpec{c.data.height, c.data.width, c.data.seq_length, c.model.encoder_depth, c.model.use_fr, true,
+                           "untrained (" + c.run.name + ", seed " + std::to_string(c.run.seed) + ")"};
+    return Model(impl);
+  });
+}
+
 Model Model::load(const std::string& path, const LoadOptions& options) {
   return guarded("loading geo model '" + path + "'", [&] {
     const std::string file = fs::is_directory(path) ? resolve_checkpoint(path) : path;
@@ -217,7 +236,8 @@ torch::Tensor Model::relative_pose(const torch::Tensor& from, const torch::Tenso
   });
 }
 
-torch::Tensor Model::flow(const torch::Tensor& from, const torch::Tensor& to, const torch::Tensor& intrinsics) const {
+torch::Tensor Model::flow(const torch::Tensor& from, const torch::Tensor& to, const torch::Tensor& intrinsics,
+                          const torch::Tensor& previous) const {
   return guarded("geo::Model::flow", [&] {
     torch::InferenceMode guard;
     int64_t H = 0, W = 0, H2 = 0, W2 = 0;
@@ -227,7 +247,13 @@ torch::Tensor Model::flow(const torch::Tensor& from, const torch::Tensor& to, co
     if (H != H2 || W != W2 || a.size(0) != b.size(0))
       throw Error("the two images differ in size: " + c10::str(from.sizes()) + " and " + c10::str(to.sizes()));
     const auto K = network_K(*impl_, intrinsics, a.size(0), H, W);
-    auto f = predict_pair(impl_->nets, a, b, K, impl_->config.loss).flow;  // [B,2,h,w]
+    torch::Tensor prev;
+    if (previous.defined()) {
+      int64_t H3 = 0, W3 = 0;
+      bool batched3 = false;
+      prev = prepare(*impl_, previous, &H3, &W3, &batched3, "flow (previous)");
+    }
+    auto f = predict_pair(impl_->nets, a, b, K, impl_->config.loss, prev).flow;  // [B,2,h,w]
     if (f.size(2) != H || f.size(3) != W) {
       f = to_size(f, H, W);
       f.select(1, 0).mul_(static_cast<double>(W) / static_cast<double>(impl_->spec.width));

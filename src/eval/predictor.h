@@ -1,11 +1,13 @@
-// A trained model loaded from a checkpoint (its config travels inside), for evaluation and
-// inference: depth of an image, relative pose of a snippet, full flow of a pair. Inputs are RGB
-// in [0,1] at the network's size (config data.height x data.width); BatchNorm folded into the convolutions (eval mode).
+// A trained model loaded from a checkpoint (its config travels inside), for evaluation: depth of an
+// image, relative pose of a snippet, full flow of a pair, in the shapes the protocols use. A thin
+// layer over geo::Model (include/geo/geo.h), so evaluation scores exactly what the library computes.
+// Inputs are RGB in [0,1] at the network's size (config data.height x data.width).
 #pragma once
 
 #include "core/config.h"
-#include "train/networks.h"
+#include "geo/geo.h"
 
+#include <optional>
 #include <string>
 
 namespace geo {
@@ -20,8 +22,8 @@ class Predictor {
   const std::string& path() const { return path_; }
   int64_t height() const { return config_.data.height; }
   int64_t width() const { return config_.data.width; }
-  bool has_flow() const { return static_cast<bool>(nets_.flow); }
-  torch::Device device() const { return device_; }
+  bool has_flow() const { return model_->spec().has_flow; }
+  torch::Device device() const { return model_->device(); }
 
   // image [B,3,H,W] -> depth [B,1,H,W] in the network's (unknown) scale: 1 / disparity.
   torch::Tensor depth(const torch::Tensor& image);
@@ -37,8 +39,7 @@ class Predictor {
  private:
   Config config_;
   std::string path_;
-  torch::Device device_;
-  Networks nets_;
+  std::optional<Model> model_;
 };
 
 // The most recent run's best checkpoint under `runs_dir` (newest folder with checkpoints), or "".

@@ -1,5 +1,5 @@
-// The C++ inference API (include/geo/geo.h): the same numbers as the evaluation path (Predictor) on a
-// training checkpoint, exported files that give exactly the checkpoint's outputs (float16: stated
+// The C++ inference API (include/geo/geo.h): the same numbers as the networks run directly on a
+// training checkpoint (and the evaluation's Predictor, a layer over it), exported files that give exactly the checkpoint's outputs (float16: stated
 // bound), any input size, thread-safe concurrent calls, the process's random generator untouched,
 // and geo::Error for every misuse.
 #include "geo/geo.h"
@@ -7,6 +7,7 @@
 #include "core/config.h"
 #include "core/state_io.h"
 #include "eval/predictor.h"
+#include "geometry/pose.h"
 #include "train/networks.h"
 
 #include <gtest/gtest.h>
@@ -38,21 +39,40 @@ torch::Tensor image(int64_t H, int64_t W, double shift = 0) {
   return (torch::linspace(0, 1, 3 * H * W).view({3, H, W}) + shift).remainder(1.0);
 }
 
-TEST(Api, SameDepthPoseAndFlowAsTheEvaluationPath) {
+// The networks of the checkpoint, run directly (what the evaluation ran before it used the API).
+struct Direct {
+  Config config;
+  Networks nets;
+  Direct() {
+    auto a = open_archive(checkpoint());
+    config = *checkpoint_config(a, checkpoint());
+    nets = Networks::create(config, true);
+    nets.load(a, checkpoint(), false);
+    nets.prepare_inference(true);
+  }
+};
+
+TEST(Api, SameDepthPoseAndFlowAsTheNetworksThemselves) {
   const Model m = Model::load(checkpoint());
-  Predictor p(checkpoint(), "cpu");
+  Direct d;
   EXPECT_EQ(m.spec().height, 64);
   EXPECT_EQ(m.spec().seq_length, 3);
   EXPECT_TRUE(m.spec().has_flow);
+  torch::NoGradGuard no_grad;
   const auto a = image(64, 208), b = image(64, 208, 0.1);
-  EXPECT_TRUE(torch::equal(m.depth(a), p.depth(a.unsqueeze(0))[0][0]));
+  EXPECT_TRUE(torch::equal(m.depth(a), (1.0 / d.nets.depth->forward(a.unsqueeze(0)).disp[0])[0][0]));
   const auto K = torch::tensor({100.f, 0.f, 104.f, 0.f, 100.f, 32.f, 0.f, 0.f, 1.f}).view({3, 3});
-  EXPECT_TRUE(torch::equal(m.flow(a, b, K), p.flow(a.unsqueeze(0), b.unsqueeze(0), K.unsqueeze(0))[0]));
-  EXPECT_TRUE(torch::equal(m.relative_pose(a, b), p.pose(a.unsqueeze(0), {a.unsqueeze(0), b.unsqueeze(0)})[0][1]));
+  EXPECT_TRUE(torch::equal(m.flow(a, b, K), predict_pair(d.nets, a.unsqueeze(0), b.unsqueeze(0), K.unsqueeze(0), d.config.loss).flow[0]));
+  const auto vec = d.nets.pose->forward(a.unsqueeze(0), {a.unsqueeze(0), b.unsqueeze(0)});  // (a, a, b)
+  EXPECT_TRUE(torch::equal(m.relative_pose(a, b), pose_vec_to_matrix(vec[0])[1]));
   EXPECT_EQ(m.pose({b, a, b}).sizes(), (torch::IntArrayRef{2, 4, 4}));
+  // The evaluation's Predictor is this API in the protocols' shapes.
+  Predictor p(checkpoint(), "cpu");
+  EXPECT_TRUE(torch::equal(p.depth(a.unsqueeze(0))[0][0], m.depth(a)));
+  EXPECT_TRUE(torch::equal(p.pose(a.unsqueeze(0), {b.unsqueeze(0), b.unsqueeze(0)})[0], m.pose({b, a, b})));
   // uint8 pixels are the same image as float / 255.
   const auto u8 = (a * 255).round().to(torch::kUInt8);
-  EXPECT_TRUE(torch::allclose(m.depth(u8), m.depth(u8.to(torch::kFloat32) / 255), 0, 0));
+  EXPECT_TRUE(torch::equal(m.depth(u8), m.depth(u8.to(torch::kFloat32) / 255)));
 }
 
 TEST(Api, AnyInputSizeAndBatches) {
