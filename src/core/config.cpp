@@ -640,6 +640,13 @@ Config load_config(const std::string& path, const std::vector<std::string>& over
 
 std::string shipped_config_dir() {
   if (const char* env = std::getenv("GEO_CONFIG_DIR")) return env;
+  // An installed tool: <prefix>/bin/geo_x -> <prefix>/share/geo/configs (cmake --install).
+  std::error_code ec;
+  const auto exe = std::filesystem::read_symlink("/proc/self/exe", ec);
+  if (!ec) {
+    const auto installed = exe.parent_path().parent_path() / "share" / "geo" / "configs";
+    if (std::filesystem::is_directory(installed, ec)) return installed.string();
+  }
   return std::string(kSourceDir) + "/configs";
 }
 

@@ -349,7 +349,8 @@ Config load_config(const std::string& path, const std::vector<std::string>& over
 // .yaml) is looked up in the shipped configs/ folder. Throws naming every place it looked.
 std::string resolve_config_path(const std::string& name);
 
-// The shipped configs/ folder (GEO_CONFIG_DIR env var, else the source tree's configs/).
+// The shipped configs/ folder: GEO_CONFIG_DIR, else <prefix>/share/geo/configs beside an installed
+// tool (cmake --install), else the source tree's configs/.
 std::string shipped_config_dir();
 
 // The resolved config as YAML (every key, defaults included). parse_config(to_yaml(c)) == c.

@@ -9,6 +9,7 @@
 #include <fstream>
 #include <optional>
 #include <stdexcept>
+#include <thread>
 
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -114,6 +115,16 @@ bool process_alive(pid_t pid) {
   if (!std::getline(stat, line)) return true;  // no /proc: assume it runs
   const auto close = line.rfind(')');
   return close == std::string::npos || close + 2 >= line.size() || line[close + 2] != 'Z';
+}
+
+// A process that was killed is still being torn down when its sockets close and this process
+// hears of it: give it until `end` to be gone before saying it is alive.
+bool alive_after(pid_t pid, std::chrono::steady_clock::time_point end) {
+  while (process_alive(pid)) {
+    if (std::chrono::steady_clock::now() > end) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return false;
 }
 
 class C10dGroup : public ProcessGroup {
@@ -246,6 +257,7 @@ class C10dGroup : public ProcessGroup {
     char host[256] = {0};
     ::gethostname(host, sizeof host - 1);
     std::string gone, unknown;
+    const auto grace_end = std::chrono::steady_clock::now() + std::chrono::seconds(2);  // for all ranks together
     for (int r = 0; r < size_; ++r) {
       if (r == rank_) continue;
       try {
@@ -255,7 +267,7 @@ class C10dGroup : public ProcessGroup {
         const std::string h = v.substr(0, space);
         const pid_t pid = static_cast<pid_t>(std::atol(v.c_str() + space + 1));
         if (h != host) unknown += (unknown.empty() ? "" : ", ") + std::to_string(r);
-        else if (!process_alive(pid))
+        else if (!alive_after(pid, grace_end))
           gone += (gone.empty() ? "" : ", ") + std::to_string(r) + " (pid " + std::to_string(pid) + ")";
       } catch (const std::exception&) {
         return "rank 0 (the rendezvous host, " + master_ + ") is gone";

@@ -16,7 +16,7 @@ grep -q "$T/prefix/lib/cmake/geo" "$T/example/CMakeCache.txt"
 B="$T/prefix/bin"
 "$B/geo_synth" --preset tiny --out "$T/world" --drives 1 --test-drives 1 --frames 8 --flow-pairs 1 \
   --odometry-frames 5 > /dev/null 2>&1
-"$B/geo_train" --config "$SRC/configs/smoke.yaml" --set data.root="$T/world" stages[0].iterations=2 \
+"$B/geo_train" --config smoke.yaml --set data.root="$T/world" stages[0].iterations=2 \
   stages[1].iterations=1 logging.val_interval=0 run.threads=2 --run-dir "$T/run" > "$T/train.log" 2>&1
 "$B/geo_export" --checkpoint "$T/run" --out "$T/model.pt"
 mkdir -p "$T/frames" "$T/infer" "$T/mine"
