@@ -1,9 +1,11 @@
 #include "data/splits.h"
 
+#include "core/config.h"
 #include "data/text_io.h"
 
 #include <algorithm>
 #include <cstdio>
+#include <filesystem>
 #include <regex>
 #include <sstream>
 #include <stdexcept>
@@ -112,6 +114,14 @@ size_t exclude_entries(std::vector<SplitEntry>& entries, const std::set<std::str
                                }),
                 entries.end());
   return before - entries.size();
+}
+
+std::string find_split_file(const std::string& root, const std::string& split, const std::string& file) {
+  for (const auto& base : {root + "/splits", shipped_config_dir() + "/splits"}) {
+    const std::string p = base + "/" + split + "/" + file;
+    if (std::filesystem::exists(p)) return p;
+  }
+  return "";
 }
 
 }  // namespace geo

@@ -33,6 +33,10 @@ std::vector<SplitEntry> read_split(const std::string& path);
 std::set<std::string> read_scene_list(const std::string& path);
 // "date drive frame" lines (static_frames.txt) as keys "drive_sync_folder frame" -> see static_key.
 std::set<std::string> read_static_frames(const std::string& path);
+
+// The first existing of <root>/splits/<split>/<file> and the shipped configs/splits/<split>/<file>;
+// "" if none.
+std::string find_split_file(const std::string& root, const std::string& split, const std::string& file);
 std::string static_key(const std::string& drive_folder, int64_t frame);
 
 // Removes entries whose drive is a test scene or whose frame is static; returns how many were removed.

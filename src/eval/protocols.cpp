@@ -8,7 +8,6 @@
 #include "data/velodyne_depth.h"
 #include "eval/metrics.h"
 #include "geometry/pose.h"
-#include "train/data_source.h"
 
 #include <spdlog/spdlog.h>
 #include <yaml-cpp/yaml.h>

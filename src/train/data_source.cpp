@@ -12,14 +12,6 @@ namespace fs = std::filesystem;
 
 namespace geo {
 
-std::string find_split_file(const std::string& root, const std::string& split, const std::string& file) {
-  for (const auto& base : {root + "/splits", shipped_config_dir() + "/splits"}) {
-    const std::string p = base + "/" + split + "/" + file;
-    if (fs::exists(p)) return p;
-  }
-  return "";
-}
-
 namespace {
 
 std::string fmt_list(const std::vector<std::string>& v) {

@@ -11,6 +11,7 @@
 #pragma once
 
 #include "core/config.h"
+#include "data/splits.h"
 #include "data/snippets.h"
 
 #include <memory>
@@ -28,8 +29,5 @@ struct TrainingData {
 };
 
 TrainingData open_training_data(const DataConfig& data);
-
-// The first existing of <root>/splits/<split>/<file> and configs/splits/<split>/<file>; "" if none.
-std::string find_split_file(const std::string& root, const std::string& split, const std::string& file);
 
 }  // namespace geo
