@@ -64,6 +64,10 @@ std::string spec_yaml(const Config& c) {
   return e.c_str();
 }
 
+ModelSpec spec_of(const Config& c, bool has_flow, const std::string& source) {
+  return ModelSpec{c.data.height, c.data.width, c.data.seq_length, c.model.encoder_depth, c.model.use_fr, has_flow, source};
+}
+
 // Networks are created with random weights that the file then replaces: the process's random
 // generator is left as it was (a library must not move its user's seeds).
 Networks create_quietly(const Config& config, bool with_flow) {
@@ -148,9 +152,7 @@ Model ModelAccess::untrained(const Config& config, const std::string& device) {
     impl->device = select_device(device);
     impl->nets.to(impl->device);
     impl->nets.prepare_inference(true);
-    const auto& c = impl->config;
-    impl->spec = ModelSpec{c.data.height, c.data.width, c.data.seq_length, c.model.encoder_depth, c.model.use_fr, true,
-                           "untrained (" + c.run.name + ", seed " + std::to_string(c.run.seed) + ")"};
+    impl->spec = spec_of(config, true, "untrained (" + config.run.name + ", seed " + std::to_string(config.run.seed) + ")");
     return Model(impl);
   });
 }
@@ -181,9 +183,7 @@ Model Model::load(const std::string& path, const LoadOptions& options) {
     impl->device = select_device(options.device);
     impl->nets.to(impl->device);
     impl->nets.prepare_inference(true);  // eval mode, BatchNorm folded into the convolutions
-    const auto& c = impl->config;
-    impl->spec = ModelSpec{c.data.height, c.data.width, c.data.seq_length, c.model.encoder_depth, c.model.use_fr,
-                           has_flow, file};
+    impl->spec = spec_of(impl->config, has_flow, file);
     return Model(impl);
   });
 }

@@ -14,14 +14,15 @@ Predictor::Predictor(const std::string& checkpoint, const std::string& device)
   LoadOptions o;
   o.device = device.empty() ? "auto" : device;
   model_ = Model::load(path_, o);
-  config_ = ModelAccess::config(*model_);
 }
 
 Predictor::Predictor(const Config& config, const std::string& device)
-    : config_(config), path_("untrained (" + config.run.name + ", seed " + std::to_string(config.run.seed) + ")") {
+    : path_("untrained (" + config.run.name + ", seed " + std::to_string(config.run.seed) + ")") {
   torch::manual_seed(static_cast<uint64_t>(config.run.seed));
   model_ = ModelAccess::untrained(config, device.empty() ? "auto" : device);
 }
+
+const Config& Predictor::config() const { return ModelAccess::config(*model_); }
 
 torch::Tensor Predictor::depth(const torch::Tensor& image) { return model_->depth(image).unsqueeze(1); }
 

@@ -18,10 +18,10 @@ class Predictor {
   explicit Predictor(const std::string& checkpoint, const std::string& device = "auto");
   // An untrained model of this config (seeded with run.seed): the "before training" baseline.
   Predictor(const Config& config, const std::string& device);
-  const Config& config() const { return config_; }
+  const Config& config() const;
   const std::string& path() const { return path_; }
-  int64_t height() const { return config_.data.height; }
-  int64_t width() const { return config_.data.width; }
+  int64_t height() const { return model_->spec().height; }
+  int64_t width() const { return model_->spec().width; }
   bool has_flow() const { return model_->spec().has_flow; }
   torch::Device device() const { return model_->device(); }
 
@@ -37,7 +37,6 @@ class Predictor {
                      const torch::Tensor& prev = {});
 
  private:
-  Config config_;
   std::string path_;
   std::optional<Model> model_;
 };

@@ -67,7 +67,6 @@ class Run {
     if (group_) averager_ = std::make_unique<GradientAverager>(*group_);
     if (resuming) restore();
     else init_networks(stage());  // here, so that a bad --init stops the run before it starts
-    initialised_ = true;
     if (writer_) {
       fs::create_directories(dir_ + "/summaries");
       auto csv = std::make_shared<CsvSink>(dir_);
@@ -125,6 +124,7 @@ class Run {
     state_.iteration = 0;
     state_.best_score = std::numeric_limits<double>::infinity();  // best is per stage
     resume_from_.clear();
+    if (state_.stage < static_cast<int64_t>(cfg_.stages.size())) init_networks(stage());
   }
 
   // Resume: networks and train state from the latest checkpoint (Adam's state when its stage starts).
@@ -167,8 +167,6 @@ class Run {
 
   int run_stage(const SignalScope& signals) {
     const auto& s = stage();
-    if (resume_from_.empty() && !initialised_) init_networks(s);
-    initialised_ = false;
     if (group_) {  // every process starts the stage from rank 0's weights
       broadcast_module(*group_, *nets_.depth);
       broadcast_module(*group_, *nets_.pose);
@@ -345,7 +343,6 @@ class Run {
   TrainState state_;
   std::string resume_from_;  // the checkpoint the current stage resumes from ("" = a fresh stage)
   int64_t skipped_ = 0;
-  bool initialised_ = false;  // the current stage's networks are already set (constructor)
 };
 
 // This process's group when geo_train was launched as one process of several (torchrun, srun);
