@@ -11,7 +11,6 @@
 // /proc/self/clear_refs), the caching allocator's peak on CUDA. FLOPs: as counted by LibTorch's
 // profiler (convolutions, matrix products, elementwise add/mul) for one forward pass.
 #include <CLI/CLI.hpp>
-#include <spdlog/fmt/chrono.h>
 #include <spdlog/spdlog.h>
 #include <torch/csrc/autograd/profiler_legacy.h>
 #include <torch/torch.h>
@@ -178,8 +177,8 @@ void print_profile(const std::string& title, const std::function<void()>& fn, in
         if (by_shape) {
           std::vector<std::string> dims;
           for (const auto& shape : open.e->shapes())
-            if (!shape.empty()) dims.push_back(fmt::format("{}", fmt::join(shape, "x")));
-          key += " " + fmt::format("{}", fmt::join(dims, ","));
+            if (!shape.empty()) dims.push_back(geo::join_list(shape, "x"));
+          key += " " + geo::join_list(dims, ",");
         }
         auto& st = stats[key];
         st.total_us += us;
@@ -201,7 +200,7 @@ void print_profile(const std::string& title, const std::function<void()>& fn, in
   }
 }
 
-std::string fmt_num(double v, const char* spec = "{:.1f}") { return v < 0 ? "-" : fmt::format(spec, v); }
+std::string fmt_num(double v, const char* spec = "{:.1f}") { return v < 0 ? "-" : fmt::format(fmt::runtime(spec), v); }
 
 std::string json_num(double v) { return v < 0 ? "null" : fmt::format("{:.4f}", v); }
 
@@ -312,7 +311,7 @@ std::vector<std::string> fr_overheads(const std::vector<Row>& rows) {
 
 std::string markdown_table(const std::vector<Row>& rows, const std::string& machine, const std::string& command) {
   std::string md = fmt::format("Machine: {}; LibTorch {}; {}.\nCommand: `{}`\n\n", machine, TORCH_VERSION,
-                               fmt::format("{:%Y-%m-%d}", fmt::localtime(std::time(nullptr))), command);
+                               geo::local_date(), command);
   md += "| section | what | FR | batch | parameters | GFLOPs | ms/call | ms/sample | samples/s | peak MB |\n"
         "|---|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& r : rows)
@@ -473,7 +472,7 @@ int main(int argc, char** argv) {
           t->step = std::make_unique<geo::TrainStep>(t->nets, t->config, stage);
           trainees.push_back(std::move(t));
         }
-        spdlog::info("training step {} [{}], FR {}, batch {} ...", stage.name, fmt::join(stage.train.names(), ","), fr_mode, b);
+        spdlog::info("training step {} [{}], FR {}, batch {} ...", stage.name, geo::join_list(stage.train.names(), ","), fr_mode, b);
         std::vector<std::pair<Row*, std::function<void()>>> calls;
         for (auto& t : trainees) {
           // The trainer's own step (loss, backward, finiteness check, clipping, Adam).
@@ -544,7 +543,7 @@ int main(int argc, char** argv) {
       std::string machine = cpu_description();
       if (device.is_cuda()) machine += ", CUDA device " + std::to_string(device.index() < 0 ? 0 : device.index());
       machine += fmt::format(", {} threads", nthreads);
-      geo::write_file_atomic(markdown_path, markdown_table(rows, machine, fmt::format("{}", fmt::join(args, " "))));
+      geo::write_file_atomic(markdown_path, markdown_table(rows, machine, geo::join_list(args, " ")));
       spdlog::info("wrote {}", markdown_path);
     }
     if (!json_path.empty()) {

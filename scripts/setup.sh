@@ -6,20 +6,57 @@
 #   GEO_JOBS        parallel compile jobs (default: number of cores)
 #   GEO_WERROR=1    compiler warnings in geo's own code are errors (CI sets it)
 #   GEO_SETUP_PACKAGES_ONLY=1  install the packages, build nothing (scripts/fuzz.sh)
+#   GEO_TORCH       which LibTorch to build against:
+#                     system (default)  Debian's libtorch-dev (1.13, CPU)
+#                     python            the one inside the PyTorch that `python3` imports (pip wheel,
+#                                       CUDA on GPU machines): torch.utils.cmake_prefix_path
+#                     /path/to/libtorch an unpacked LibTorch archive (holds share/cmake/Torch)
+#   GEO_OPENCV      1: build the image tools (geo_eval, geo_infer, geo_synth, geo_prepare; installs
+#                   libopencv-dev), 0: without OpenCV (geo_train trains from packed caches and the
+#                   in-memory synthetic world, geo_bench, geo_export, the library). Default: 1 with
+#                   the system LibTorch; with another LibTorch 1 only when OpenCV's C++ package is
+#                   already installed (a PyTorch GPU image usually has none; ~220 MB of packages).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+installed() { dpkg-query -W -f='${Status}' "$1" 2>/dev/null | grep -q "install ok installed"; }
+
+TORCH="${GEO_TORCH:-system}"
+TORCH_PREFIX=""
+case "$TORCH" in
+  system) ;;
+  python)
+    TORCH_PREFIX="$(python3 -c 'import torch; print(torch.utils.cmake_prefix_path)' 2>/dev/null)" ||
+      { echo "geo setup: GEO_TORCH=python, but 'python3 -c \"import torch\"' fails: install PyTorch or use GEO_TORCH=system" >&2; exit 1; }
+    ;;
+  *)
+    [ -d "$TORCH/share/cmake/Torch" ] ||
+      { echo "geo setup: GEO_TORCH=$TORCH is not a LibTorch folder (no $TORCH/share/cmake/Torch); use system, python or such a folder" >&2; exit 1; }
+    TORCH_PREFIX="$(cd "$TORCH" && pwd)"
+    ;;
+esac
+OPENCV="${GEO_OPENCV:-}"
+if [ -z "$OPENCV" ]; then
+  if [ "$TORCH" = system ] || installed libopencv-dev; then OPENCV=1; else OPENCV=0; fi
+fi
+
 PACKAGES=(
-  libtorch-dev libopencv-dev libyaml-cpp-dev libcli11-dev libspdlog-dev
+  libyaml-cpp-dev libcli11-dev libspdlog-dev
   libgtest-dev libgmock-dev
-  libgloo-dev  # the headers of LibTorch's Gloo backend: multi-process training (train/distributed.h)
-  libopenblas0-pthread  # without it Debian's LibTorch uses the reference BLAS: 17-25x slower matmuls
   cmake g++ make ccache
 )
+if [ "$TORCH" = system ]; then
+  PACKAGES+=(
+    libtorch-dev
+    libgloo-dev  # the headers of LibTorch's Gloo backend: multi-process training (train/distributed.h)
+    libopenblas0-pthread  # without it Debian's LibTorch uses the reference BLAS: 17-25x slower matmuls
+  )
+fi
+if [ "$OPENCV" = 1 ]; then PACKAGES+=(libopencv-dev); fi
 
 missing=()
 for p in "${PACKAGES[@]}"; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  installed "$p" || missing+=("$p")
 done
 if ((${#missing[@]})); then
   echo "geo setup: installing ${missing[*]}"
@@ -40,8 +77,14 @@ fi
 
 BUILD_DIR="${GEO_BUILD_DIR:-build}"
 JOBS="${GEO_JOBS:-$(nproc)}"
+CONFIGURE=(-DCMAKE_BUILD_TYPE=Release)
+if [ "$OPENCV" = 1 ]; then CONFIGURE+=(-DGEO_WITH_OPENCV=ON); else CONFIGURE+=(-DGEO_WITH_OPENCV=OFF); fi
+if [ -n "$TORCH_PREFIX" ]; then CONFIGURE+=("-DCMAKE_PREFIX_PATH=$TORCH_PREFIX"); fi
+echo "geo setup: LibTorch $TORCH${TORCH_PREFIX:+ ($TORCH_PREFIX)}, OpenCV $OPENCV, build folder $BUILD_DIR"
 if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
-  cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release
+  cmake -S . -B "$BUILD_DIR" "${CONFIGURE[@]}"
+elif [ -n "${GEO_TORCH:-}${GEO_OPENCV:-}" ]; then
+  cmake -S . -B "$BUILD_DIR" "${CONFIGURE[@]}" >/dev/null  # asked for explicitly: apply to an existing build
 fi
 if [ "${GEO_WERROR:-0}" = 1 ]; then
   cmake -S . -B "$BUILD_DIR" -DGEO_WERROR=ON >/dev/null

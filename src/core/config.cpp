@@ -442,8 +442,20 @@ void DataConfig::validate(Checker& c) const {
   c.require(split != "odometry" || !sequences.empty(), "sequences", sequences,
             "must name at least one KITTI odometry sequence when data.split is odometry");
   c.require(!split.empty(), "split", split, "must not be empty (eigen_zhou, raw_minus_kitti2015, odometry, ...)");
-  Checker::Scope s(c, "augment");
-  augment.validate(c);
+  {
+    Checker::Scope s(c, "augment");
+    augment.validate(c);
+  }
+  Checker::Scope s(c, "synthetic");
+  synthetic.validate(c);
+}
+
+void SynthDataConfig::validate(Checker& c) const {
+  c.require(one_of(preset, {"tiny", "kitti"}), "preset", preset, "must be tiny or kitti");
+  c.require(seed >= 0, "seed", seed, "must be >= 0");
+  c.require(drives >= 1 && drives <= 1000, "drives", drives, "must be in 1..1000");
+  c.require(frames_per_drive >= 3 && frames_per_drive <= 100000, "frames_per_drive", frames_per_drive,
+            "must be in 3..100000");
 }
 
 void LossConfig::validate(Checker& c) const {
@@ -486,7 +498,8 @@ const std::vector<EnumName<LrScheduleKind>>& enum_names(LrScheduleKind) {
 }
 const std::vector<EnumName<DataFormat>>& enum_names(DataFormat) {
   static const std::vector<EnumName<DataFormat>> n{
-      {DataFormat::kAuto, "auto"}, {DataFormat::kKittiRaw, "kitti_raw"}, {DataFormat::kPacked, "packed"}};
+      {DataFormat::kAuto, "auto"}, {DataFormat::kKittiRaw, "kitti_raw"}, {DataFormat::kPacked, "packed"},
+      {DataFormat::kSynthetic, "synthetic"}};
   return n;
 }
 const std::vector<EnumName<BadSample>>& enum_names(BadSample) {

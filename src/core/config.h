@@ -29,7 +29,7 @@ template <class E> struct EnumName {
 };
 enum class Upsample { kNearest, kBilinear };
 enum class LrScheduleKind { kConstant, kStep };
-enum class DataFormat { kAuto, kKittiRaw, kPacked };
+enum class DataFormat { kAuto, kKittiRaw, kPacked, kSynthetic };
 enum class BadSample { kStop, kSkip };
 enum class Sampler { kZeros, kBorder };
 enum class FlowMask { kOcclusion, kConsistency };
@@ -112,9 +112,26 @@ struct AugmentConfig {
   void validate(Checker& c) const;
 };
 
+// data.format synthetic: geo_synth's world rendered in memory at data.height x data.width (no files,
+// no OpenCV): the training and validation snippets of the drives geo_synth would write.
+struct SynthDataConfig {
+  std::string preset = "tiny";       // tiny | kitti: the camera (intrinsics scaled to the training size)
+  int64_t seed = 1;                  // the world (as geo_synth --seed)
+  int drives = 3;                    // training drives (geo_synth's train_drives)
+  int64_t frames_per_drive = 42;     // frames per drive (geo_synth's)
+
+  template <class V> void fields(V& v) {
+    v("preset", preset);
+    v("seed", seed);
+    v("drives", drives);
+    v("frames_per_drive", frames_per_drive);
+  }
+  void validate(Checker& c) const;
+};
+
 struct DataConfig {
   std::string root;                   // dataset root (KITTI raw, packed cache or a geo_synth world)
-  DataFormat format = DataFormat::kAuto;  // auto | kitti_raw | packed
+  DataFormat format = DataFormat::kAuto;  // auto | kitti_raw | packed | synthetic (no files; data.synthetic)
   // Training data of a task: eigen_zhou (depth; the paper's Eigen split), raw_minus_kitti2015 (flow,
   // GeoNet: eigen_zhou without the KITTI 2015 scenes), odometry (pose, GeoNet: KITTI odometry
   // `sequences`), or any split folder under configs/splits or <root>/splits.
@@ -128,6 +145,7 @@ struct DataConfig {
   int num_workers = 2;                // loader threads prefetching batches
   BadSample on_bad_sample = BadSample::kStop;  // stop | skip
   AugmentConfig augment;
+  SynthDataConfig synthetic;          // data.format synthetic only
 
   template <class V> void fields(V& v) {
     v("root", root);
@@ -142,6 +160,7 @@ struct DataConfig {
     v("num_workers", num_workers);
     v("on_bad_sample", on_bad_sample);
     v("augment", augment);
+    v("synthetic", synthetic);
   }
   void validate(Checker& c) const;
 };

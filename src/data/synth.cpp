@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <functional>
 #include <random>
 #include <stdexcept>
@@ -79,6 +80,20 @@ void parallel_rows(int64_t rows, int threads, const std::function<void(int64_t, 
 }
 
 }  // namespace
+
+std::string synth_drive_folder(int drive) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "_drive_%04d_sync", drive);
+  return std::string(kSynthDate) + "/" + kSynthDate + buf;
+}
+
+uint64_t synth_drive_seed(uint64_t seed, int kind, int64_t index) {
+  return seed * 1000003ULL + static_cast<uint64_t>(kind) * 7919ULL + static_cast<uint64_t>(index);
+}
+
+std::string synth_snippet_id(int drive_index, int64_t frame) {
+  return synth_drive_folder(drive_index + 1) + " " + std::to_string(frame) + " l";
+}
 
 torch::Tensor SynthIntrinsics::K() const {
   return torch::tensor({fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0}, torch::kFloat64).reshape({3, 3});

@@ -109,4 +109,17 @@ SynthFlow render_flow(const SynthScene& scene, int64_t frame, const SynthOptions
 torch::Tensor render_lidar(const SynthScene& scene, int64_t frame, const SynthOptions& options);
 torch::Tensor synth_cam_from_velo();  // [4,4] float64
 
+// The world's layout, shared by geo_synth's files (synth_writer.h) and the in-memory snippets
+// (synth_snippets.h), so that both hold the same drives, frames and split:
+// The date folder used for synthetic drives.
+inline const char* kSynthDate = "2011_01_01";
+// Drive folder name for drive number n, from 1 ("2011_01_01/2011_01_01_drive_0001_sync").
+std::string synth_drive_folder(int drive);
+// The scene seed of drive `index` of a kind (0 raw drives, 1 KITTI 2015 pairs, 2 odometry).
+uint64_t synth_drive_seed(uint64_t seed, int kind, int64_t index);
+// Targets of the training drives go to validation when frame % 10 == 5, else to training.
+inline bool synth_is_validation_frame(int64_t frame) { return frame % 10 == 5; }
+// A split-list line / snippet id of drive index d (from 0), frame f: "<folder> <f> l".
+std::string synth_snippet_id(int drive_index, int64_t frame);
+
 }  // namespace geo

@@ -65,15 +65,7 @@ std::string join_lines(const std::vector<std::string>& lines) {
   return s;
 }
 
-uint64_t drive_seed(uint64_t seed, int kind, int64_t index) {
-  return seed * 1000003ULL + static_cast<uint64_t>(kind) * 7919ULL + static_cast<uint64_t>(index);
-}
-
 }  // namespace
-
-std::string synth_drive_folder(int drive) {
-  return std::string(kSynthDate) + "/" + kSynthDate + numbered("_drive_%04lld_sync", drive);
-}
 
 void write_synth_world(const std::string& root, const SynthOptions& o,
                        const std::function<void(int64_t, int64_t, const std::string&)>& progress) {
@@ -92,7 +84,7 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
   std::vector<std::string> train, val, test, test_scenes;
   for (int d = 0; d < drives; ++d) {
     const bool is_test = d >= o.train_drives;
-    const SynthScene scene(drive_seed(o.seed, 0, d), o.frames_per_drive);
+    const SynthScene scene(synth_drive_seed(o.seed, 0, d), o.frames_per_drive);
     const std::string folder = synth_drive_folder(d + 1), dir = raw + "/" + folder;
     for (const char* sub : {"/image_02/data", "/velodyne_points/data", "/proj_depth/groundtruth/image_02"})
       fs::create_directories(dir + sub);
@@ -104,7 +96,7 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
       write_velodyne(dir + "/velodyne_points/data/" + name + ".bin", render_lidar(scene, f, o));
       if (f > 0 && f + 1 < o.frames_per_drive) {  // targets need both neighbours
         if (is_test) test.push_back(folder + "/image_02/data/" + name + ".png");
-        else (f % 10 == 5 ? val : train).push_back(folder + " " + std::to_string(f) + " l");
+        else (synth_is_validation_frame(f) ? val : train).push_back(synth_snippet_id(d, f));
       }
       tick("drive " + std::to_string(d + 1));
     }
@@ -122,7 +114,7 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
   for (const char* sub : {"/image_2", "/flow_occ", "/flow_noc", "/calib_cam_to_cam", "/depth"})
     fs::create_directories(flow + sub);
   for (int i = 0; i < o.flow_pairs; ++i) {
-    const SynthScene scene(drive_seed(o.seed, 1, i), 40);
+    const SynthScene scene(synth_drive_seed(o.seed, 1, i), 40);
     const int64_t f = 5 + (i * 7) % 30;
     const std::string name = numbered("%06lld", i);
     const auto a = render_frame(scene, f, o);
@@ -141,7 +133,7 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
   const std::string seq = root + "/odometry/sequences/09";
   fs::create_directories(seq + "/image_2");
   fs::create_directories(root + "/odometry/poses");
-  const SynthScene odo(drive_seed(o.seed, 2, 9), o.odometry_frames);
+  const SynthScene odo(synth_drive_seed(o.seed, 2, 9), o.odometry_frames);
   std::ostringstream times;
   for (int64_t f = 0; f < o.odometry_frames; ++f) {
     write_image(seq + "/image_2/" + numbered("%06lld", f) + ".png", render_frame(odo, f, o).image);

@@ -18,12 +18,6 @@
 
 namespace geo {
 
-// The date folder used for synthetic drives.
-inline const char* kSynthDate = "2011_01_01";
-
-// Drive folder name for drive index i ("2011_01_01/2011_01_01_drive_0001_sync").
-std::string synth_drive_folder(int drive);
-
 // Writes everything; `progress(done, total, what)` is called after each rendered frame.
 void write_synth_world(const std::string& root, const SynthOptions& options,
                        const std::function<void(int64_t, int64_t, const std::string&)>& progress = {});

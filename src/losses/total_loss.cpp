@@ -209,17 +209,26 @@ LossTerms total_loss(const RigidTerms& rigid, const FlowTerms* flow, const LossW
   return t;
 }
 
+std::vector<std::pair<std::string, torch::Tensor>> LossTerms::named() const {
+  std::vector<std::pair<std::string, torch::Tensor>> out;
+  for (const auto& [name, v] : {std::pair<const char*, const torch::Tensor&>{"rigid", rigid}, {"flow", flow},
+                                {"disp_smooth", disp_smooth}, {"flow_smooth", flow_smooth},
+                                {"flow_consistency", flow_consistency}, {"total", total}})
+    if (v.defined()) out.emplace_back(name, v);
+  return out;
+}
+
+torch::Tensor LossTerms::stacked() const {
+  std::vector<torch::Tensor> scalars;
+  for (const auto& t : named()) scalars.push_back(t.second.detach().reshape({}).to(torch::kFloat64));
+  return scalars.empty() ? torch::zeros({0}, torch::kFloat64) : torch::stack(scalars);
+}
+
 std::vector<std::pair<std::string, double>> LossTerms::values() const {
+  const auto terms = named();
+  const auto host = stacked().cpu().contiguous();
   std::vector<std::pair<std::string, double>> out;
-  auto add = [&](const char* name, const torch::Tensor& v) {
-    if (v.defined()) out.emplace_back(name, v.item<double>());
-  };
-  add("rigid", rigid);
-  add("flow", flow);
-  add("disp_smooth", disp_smooth);
-  add("flow_smooth", flow_smooth);
-  add("flow_consistency", flow_consistency);
-  add("total", total);
+  for (size_t i = 0; i < terms.size(); ++i) out.emplace_back(terms[i].first, host.data_ptr<double>()[i]);
   return out;
 }
 

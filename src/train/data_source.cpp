@@ -1,8 +1,12 @@
 #include "train/data_source.h"
 
+#include "core/logging.h"
 #include "data/packed.h"
-#include "data/sequence_dataset.h"
 #include "data/splits.h"
+#include "data/synth_snippets.h"
+#ifdef GEO_WITH_OPENCV
+#include "data/sequence_dataset.h"
+#endif
 
 #include <spdlog/spdlog.h>
 
@@ -13,12 +17,6 @@ namespace fs = std::filesystem;
 namespace geo {
 
 namespace {
-
-std::string fmt_list(const std::vector<std::string>& v) {
-  std::string s;
-  for (const auto& x : v) s += (s.empty() ? "" : ",") + x;
-  return s;
-}
 
 TrainingData open_at(const DataConfig& d, TrainingData out) {
   const bool packed = d.format == DataFormat::kPacked || (d.format == DataFormat::kAuto && is_packed_cache(d.root + "/train"));
@@ -36,6 +34,12 @@ TrainingData open_at(const DataConfig& d, TrainingData out) {
     out.train_list = d.root + "/train";
     return out;
   }
+#ifndef GEO_WITH_OPENCV
+  throw ConfigError("data.root '" + d.root + "' is not a packed cache (no " + d.root + "/train/index.txt), and this "
+                    "geo was built without OpenCV (-DGEO_WITH_OPENCV=OFF), so it cannot read KITTI's image files: "
+                    "train from a packed cache (geo_prepare, on a machine with OpenCV) or from the built-in "
+                    "synthetic world (data.format: synthetic)");
+#else
   if (d.split == "odometry") {
     OdometryDatasetOptions oo;
     oo.root = d.root;
@@ -45,7 +49,7 @@ TrainingData open_at(const DataConfig& d, TrainingData out) {
     oo.seq_length = d.seq_length;
     out.format = "kitti_odometry";
     out.train = std::make_shared<OdometryDataset>(oo);
-    out.train_list = d.root + "/sequences/{" + fmt_list(d.sequences) + "}";
+    out.train_list = d.root + "/sequences/{" + join_list(d.sequences, ",") + "}";
     if (out.train->size() == 0)
       throw ConfigError("data.sequences: no " + std::to_string(d.seq_length) + "-frame snippet in " + out.train_list);
     return out;
@@ -88,7 +92,7 @@ TrainingData open_at(const DataConfig& d, TrainingData out) {
   out.excluded = exclude_entries(entries, scenes, statics);
   if (entries.empty())
     throw ConfigError("data.split " + d.split + ": all " + std::to_string(listed) + " entries of " + out.train_list +
-                      " are excluded (test scenes or static frames listed in " + fmt_list(out.exclusions) + ")");
+                      " are excluded (test scenes or static frames listed in " + join_list(out.exclusions, ",") + ")");
   auto train = std::make_shared<SequenceDataset>(std::move(entries), so);
   out.dropped = train->dropped();
   if (train->size() == 0) {
@@ -113,14 +117,41 @@ TrainingData open_at(const DataConfig& d, TrainingData out) {
     if (val->size() > 0) out.val = val;
   }
   return out;
+#endif
+}
+
+TrainingData open_synthetic(const DataConfig& d) {
+  const auto& sc = d.synthetic;
+  SynthOptions world = synth_world_at(sc.preset, d.height, d.width);
+  world.seed = static_cast<uint64_t>(sc.seed);
+  world.train_drives = sc.drives;
+  world.frames_per_drive = sc.frames_per_drive;
+  if (world.frames_per_drive < d.seq_length)
+    throw ConfigError("data.synthetic.frames_per_drive " + std::to_string(sc.frames_per_drive) +
+                      " is shorter than one snippet (data.seq_length " + std::to_string(d.seq_length) + ")");
+  spdlog::info("rendering the synthetic world in memory: preset {}, seed {}, {} drives of {} frames at {}x{}",
+               sc.preset, sc.seed, sc.drives, sc.frames_per_drive, d.width, d.height);
+  auto sets = render_synth_snippets(world, d.seq_length);
+  TrainingData out;
+  out.root = "memory";
+  out.format = "synthetic";
+  out.train = sets.train;
+  out.val = sets.val;
+  out.train_list = "synthetic world, seed " + std::to_string(sc.seed);
+  if (out.train->size() == 0)
+    throw ConfigError("data.synthetic: " + std::to_string(sc.drives) + " drives of " +
+                      std::to_string(sc.frames_per_drive) + " frames hold no training snippet");
+  return out;
 }
 
 }  // namespace
 
 TrainingData open_training_data(const DataConfig& d) {
+  if (d.format == DataFormat::kSynthetic) return open_synthetic(d);
   if (d.root.empty())
     throw ConfigError("data.root is empty: set it in the config or with --set data.root=DIR "
-                      "(a KITTI raw folder, a geo_prepare cache or a geo_synth world's raw/ folder)");
+                      "(a KITTI raw folder, a geo_prepare cache or a geo_synth world's raw/ folder), or "
+                      "use the built-in synthetic world: --set data.format=synthetic");
   if (!fs::is_directory(d.root))
     throw ConfigError("data.root '" + d.root + "' is not a directory");
   TrainingData out;

@@ -4,7 +4,9 @@
 #include "core/logging.h"
 #include "core/runtime.h"
 #include "core/state_io.h"
+#ifdef GEO_WITH_OPENCV
 #include "data/image_io.h"
+#endif
 #include "data/loader.h"
 #include "train/data_source.h"
 #include "train/distributed.h"
@@ -82,7 +84,7 @@ class Run {
     spdlog::info("run folder {}; device {}; {} threads; data {} in {} ({} training snippets{}{}, {} validation); "
                  "TensorBoard: tensorboard --logdir {}",
                  dir_, device_.str(), torch::get_num_threads(), data_.format, data_.root, data_.train->size(),
-                 data_.excluded ? ", " + std::to_string(data_.excluded) + " excluded by " + fmt::format("{}", fmt::join(data_.exclusions, ", ")) : "",
+                 data_.excluded ? ", " + std::to_string(data_.excluded) + " excluded by " + join_list(data_.exclusions, ", ") : "",
                  data_.dropped ? ", " + std::to_string(data_.dropped) + " without neighbours" : "",
                  data_.val ? data_.val->size() : 0, fs::path(dir_).parent_path().string());
     if (!data_.val && cfg_.logging.val_interval > 0)
@@ -192,7 +194,7 @@ class Run {
     }
     BatchLoader loader(data_.train, lo, state_.iteration);
     spdlog::info("stage {} ({}/{}): training [{}] for {} iterations from {}, batch {}, lr {}", s.name,
-                 state_.stage + 1, cfg_.stages.size(), fmt::join(s.train.names(), ", "), s.iterations, state_.iteration,
+                 state_.stage + 1, cfg_.stages.size(), join_list(s.train.names(), ", "), s.iterations, state_.iteration,
                  s.batch_size, s.learning_rate);
     const auto& log = cfg_.logging;
     int bad_in_row = 0;
@@ -254,7 +256,7 @@ class Run {
     rec.iteration = state_.iteration;
     rec.stage_iterations = stage().iterations;
     rec.global_step = global_step();
-    rec.losses = r.out.losses.values();
+    rec.losses = r.losses;
     rec.lr = lr;
     rec.grad_norm = r.grad_norm;
     rec.skipped_steps = skipped_;
@@ -301,7 +303,9 @@ class Run {
 
   // PNGs of the first sample, also sent to the sinks: target, disparity, source warped by the
   // rigid flow, and in flow stages the full flow and the forward visibility mask of eq. 13.
+  // A build without OpenCV writes no images (said once).
   void write_summaries(const Batch& batch, const StepOutput& out) {
+#ifdef GEO_WITH_OPENCV
     torch::NoGradGuard no_grad;
     std::vector<std::pair<std::string, torch::Tensor>> images = {
         {"target", batch.tgt[0]},
@@ -318,6 +322,11 @@ class Run {
                       static_cast<int>(image.size(1)), static_cast<int>(image.size(2)), 3};
       for (auto& sink : sinks_) sink->on_image(rec);
     }
+#else
+    if (!summaries_skipped_)
+      spdlog::info("image summaries (logging.summary_interval) are skipped: this geo was built without OpenCV");
+    summaries_skipped_ = true;
+#endif
   }
 
   // cuda / auto with CUDA in a distributed run: this process's GPU, cuda:LOCAL_RANK.
@@ -343,6 +352,7 @@ class Run {
   TrainState state_;
   std::string resume_from_;  // the checkpoint the current stage resumes from ("" = a fresh stage)
   int64_t skipped_ = 0;
+  bool summaries_skipped_ = false;
 };
 
 // This process's group when geo_train was launched as one process of several (torchrun, srun);

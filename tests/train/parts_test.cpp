@@ -303,3 +303,93 @@ TEST(ComputeLosses, NumScalesSetsTheScalesOfEveryTerm) {
 
 }  // namespace
 }  // namespace geo
+
+namespace geo {
+namespace {
+
+// Three parameters; the third gets its first gradient at step 3 (so it lags two steps behind).
+std::vector<torch::Tensor> adam_params() {
+  torch::manual_seed(11);
+  return {torch::randn({4, 3}).requires_grad_(), torch::randn({5}).requires_grad_(),
+          torch::randn({2, 2, 3}).requires_grad_()};
+}
+
+std::vector<torch::Tensor> clones(const std::vector<torch::Tensor>& ps) {
+  std::vector<torch::Tensor> out;
+  for (const auto& p : ps) out.push_back(p.detach().clone().requires_grad_());
+  return out;
+}
+
+void set_grads(std::vector<torch::Tensor>& ps, int step) {
+  torch::manual_seed(100 + step);
+  for (size_t i = 0; i < ps.size(); ++i) {
+    auto g = torch::randn_like(ps[i]) * static_cast<double>(i + 1);
+    if (i == 2 && step < 3) ps[i].mutable_grad() = torch::Tensor();
+    else ps[i].mutable_grad() = g;
+  }
+}
+
+TEST(MultiTensorAdam, BitIdenticalToTorchAdamAndStateInterchangeable) {
+  auto a = adam_params(), b = clones(a);
+  const auto options = torch::optim::AdamOptions(1e-2).betas({0.9, 0.999}).eps(1e-8).weight_decay(0.01);
+  MultiTensorAdam fast(a, options);
+  torch::optim::Adam reference(b, options);
+  for (int step = 1; step <= 5; ++step) {
+    set_grads(a, step);
+    set_grads(b, step);
+    fast.step();
+    reference.step();
+    for (size_t i = 0; i < a.size(); ++i) EXPECT_TRUE(torch::equal(a[i], b[i])) << "step " << step << " param " << i;
+  }
+  // The third parameter took 3 steps, the others 5.
+  const auto& st = static_cast<const torch::optim::AdamParamState&>(*fast.state().begin()->second);
+  EXPECT_TRUE(st.step() == 5 || st.step() == 3);
+  // Saved by one, loaded by the other (the checkpoint format is torch::optim::Adam's): the next
+  // update is the same again.
+  const auto dir = test::fresh_dir("adam_state");
+  torch::serialize::OutputArchive out;
+  fast.save(out);
+  out.save_to(dir + "/fast.pt");
+  auto c = clones(a);
+  torch::optim::Adam loaded(c, options);
+  torch::serialize::InputArchive in;
+  in.load_from(dir + "/fast.pt");
+  loaded.load(in);
+  set_grads(a, 6);
+  set_grads(c, 6);
+  fast.step();
+  loaded.step();
+  for (size_t i = 0; i < a.size(); ++i) EXPECT_TRUE(torch::equal(a[i], c[i])) << "param " << i;
+}
+
+TEST(GradientNorm, OneReductionOverAllGradients) {
+  std::vector<torch::Tensor> ps{torch::zeros({2}).requires_grad_(), torch::zeros({1}).requires_grad_(),
+                                torch::zeros({3}).requires_grad_()};
+  ps[0].mutable_grad() = torch::tensor({3.0f, 4.0f});
+  ps[1].mutable_grad() = torch::tensor({12.0f});
+  // ps[2] has no gradient: left out.
+  EXPECT_FLOAT_EQ(gradient_norm(ps).item<float>(), 13.0f);
+  EXPECT_FALSE(gradient_norm({ps[2]}).defined());
+}
+
+// optimizer.grad_clip: the step reports the norm before clipping and leaves the gradients it
+// applied scaled to the bound (torch::nn::utils::clip_grad_norm_'s rule); the losses it reports
+// are the loss terms of the step.
+TEST(TrainStep, ClipsToTheBoundAndReportsTheNormBefore) {
+  torch::manual_seed(5);
+  Config c = parse_config("model: {encoder_depth: 18, num_scales: 1}\noptimizer: {grad_clip: 0.001}\n");
+  Networks n = Networks::create(c, false);
+  TrainStep step(n, c, c.stages[0]);
+  const auto tgt = torch::rand({2, 3, 64, 128}), srcs = torch::rand({2, 2, 3, 64, 128});
+  const auto K = torch::tensor({60.f, 0.f, 64.f, 0.f, 60.f, 32.f, 0.f, 0.f, 1.f}).view({1, 3, 3}).repeat({2, 1, 1});
+  const StepResult r = step.run(tgt, srcs, K, 1e-4);
+  ASSERT_TRUE(r.finite);
+  EXPECT_GT(r.grad_norm, 0.001);
+  const double after = gradient_norm(n.trainable_parameters()).item<double>();
+  EXPECT_NEAR(after, 0.001 * r.grad_norm / (r.grad_norm + 1e-6), 1e-7);
+  ASSERT_EQ(r.losses.back().first, "total");
+  EXPECT_EQ(r.losses.size(), 3u);  // rigid, disp_smooth, total
+}
+
+}  // namespace
+}  // namespace geo

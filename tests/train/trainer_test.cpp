@@ -18,6 +18,7 @@
 
 #include "synth_world.h"
 #include "tensorboard_reader.h"
+#include "train/training_helpers.h"
 
 namespace geo {
 namespace {
@@ -40,16 +41,8 @@ run: {threads: 2, seed: 3}
 )" + extra, "tiny.yaml", {"data.root=" + world()});
 }
 
-std::string metrics(const std::string& dir) { return test::read_file(dir + "/metrics.csv"); }
-
-// Stops the run from inside, as a crash would: no checkpoint for the step it interrupts.
-struct KillAtStep : MetricsSink {
-  explicit KillAtStep(int64_t n) : left(n) {}
-  void on_step(const StepRecord&) override {
-    if (--left == 0) throw std::runtime_error("killed");
-  }
-  int64_t left;
-};
+using test::KillAtStep;
+using test::metrics;
 
 TrainState state_of(const std::string& checkpoint) {
   torch::serialize::InputArchive a;
