@@ -337,10 +337,13 @@ int main(int argc, char** argv) {
   int warmup = 10, iters = 5, train_warmup = 2, train_iters = 5, threads = 0, train_batch = 0, loader_batches = 20,
       profile_top = 0;
   bool profile_shapes = false;
+  std::string precision;
   app.add_option("--config", config_path,
                  "YAML config (model, data size, stages); default: the paper's settings and its two stages");
   app.add_option("--device", device_name, "cpu (default), cuda, cuda:N or auto; cuda without CUDA is an error");
   app.add_option("--batch", batches, "inference batch sizes, e.g. 1,4")->delimiter(',')->check(CLI::PositiveNumber);
+  app.add_option("--precision", precision, "fp32, tf32 or bf16 (run.precision; default: the config's)")
+      ->check(CLI::IsMember({"fp32", "tf32", "bf16"}));
   app.add_option("--train-batch", train_batch, "training batch size (default: each stage's batch_size)");
   app.add_option("--fr", fr_mode, "feature refinement: both, on or off")->check(CLI::IsMember({"both", "on", "off"}));
   app.add_option("--warmup", warmup, "untimed inference runs before timing (fresh memory is slow to touch)")
@@ -369,15 +372,18 @@ int main(int argc, char** argv) {
 
   try {
     geo::setup_logging("info");
-    const geo::Config config = config_path.empty() ? geo::parse_config("", "<defaults>")
-                                                   : geo::load_config(geo::resolve_config_path(config_path));
+    const std::vector<std::string> overrides =
+        precision.empty() ? std::vector<std::string>{} : std::vector<std::string>{"run.precision=" + precision};
+    const geo::Config config = config_path.empty() ? geo::parse_config("", "<defaults>", overrides)
+                                                   : geo::load_config(geo::resolve_config_path(config_path), overrides);
+    geo::apply_precision(config.run.precision);
     const torch::Device device = geo::select_device(device_name);
     if (device.is_cuda()) at::globalContext().setBenchmarkCuDNN(true);  // fixed shapes: autotune once
     const int nthreads = threads > 0 ? threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
     torch::set_num_threads(nthreads);
     const int64_t H = config.data.height, W = config.data.width, N = config.data.seq_length - 1;
-    spdlog::info("geo_bench: LibTorch {}, device {}, {} threads, {}x{}, {}-frame snippets, encoder ResNet-{}",
-                 TORCH_VERSION, device.str(), nthreads, H, W, N + 1, config.model.encoder_depth);
+    spdlog::info("geo_bench: LibTorch {}, device {} ({}), {} threads, {}x{}, {}-frame snippets, encoder ResNet-{}",
+                 TORCH_VERSION, device.str(), geo::name_of(config.run.precision), nthreads, H, W, N + 1, config.model.encoder_depth);
 
     std::vector<bool> frs;
     if (fr_mode != "off") frs.push_back(true);

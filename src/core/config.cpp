@@ -502,6 +502,11 @@ const std::vector<EnumName<DataFormat>>& enum_names(DataFormat) {
       {DataFormat::kSynthetic, "synthetic"}};
   return n;
 }
+const std::vector<EnumName<Precision>>& enum_names(Precision) {
+  static const std::vector<EnumName<Precision>> n{
+      {Precision::kFp32, "fp32"}, {Precision::kTf32, "tf32"}, {Precision::kBf16, "bf16"}};
+  return n;
+}
 const std::vector<EnumName<BadSample>>& enum_names(BadSample) {
   static const std::vector<EnumName<BadSample>> n{{BadSample::kStop, "stop"}, {BadSample::kSkip, "skip"}};
   return n;

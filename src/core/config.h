@@ -30,6 +30,7 @@ template <class E> struct EnumName {
 enum class Upsample { kNearest, kBilinear };
 enum class LrScheduleKind { kConstant, kStep };
 enum class DataFormat { kAuto, kKittiRaw, kPacked, kSynthetic };
+enum class Precision { kFp32, kTf32, kBf16 };
 enum class BadSample { kStop, kSkip };
 enum class Sampler { kZeros, kBorder };
 enum class FlowMask { kOcclusion, kConsistency };
@@ -37,6 +38,7 @@ enum class Net { kDepth, kPose, kFlow };
 const std::vector<EnumName<Upsample>>& enum_names(Upsample);
 const std::vector<EnumName<LrScheduleKind>>& enum_names(LrScheduleKind);
 const std::vector<EnumName<DataFormat>>& enum_names(DataFormat);
+const std::vector<EnumName<Precision>>& enum_names(Precision);
 const std::vector<EnumName<BadSample>>& enum_names(BadSample);
 const std::vector<EnumName<Sampler>>& enum_names(Sampler);
 const std::vector<EnumName<FlowMask>>& enum_names(FlowMask);
@@ -316,6 +318,10 @@ struct RunConfig {
   int64_t seed = 42;            // seeds torch and the data pipeline
   std::string device = "auto";  // auto | cpu | cuda | cuda:N (core/runtime.h: select_device)
   int threads = 0;              // intra-op threads; 0 = all cores
+  // Arithmetic of the networks (losses and warping stay fp32): fp32; tf32 (CUDA convolutions and
+  // matrix products in TF32 on Ampere and later, PyTorch's default for convolutions; the same as
+  // fp32 on CPU); bf16 (the networks under autocast to bfloat16 on CUDA and on CPU, TF32 elsewhere).
+  Precision precision = Precision::kTf32;
   DistributedConfig distributed;
 
   template <class V> void fields(V& v) {
@@ -324,6 +330,7 @@ struct RunConfig {
     v("seed", seed);
     v("device", device);
     v("threads", threads);
+    v("precision", precision);
     v("distributed", distributed);
   }
   void validate(Checker& c) const;

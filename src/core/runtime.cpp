@@ -4,6 +4,8 @@
 #include <cstring>
 #include <stdexcept>
 
+#include <ATen/Context.h>
+#include <ATen/autocast_mode.h>
 #include <torch/cuda.h>
 #include <torch/version.h>
 #if defined(__GLIBC__)
@@ -48,6 +50,62 @@ torch::Device select_device(const std::string& name) {
     return d;
   }
   throw std::runtime_error("device '" + name + "' is not one of auto, cpu, cuda, cuda:N");
+}
+
+void apply_precision(Precision precision) {
+  const bool tf32 = precision != Precision::kFp32;
+  at::globalContext().setAllowTF32CuDNN(tf32);
+  at::globalContext().setAllowTF32CuBLAS(tf32);
+}
+
+// LibTorch 2.4 replaced the per-device autocast functions (set_enabled for CUDA, set_cpu_enabled,
+// ...) by ones that take the device type.
+#if TORCH_VERSION_MAJOR > 2 || (TORCH_VERSION_MAJOR == 2 && TORCH_VERSION_MINOR >= 4)
+#define GEO_AUTOCAST_BY_DEVICE_TYPE 1
+#endif
+
+Bf16Autocast::Bf16Autocast(bool enabled, const torch::Device& device) : enabled_(enabled), type_(device.type()) {
+  if (!enabled_) return;
+  if (type_ != torch::kCPU && type_ != torch::kCUDA)
+    throw std::runtime_error("run.precision bf16: autocast on " + device.str() + " is not supported (cpu or cuda)");
+#ifdef GEO_AUTOCAST_BY_DEVICE_TYPE
+  was_enabled_ = at::autocast::is_autocast_enabled(type_);
+  was_dtype_ = at::autocast::get_autocast_dtype(type_);
+  at::autocast::set_autocast_dtype(type_, at::kBFloat16);
+  at::autocast::set_autocast_enabled(type_, true);
+#else
+  if (type_ == torch::kCUDA) {
+    was_enabled_ = at::autocast::is_enabled();
+    was_dtype_ = at::autocast::get_autocast_gpu_dtype();
+    at::autocast::set_autocast_gpu_dtype(at::kBFloat16);
+    at::autocast::set_enabled(true);
+  } else {
+    was_enabled_ = at::autocast::is_cpu_enabled();
+    was_dtype_ = at::autocast::get_autocast_cpu_dtype();
+    at::autocast::set_autocast_cpu_dtype(at::kBFloat16);
+    at::autocast::set_cpu_enabled(true);
+  }
+#endif
+  at::autocast::increment_nesting();
+}
+
+Bf16Autocast::~Bf16Autocast() {
+  if (!enabled_) return;
+  // The bf16 copies of the weights are cached while autocast is on: dropped here, since the
+  // weights change with every update.
+  if (at::autocast::decrement_nesting() == 0) at::autocast::clear_cache();
+#ifdef GEO_AUTOCAST_BY_DEVICE_TYPE
+  at::autocast::set_autocast_enabled(type_, was_enabled_);
+  at::autocast::set_autocast_dtype(type_, was_dtype_);
+#else
+  if (type_ == torch::kCUDA) {
+    at::autocast::set_enabled(was_enabled_);
+    at::autocast::set_autocast_gpu_dtype(was_dtype_);
+  } else {
+    at::autocast::set_cpu_enabled(was_enabled_);
+    at::autocast::set_autocast_cpu_dtype(was_dtype_);
+  }
+#endif
 }
 
 }  // namespace geo

@@ -3,6 +3,8 @@
 
 #include <torch/types.h>
 
+#include "core/config.h"
+
 #include <string>
 
 namespace geo {
@@ -20,5 +22,26 @@ torch::Device select_device(const std::string& name);
 // 2.1 s. The peak memory is unchanged; the process simply does not shrink after it.
 // GEO_KEEP_MEMORY=0 in the environment turns this off.
 void keep_freed_memory();
+
+// run.precision for the whole process: TF32 for CUDA convolutions and matrix products off for
+// fp32, on for tf32 and bf16 (no effect on CPU).
+void apply_precision(Precision precision);
+
+// While alive and `enabled`: the operations on `device`'s type run under autocast to bfloat16
+// (convolutions and matrix products in bf16, precision-sensitive operations in fp32; PyTorch's
+// autocast lists). Wrap only the networks' forward; cast their outputs back to float32.
+class Bf16Autocast {
+ public:
+  Bf16Autocast(bool enabled, const torch::Device& device);
+  ~Bf16Autocast();
+  Bf16Autocast(const Bf16Autocast&) = delete;
+  Bf16Autocast& operator=(const Bf16Autocast&) = delete;
+
+ private:
+  bool enabled_;
+  bool was_enabled_ = false;
+  at::ScalarType was_dtype_ = at::kBFloat16;
+  torch::DeviceType type_;
+};
 
 }  // namespace geo

@@ -115,6 +115,11 @@ Batch BatchLoader::make(int64_t k) const {
   Batch b = augment(collate(snippets), options_.augment, options_.seed * 7919ULL + draw);
   b.index = k;
   b.skipped = skipped;
+  if (options_.pin_memory) {  // in the worker, off the training thread
+    b.tgt = b.tgt.pin_memory();
+    b.srcs = b.srcs.pin_memory();
+    b.K = b.K.pin_memory();
+  }
   return b;
 }
 

@@ -45,6 +45,7 @@ struct LoaderOptions {
   bool shuffle = true;
   bool skip_bad = false;    // on_bad_sample: skip (log and use the next sample) vs stop (throw)
   AugmentConfig augment;    // augment.enabled = false: none
+  bool pin_memory = false;  // batches in page-locked memory (CUDA training: asynchronous copies to the GPU)
   // Shard `rank` of `world_size` (distributed training): global batch k is the stream positions
   // [k*B*W, (k+1)*B*W); this process takes its B positions r*B.. of it, and its own augmentation
   // draw. world_size 1 is the single-process stream.

@@ -1,5 +1,7 @@
 #include "train/networks.h"
 
+#include "core/runtime.h"
+
 #include "core/state_io.h"
 #include "geometry/camera.h"
 #include "geometry/pose.h"
@@ -152,6 +154,24 @@ void Networks::prepare_inference(bool fold) {
   if (flow) prepare(*flow);  // null for checkpoints without a FlowNet
 }
 
+namespace {
+
+torch::Tensor to_float32(const torch::Tensor& t) { return t.scalar_type() == torch::kFloat32 ? t : t.to(torch::kFloat32); }
+std::vector<torch::Tensor> to_float32(std::vector<torch::Tensor> ts) {
+  for (auto& t : ts) t = to_float32(t);
+  return ts;
+}
+
+// A network's forward in run.precision: under bf16 autocast for bf16, its outputs back in float32
+// (the losses, warping and geometry run in float32).
+template <class F>
+auto network_pass(const Config& config, const torch::Device& device, F forward) {
+  Bf16Autocast autocast(config.run.precision == Precision::kBf16, device);
+  return to_float32(forward());
+}
+
+}  // namespace
+
 StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& srcs,
                           const torch::Tensor& K, const StageConfig& stage, const Config& config) {
   const int64_t B = tgt.size(0), N = srcs.size(1);
@@ -167,7 +187,7 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
     std::optional<torch::NoGradGuard> frozen;
     if (!stage.trains(Net::kDepth)) frozen.emplace();
     auto frames = torch::cat({tgt.unsqueeze(1), srcs}, 1).flatten(0, 1);  // [B*(N+1),3,H,W]
-    auto disp = nets.depth->forward(frames).disp;
+    auto disp = network_pass(config, tgt.device(), [&] { return nets.depth->forward(frames).disp; });
     // model.num_scales: the losses use the finest num_scales predictions (GeoNet's num_scales).
     disp.resize(std::min(disp.size(), static_cast<size_t>(config.model.num_scales)));
     in.src_disp.assign(N, {});
@@ -180,7 +200,7 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
   {
     std::optional<torch::NoGradGuard> frozen;
     if (!stage.trains(Net::kPose)) frozen.emplace();
-    in.poses = nets.pose->forward(tgt, src_list);
+    in.poses = network_pass(config, tgt.device(), [&] { return nets.pose->forward(tgt, src_list); });
   }
   StepOutput out;
   out.tgt_disp = in.tgt_disp;
@@ -201,7 +221,7 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
                                     out.rigid.bwd_flow[i][0].detach(), out.rigid.bwd_error_norm[i].detach()));
   std::optional<torch::NoGradGuard> frozen;
   if (!stage.trains(Net::kFlow)) frozen.emplace();
-  auto residual = nets.flow->forward(torch::cat(inputs, 0)).flow;
+  auto residual = network_pass(config, tgt.device(), [&] { return nets.flow->forward(torch::cat(inputs, 0)).flow; });
   PerSourceScale<torch::Tensor> bwd_full(N);
   out.fwd_full.assign(N, {});
   const int64_t S = static_cast<int64_t>(out.rigid.fwd_flow[0].size());

@@ -61,6 +61,8 @@ class Run {
       spdlog::warn("run.threads {} is more than this machine's {} cores: using {}", cfg_.run.threads, cores, cores);
     torch::set_num_threads(cfg_.run.threads > 0 ? std::min(cfg_.run.threads, cores) : cores);
     torch::manual_seed(static_cast<uint64_t>(cfg_.run.seed));
+    apply_precision(cfg_.run.precision);
+    if (device_.is_cuda()) at::globalContext().setBenchmarkCuDNN(true);  // fixed shapes: cuDNN autotunes once
     data_ = open_training_data(cfg_.data);
     bool with_flow = false;
     for (const auto& s : cfg_.stages) with_flow = with_flow || s.uses_flow();
@@ -81,9 +83,9 @@ class Run {
 
   int run() {
     SignalScope signals;
-    spdlog::info("run folder {}; device {}; {} threads; data {} in {} ({} training snippets{}{}, {} validation); "
+    spdlog::info("run folder {}; device {} ({}); {} threads; data {} in {} ({} training snippets{}{}, {} validation); "
                  "TensorBoard: tensorboard --logdir {}",
-                 dir_, device_.str(), torch::get_num_threads(), data_.format, data_.root, data_.train->size(),
+                 dir_, device_.str(), name_of(cfg_.run.precision), torch::get_num_threads(), data_.format, data_.root, data_.train->size(),
                  data_.excluded ? ", " + std::to_string(data_.excluded) + " excluded by " + join_list(data_.exclusions, ", ") : "",
                  data_.dropped ? ", " + std::to_string(data_.dropped) + " without neighbours" : "",
                  data_.val ? data_.val->size() : 0, fs::path(dir_).parent_path().string());
@@ -188,6 +190,7 @@ class Run {
     lo.workers = cfg_.data.num_workers;
     lo.skip_bad = cfg_.data.on_bad_sample == BadSample::kSkip;
     lo.augment = cfg_.data.augment;
+    lo.pin_memory = device_.is_cuda();  // page-locked batches, copied to the GPU without blocking
     if (group_ && cfg_.run.distributed.shard_data) {
       lo.rank = group_->rank();
       lo.world_size = group_->size();
@@ -201,8 +204,9 @@ class Run {
     bool pending_best = false;
     while (state_.iteration < s.iterations) {
       const Batch batch = loader.next();
-      StepResult r = step.run(batch.tgt.to(device_), batch.srcs.to(device_), batch.K.to(device_),
-                              lr.at(state_.iteration));
+      const bool async = device_.is_cuda();  // the batch stays alive until the step has read it
+      StepResult r = step.run(batch.tgt.to(device_, async), batch.srcs.to(device_, async),
+                              batch.K.to(device_, async), lr.at(state_.iteration));
       if (!r.finite) {
         ++skipped_;
         spdlog::warn("stage {} iteration {}: NaN/Inf loss or gradient, step skipped ({} in a row, {} in all)",

@@ -1,10 +1,12 @@
 // The training loop's parts on their own: TensorBoard encoding, the CSV sink's resume trimming, the
 // LR schedule, checkpoint rotation and best files, and run-folder resolution.
+#include "core/runtime.h"
 #include "train/checkpoints.h"
 #include "train/metrics.h"
 #include "train/tensorboard.h"
 #include "train/train_step.h"
 
+#include <ATen/autocast_mode.h>
 #include <gtest/gtest.h>
 
 #include <unistd.h>
@@ -389,6 +391,46 @@ TEST(TrainStep, ClipsToTheBoundAndReportsTheNormBefore) {
   EXPECT_NEAR(after, 0.001 * r.grad_norm / (r.grad_norm + 1e-6), 1e-7);
   ASSERT_EQ(r.losses.back().first, "total");
   EXPECT_EQ(r.losses.size(), 3u);  // rigid, disp_smooth, total
+}
+
+// run.precision bf16: the networks run under bf16 autocast, the losses stay float32 and close to
+// the fp32 step's; gradients reach every parameter in float32; autocast is off again afterwards.
+TEST(Precision, Bf16NetworksWithFloat32Losses) {
+  Config c = parse_config("model: {encoder_depth: 18, num_scales: 2}\n");
+  StageConfig stage = c.stages[0];
+  stage.train = NetworkSet{true, true, true};
+  torch::manual_seed(5);
+  Networks n = Networks::create(c, true);
+  n.set_modes(stage);
+  n.set_trainable(stage);
+  const auto tgt = torch::rand({2, 3, 64, 128}), srcs = torch::rand({2, 2, 3, 64, 128});
+  const auto K = torch::tensor({60.f, 0.f, 64.f, 0.f, 60.f, 32.f, 0.f, 0.f, 1.f}).view({1, 3, 3}).repeat({2, 1, 1});
+  const auto fp32 = compute_losses(n, tgt, srcs, K, stage, c).losses.values();
+  Config b = parse_config("model: {encoder_depth: 18, num_scales: 2}\nrun: {precision: bf16}\n");
+  auto out = compute_losses(n, tgt, srcs, K, stage, b);
+  EXPECT_FALSE(at::autocast::is_cpu_enabled());
+  EXPECT_EQ(out.tgt_disp[0].scalar_type(), torch::kFloat32);
+  EXPECT_EQ(out.fwd_full[0][0].scalar_type(), torch::kFloat32);
+  EXPECT_EQ(out.losses.total.scalar_type(), torch::kFloat32);
+  const auto bf16 = out.losses.values();
+  ASSERT_EQ(bf16.size(), fp32.size());
+  EXPECT_NE(bf16.back().second, fp32.back().second);  // the networks did run in bfloat16
+  for (size_t i = 0; i < fp32.size(); ++i)  // bfloat16 keeps 8 bits of mantissa
+    EXPECT_NEAR(bf16[i].second, fp32[i].second, 0.05 * std::abs(fp32[i].second) + 1e-3) << fp32[i].first;
+  out.losses.total.backward();
+  for (const auto& p : n.trainable_parameters()) {
+    ASSERT_TRUE(p.grad().defined());
+    EXPECT_EQ(p.grad().scalar_type(), torch::kFloat32);
+    EXPECT_TRUE(torch::isfinite(p.grad()).all().item<bool>());
+  }
+  GEO_EXPECT_THROW_WITH(parse_config("run: {precision: fp16}\n"), "run.precision", "fp32, tf32, bf16");
+  {
+    Bf16Autocast on(true, torch::kCPU);
+    EXPECT_EQ(torch::conv2d(torch::rand({1, 2, 4, 4}), torch::rand({3, 2, 1, 1})).scalar_type(), torch::kBFloat16);
+    Bf16Autocast off(false, torch::kCPU);
+    EXPECT_TRUE(at::autocast::is_cpu_enabled());
+  }
+  EXPECT_FALSE(at::autocast::is_cpu_enabled());
 }
 
 }  // namespace
