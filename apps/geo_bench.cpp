@@ -419,11 +419,17 @@ int main(int argc, char** argv) {
     }
 
     if (!summary && !no_infer) {
+      // Each FR variant in float32 and, with --precision bf16, in bfloat16 too (side by side).
       std::vector<std::pair<geo::Config, geo::Networks>> made;
-      for (bool fr : frs) {
-        made.push_back(networks_with_fr(config, fr, true, device));
-        made.back().second.prepare_inference(!no_fold);
-      }
+      std::vector<bool> made_fr, made_bf16;
+      for (bool fr : frs)
+        for (bool bf16 : {false, true}) {
+          if (bf16 && config.run.precision != geo::Precision::kBf16) continue;
+          made.push_back(networks_with_fr(config, fr, true, device));
+          made.back().second.prepare_inference(!no_fold, bf16);
+          made_fr.push_back(fr);
+          made_bf16.push_back(bf16);
+        }
       torch::InferenceMode guard;
       for (int b : batches) {
         spdlog::info("inference, FR {}, batch {} ...", fr_mode, b);
@@ -432,17 +438,18 @@ int main(int argc, char** argv) {
         const auto flow_in = torch::rand({b, 12, H, W}, device);
         const auto K = intrinsics(b, H, W, device);
         std::vector<Row> batch_rows;
-        batch_rows.reserve(4 * frs.size());
+        batch_rows.reserve(4 * made.size());
         std::vector<std::pair<Row*, std::function<void()>>> calls;
         // One kind of call at a time (DepthNet, PoseNet, ...), its FR variants side by side.
         for (const std::string what : {"DepthNet", "PoseNet", "FlowNet", "pipeline"}) {
           calls.clear();
-          for (size_t k = 0; k < frs.size(); ++k) {
+          for (size_t k = 0; k < made.size(); ++k) {
             const bool pose = what == "PoseNet";
-            if (pose && k > 0) continue;  // no FR in the PoseNet: once
+            if (pose && made_fr[k] != made_fr[0]) continue;  // no FR in the PoseNet: once per precision
             geo::Networks& nets = made[k].second;
             const geo::LossConfig& loss = made[k].first.loss;
-            batch_rows.push_back(Row{"infer", what, pose ? "-" : (frs[k] ? "on" : "off"), b});
+            batch_rows.push_back(Row{"infer", std::string(what) + (made_bf16[k] ? " bf16" : ""),
+                                     pose ? "-" : (made_fr[k] ? "on" : "off"), b});
             std::function<void()> fn;
             if (what == "DepthNet") fn = [&nets, &img] { nets.depth(img); };
             if (pose) fn = [&nets, &img, &srcs] { nets.pose(img, srcs); };

@@ -32,6 +32,10 @@ int main(int argc, char** argv) {
   app.add_option("--input", input, "an image, a folder of frames (sorted by name) or a video file")->required();
   app.add_option("--output", output, "output folder (created)")->required();
   app.add_option("--device", device, "auto (CUDA when available), cpu, cuda or cuda:N (an error without CUDA)");
+  std::string precision = "fp32";
+  app.add_option("--precision", precision,
+                 "fp32, bf16 (faster on CPUs with AVX512-BF16/AMX, depth within ~1%) or auto (bf16 on such a CPU)")
+      ->check(CLI::IsMember({"fp32", "bf16", "auto"}));
   app.add_option("--intrinsics", intrinsics,
                  "fx fy cx cy of the input images in pixels (default: KITTI-like 0.58 W, 1.92 H, W/2, H/2)")
       ->expected(4);
@@ -42,6 +46,7 @@ int main(int argc, char** argv) {
     geo::setup_logging("info");
     geo::LoadOptions load;
     load.device = device;
+    load.precision = precision;
     const geo::Model model = geo::Model::load(checkpoint, load);  // the library's inference path
     const int64_t h = model.spec().height, w = model.spec().width;
     // Frames as (name, image [1,3,h,w]) in order; the original size is kept for the intrinsics.

@@ -68,6 +68,14 @@ ModelSpec spec_of(const Config& c, bool has_flow, const std::string& source) {
   return ModelSpec{c.data.height, c.data.width, c.data.seq_length, c.model.encoder_depth, c.model.use_fr, has_flow, source};
 }
 
+// LoadOptions::precision.
+bool use_bf16(const std::string& precision, const torch::Device& device) {
+  if (precision == "fp32") return false;
+  if (precision == "bf16") return true;
+  if (precision == "auto") return device.is_cpu() && cpu_has_fast_bf16();
+  throw Error("precision '" + precision + "' is not one of fp32, bf16, auto");
+}
+
 // Networks are created with random weights that the file then replaces: the process's random
 // generator is left as it was (a library must not move its user's seeds).
 Networks create_quietly(const Config& config, bool with_flow) {
@@ -182,8 +190,10 @@ Model Model::load(const std::string& path, const LoadOptions& options) {
     if (options.threads > 0) torch::set_num_threads(options.threads);
     impl->device = select_device(options.device);
     impl->nets.to(impl->device);
-    impl->nets.prepare_inference(true);  // eval mode, BatchNorm folded into the convolutions
+    const bool bf16 = use_bf16(options.precision, impl->device);
+    impl->nets.prepare_inference(true, bf16);  // eval mode, BatchNorm folded into the convolutions
     impl->spec = spec_of(impl->config, has_flow, file);
+    impl->spec.precision = bf16 ? "bf16" : "fp32";
     return Model(impl);
   });
 }

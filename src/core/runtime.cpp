@@ -11,6 +11,9 @@
 #if defined(__GLIBC__)
 #include <malloc.h>
 #endif
+#if defined(__x86_64__) || defined(__i386__)
+#include <cpuid.h>
+#endif
 
 namespace geo {
 
@@ -50,6 +53,15 @@ torch::Device select_device(const std::string& name) {
     return d;
   }
   throw std::runtime_error("device '" + name + "' is not one of auto, cpu, cuda, cuda:N");
+}
+
+bool cpu_has_fast_bf16() {
+#if defined(__x86_64__) || defined(__i386__)
+  unsigned a = 0, b = 0, c = 0, d = 0;
+  if (__get_cpuid_count(7, 0, &a, &b, &c, &d) && (d & (1u << 22))) return true;  // AMX-BF16
+  if (__get_cpuid_count(7, 1, &a, &b, &c, &d) && (a & (1u << 5))) return true;   // AVX512-BF16
+#endif
+  return false;
 }
 
 void apply_precision(Precision precision) {

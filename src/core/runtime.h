@@ -23,6 +23,9 @@ torch::Device select_device(const std::string& name);
 // GEO_KEEP_MEMORY=0 in the environment turns this off.
 void keep_freed_memory();
 
+// Whether this CPU computes bfloat16 natively (AVX512-BF16 or AMX-BF16), checked at run time.
+bool cpu_has_fast_bf16();
+
 // run.precision for the whole process: TF32 for CUDA convolutions and matrix products off for
 // fp32, on for tf32 and bf16 (no effect on CPU).
 void apply_precision(Precision precision);

@@ -26,7 +26,9 @@ DepthNetImpl::DepthNetImpl(const DepthNetOptions& o) : options(o) {
 DepthOutput DepthNetImpl::forward(const torch::Tensor& image) {
   TORCH_CHECK(image.dim() == 4 && image.size(1) == 3, "DepthNet input must be [B,3,H,W], got ",
               image.sizes());
-  return DepthOutput{net(normalize_image(image))};
+  auto disp = net(normalize_image(image.to(compute_dtype)));
+  for (auto& d : disp) d = d.to(torch::kFloat32);
+  return DepthOutput{std::move(disp)};
 }
 
 }  // namespace geo

@@ -35,6 +35,9 @@ struct DepthNetImpl : torch::nn::Module {
   DepthOutput forward(const torch::Tensor& image);
 
   DepthNetOptions options;
+  // The type of the weights and the arithmetic: float32, or bfloat16 for inference
+  // (Networks::prepare_inference); inputs are cast to it and the outputs are float32.
+  torch::Dtype compute_dtype = torch::kFloat32;
   EncoderDecoder net{nullptr};
 };
 TORCH_MODULE(DepthNet);

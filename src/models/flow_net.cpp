@@ -28,7 +28,8 @@ FlowOutput FlowNetImpl::forward(const torch::Tensor& input) {
   TORCH_CHECK(input.dim() == 4 && input.size(1) == 12, "FlowNet input must be [B,12,H,W], got ",
               input.sizes());
   FlowOutput out;
-  for (auto& f : net(input)) {
+  for (auto f : net(input.to(compute_dtype))) {
+    f = f.to(torch::kFloat32);
     // Normalised flow -> pixels of its scale: u * W_s, v * H_s (GeoNet).
     auto factor = torch::tensor({static_cast<double>(f.size(3)), static_cast<double>(f.size(2))},
                                 f.options())

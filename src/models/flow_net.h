@@ -32,6 +32,7 @@ struct FlowNetImpl : torch::nn::Module {
   FlowOutput forward(const torch::Tensor& input);
 
   FlowNetOptions options;
+  torch::Dtype compute_dtype = torch::kFloat32;  // as DepthNetImpl::compute_dtype
   EncoderDecoder net{nullptr};
 };
 TORCH_MODULE(FlowNet);

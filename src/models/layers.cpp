@@ -117,19 +117,19 @@ torch::Tensor conv3x3_of_upsampled(const torch::Tensor& x, const torch::Tensor& 
   return InterleavePhases::apply(y);
 }
 
-void ConvBnImpl::fold_batchnorm() {
+void ConvBnImpl::fold_batchnorm(torch::Dtype dtype) {
   if (folded()) return;
   torch::NoGradGuard no_grad;
   const auto scale = bn->weight / torch::sqrt(bn->running_var + bn->options.eps());
-  folded_weight_ = (conv->weight * scale.view({-1, 1, 1, 1})).contiguous();
-  folded_bias_ = bn->bias - bn->running_mean * scale;
+  folded_weight_ = (conv->weight * scale.view({-1, 1, 1, 1})).to(dtype).contiguous();
+  folded_bias_ = (bn->bias - bn->running_mean * scale).to(dtype);
 }
 
-int fold_batchnorm(torch::nn::Module& module) {
+int fold_batchnorm(torch::nn::Module& module, torch::Dtype dtype) {
   int n = 0;
   for (auto& m : module.modules(/*include_self=*/true)) {
     if (auto* cb = m->as<ConvBnImpl>()) {
-      cb->fold_batchnorm();
+      cb->fold_batchnorm(dtype);
       ++n;
     }
   }

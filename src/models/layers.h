@@ -22,8 +22,8 @@ struct ConvBnImpl : torch::nn::Module {
   // Inference only: folds BatchNorm's running statistics and affine into one convolution with a
   // bias (w' = w·γ/√(σ²+ε), b' = β − μ·γ/√(σ²+ε)), so forward is a single conv (+ ReLU). The folded
   // tensors are not registered: fold after loading weights and moving to the device; a folded
-  // module refuses to run in training mode.
-  void fold_batchnorm();
+  // module refuses to run in training mode. `dtype`: the folded tensors' type (computed in float32).
+  void fold_batchnorm(torch::Dtype dtype = torch::kFloat32);
   bool folded() const { return folded_weight_.defined(); }
   torch::nn::Conv2d conv{nullptr};
   torch::nn::BatchNorm2d bn{nullptr};
@@ -46,7 +46,7 @@ TORCH_MODULE(ConvBn);
 torch::Tensor conv3x3_of_upsampled(const torch::Tensor& x, const torch::Tensor& weight, const torch::Tensor& bias);
 
 // Folds every ConvBn inside `module` (see ConvBnImpl::fold_batchnorm); returns how many.
-int fold_batchnorm(torch::nn::Module& module);
+int fold_batchnorm(torch::nn::Module& module, torch::Dtype dtype = torch::kFloat32);
 
 // x2 upsampling of the decoders.
 enum class UpsampleMode { kNearest, kBilinear };  // nearest: GeoNet

@@ -24,6 +24,7 @@ struct PoseNetImpl : torch::nn::Module {
   int num_sources() const { return options.seq_length - 1; }
 
   PoseNetOptions options;
+  torch::Dtype compute_dtype = torch::kFloat32;  // as DepthNetImpl::compute_dtype
   std::vector<ConvBn> convs;     // conv1..conv7: 16 (7x7), 32 (5x5), 64, 128, 256, 256, 256 (3x3), /2
   torch::nn::Conv2d pred{nullptr};  // 1x1 to 6 * num_sources, no BN / activation
 };

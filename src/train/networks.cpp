@@ -144,14 +144,17 @@ std::optional<Config> checkpoint_config(torch::serialize::InputArchive& archive,
   return parse_config(yaml.toStringRef(), source + " [config]");
 }
 
-void Networks::prepare_inference(bool fold) {
-  auto prepare = [fold](torch::nn::Module& m) {
+void Networks::prepare_inference(bool fold, bool bf16) {
+  const torch::Dtype dtype = bf16 ? torch::kBFloat16 : torch::kFloat32;
+  auto prepare = [fold, dtype](torch::nn::Module& m, torch::Dtype& compute_dtype) {
     m.eval();
-    if (fold) fold_batchnorm(m);
+    if (fold) fold_batchnorm(m, dtype);  // from the float32 weights
+    m.to(dtype);
+    compute_dtype = dtype;
   };
-  prepare(*depth);
-  prepare(*pose);
-  if (flow) prepare(*flow);  // null for checkpoints without a FlowNet
+  prepare(*depth, depth->compute_dtype);
+  prepare(*pose, pose->compute_dtype);
+  if (flow) prepare(*flow, flow->compute_dtype);  // null for checkpoints without a FlowNet
 }
 
 namespace {

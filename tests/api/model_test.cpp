@@ -5,6 +5,7 @@
 #include "geo/geo.h"
 
 #include "core/config.h"
+#include "core/runtime.h"
 #include "core/state_io.h"
 #include "eval/predictor.h"
 #include "geometry/pose.h"
@@ -12,6 +13,7 @@
 
 #include <gtest/gtest.h>
 
+#include <iostream>
 #include <thread>
 
 #include "test_util.h"
@@ -158,6 +160,33 @@ TEST(Api, Rgb8ImagesWithRowPadding) {
   EXPECT_EQ(t.sizes(), (torch::IntArrayRef{3, 2, 2}));
   EXPECT_EQ(t[0][1][0].item<int>(), 7);   // R of row 1, column 0
   EXPECT_EQ(t[2][0][1].item<int>(), 6);   // B of row 0, column 1
+}
+
+// LoadOptions::precision bf16: weights and arithmetic in bfloat16, outputs float32, close to fp32.
+TEST(Api, Bf16PrecisionStaysCloseToFp32) {
+  const Model fp32 = Model::load(checkpoint());
+  LoadOptions o;
+  o.precision = "bf16";
+  const Model bf16 = Model::load(checkpoint(), o);
+  EXPECT_EQ(fp32.spec().precision, "fp32");
+  EXPECT_EQ(bf16.spec().precision, "bf16");
+  const auto a = image(64, 208), b = image(64, 208, 0.1);
+  const auto d32 = fp32.depth(a), d16 = bf16.depth(a);
+  EXPECT_EQ(d16.scalar_type(), torch::kFloat32);
+  const auto rel = ((d16 - d32).abs() / d32);
+  std::cout << "bf16 depth vs fp32: mean relative difference " << rel.mean().item<double>() << ", max "
+            << rel.max().item<double>() << "\n";
+  EXPECT_LT(rel.mean().item<double>(), 0.01);
+  EXPECT_LT(rel.max().item<double>(), 0.05);
+  EXPECT_FALSE(torch::equal(d16, d32));  // it did compute in bfloat16
+  const auto K = torch::tensor({100.f, 0.f, 104.f, 0.f, 100.f, 32.f, 0.f, 0.f, 1.f}).view({3, 3});
+  const auto f32 = fp32.flow(a, b, K), f16 = bf16.flow(a, b, K);
+  EXPECT_LT((f16 - f32).abs().mean().item<double>(), 0.05);  // pixels
+  EXPECT_LT((bf16.relative_pose(a, b) - fp32.relative_pose(a, b)).abs().max().item<double>(), 1e-3);
+  o.precision = "auto";
+  EXPECT_EQ(Model::load(checkpoint(), o).spec().precision, cpu_has_fast_bf16() ? "bf16" : "fp32");
+  o.precision = "fp16";
+  GEO_EXPECT_THROW_WITH(Model::load(checkpoint(), o), "precision 'fp16'", "fp32, bf16, auto");
 }
 
 }  // namespace
