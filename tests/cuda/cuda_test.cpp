@@ -120,8 +120,7 @@ TEST(Cuda, ResumeOnCudaContinuesTheRun) {
   a.run_dir = base + "/whole";
   b.run_dir = base + "/killed";
   ASSERT_EQ(train(cuda_run_config(), a), 0);
-  b.sinks.push_back(std::make_shared<test::KillAtStep>(4));
-  GEO_EXPECT_THROW_WITH(train(cuda_run_config(), b), "killed");
+  test::train_until_killed(cuda_run_config(), b, 4);
   ASSERT_EQ(resume(b.run_dir, {}), 0);
   expect_same_losses(test::metrics(a.run_dir), test::metrics(b.run_dir), 1e-3);
 }
@@ -130,26 +129,16 @@ TEST(Cuda, ResumeOnCudaContinuesTheRun) {
 TEST(Cuda, CheckpointsMoveBetweenCudaAndCpu) {
   GEO_REQUIRE_CUDA();
   const auto base = test::fresh_dir("cuda_cpu");
-  TrainOptions on_cuda;
-  on_cuda.run_dir = base + "/from_cuda";
-  on_cuda.sinks.push_back(std::make_shared<test::KillAtStep>(3));
-  GEO_EXPECT_THROW_WITH(train(cuda_run_config(), on_cuda), "killed");
-  TrainOptions cpu;
-  cpu.device = "cpu";
-  ASSERT_EQ(resume(on_cuda.run_dir, cpu), 0);
-  const auto from_cuda = test::metrics(on_cuda.run_dir);
-  EXPECT_EQ(std::count(from_cuda.begin(), from_cuda.end(), '\n'), 6);  // header + 5 iterations
-
-  TrainOptions on_cpu;
-  on_cpu.run_dir = base + "/from_cpu";
-  on_cpu.device = "cpu";
-  on_cpu.sinks.push_back(std::make_shared<test::KillAtStep>(3));
-  GEO_EXPECT_THROW_WITH(train(cuda_run_config(), on_cpu), "killed");
-  TrainOptions gpu;
-  gpu.device = "cuda";
-  ASSERT_EQ(resume(on_cpu.run_dir, gpu), 0);
-  const auto from_cpu = test::metrics(on_cpu.run_dir);
-  EXPECT_EQ(std::count(from_cpu.begin(), from_cpu.end(), '\n'), 6);
+  for (const auto& [first, then] : {std::pair<const char*, const char*>{"cuda", "cpu"}, {"cpu", "cuda"}}) {
+    TrainOptions start, resumed;
+    start.run_dir = base + "/from_" + first;
+    start.device = first;
+    resumed.device = then;
+    test::train_until_killed(cuda_run_config(), start, 3);  // in stage 1, after its checkpoint at 2
+    ASSERT_EQ(resume(start.run_dir, resumed), 0) << first << " -> " << then;
+    const auto rows = test::metrics(start.run_dir);
+    EXPECT_EQ(std::count(rows.begin(), rows.end(), '\n'), 6) << first << " -> " << then;  // header + 5
+  }
 }
 
 }  // namespace

@@ -41,7 +41,6 @@ run: {threads: 2, seed: 3}
 )" + extra, "tiny.yaml", {"data.root=" + world()});
 }
 
-using test::KillAtStep;
 using test::metrics;
 
 TrainState state_of(const std::string& checkpoint) {
@@ -74,8 +73,7 @@ TEST(Trainer, KilledAndResumedRunLogsTheSameLosses) {
   TrainOptions b;
   b.run_dir = base + "/killed";
   // s1: 3 steps (checkpoints 2, 3), s2: 2 steps (checkpoint 2), killed during the 6th step.
-  b.sinks.push_back(std::make_shared<KillAtStep>(6));
-  GEO_EXPECT_THROW_WITH(train(tiny_config(), b), "killed");
+  test::train_until_killed(tiny_config(), b, 6);
   EXPECT_EQ(test::read_file(b.run_dir + "/checkpoints/latest"), "s2-00000002.pt\n");
   ASSERT_EQ(resume(b.run_dir, {}), 0);
   const auto whole = metrics(a.run_dir), resumed = metrics(b.run_dir);

@@ -2,6 +2,9 @@
 #pragma once
 
 #include "train/metrics.h"
+#include "train/trainer.h"
+
+#include <gtest/gtest.h>
 
 #include <cstdint>
 #include <stdexcept>
@@ -21,5 +24,12 @@ struct KillAtStep : MetricsSink {
 };
 
 inline std::string metrics(const std::string& dir) { return read_file(dir + "/metrics.csv"); }
+
+// Trains `config` with `options` until a crash at step `step` (counted over all stages); the run
+// folder keeps the checkpoints written before it.
+inline void train_until_killed(const Config& config, TrainOptions options, int64_t step) {
+  options.sinks.push_back(std::make_shared<KillAtStep>(step));
+  GEO_EXPECT_THROW_WITH(train(config, options), "killed");
+}
 
 }  // namespace geo::test
