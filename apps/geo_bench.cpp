@@ -101,16 +101,20 @@ void sync(const torch::Device& device) {
   if (device.is_cuda()) torch::cuda::synchronize();
 }
 
-// Times several calls side by side: each is warmed up `warmup` times (its peak memory taken over
-// its warm-up), then the calls take turns for `iters` rounds, so a machine that slows down or
+// Times several calls side by side: each is warmed up `warmup` times (at least once), then its peak
+// memory is taken over one more call, after the warm-up (the first calls' cuDNN autotuning
+// workspaces and one-off allocations are not a steady state's), then the calls take turns for
+// `iters` rounds, so a machine that slows down or
 // speeds up affects all of them alike (FR on vs off is a difference of a few percent). Fills ms
 // (median), per-sample figures and peak_mb of each row.
 void time_side_by_side(const std::vector<std::pair<Row*, std::function<void()>>>& calls, int warmup, int iters,
                        const torch::Device& device) {
   const Memory mem(device);
   for (const auto& [row, fn] : calls) {
-    mem.reset();
     for (int i = 0; i < std::max(warmup, 1); ++i) fn();
+    sync(device);
+    mem.reset();
+    fn();
     sync(device);
     row->peak_mb = mem.peak_mb();
   }
