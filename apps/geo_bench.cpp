@@ -30,6 +30,7 @@
 #include <sstream>
 #include <thread>
 
+#include "api/model_access.h"
 #include "core/config.h"
 #include "core/files.h"
 #include "core/logging.h"
@@ -442,10 +443,14 @@ int main(int argc, char** argv) {
         const auto flow_in = torch::rand({b, 12, H, W}, device);
         const auto K = intrinsics(b, H, W, device);
         std::vector<Row> batch_rows;
-        batch_rows.reserve(4 * made.size());
+        batch_rows.reserve(5 * made.size());
         std::vector<std::pair<Row*, std::function<void()>>> calls;
         // One kind of call at a time (DepthNet, PoseNet, ...), its FR variants side by side.
-        for (const std::string what : {"DepthNet", "PoseNet", "FlowNet", "pipeline"}) {
+        // The library path: geo::Model::depth on a uint8 [3,H,W] frame (its conversion, the network,
+        // the depth at the frame's size), beside the DepthNet's own forward above.
+        const auto frame8 = (img * 255).to(torch::kUInt8);
+        std::vector<std::unique_ptr<geo::Model>> models;
+        for (const std::string what : {"DepthNet", "PoseNet", "FlowNet", "pipeline", "Model::depth"}) {
           calls.clear();
           for (size_t k = 0; k < made.size(); ++k) {
             const bool pose = what == "PoseNet";
@@ -459,6 +464,11 @@ int main(int argc, char** argv) {
             if (pose) fn = [&nets, &img, &srcs] { nets.pose(img, srcs); };
             if (what == "FlowNet") fn = [&nets, &flow_in] { nets.flow(flow_in); };
             if (what == "pipeline") fn = [&nets, &img, &img2, &K, &loss] { geo::predict_pair(nets, img, img2, K, loss); };
+            if (what == "Model::depth") {  // the library's call: an 8-bit RGB frame in, depth at its size out
+              models.push_back(std::make_unique<geo::Model>(geo::ModelAccess::untrained(
+                  made[k].first, device.str(), made_bf16[k] ? "bf16" : "fp32")));
+              fn = [m = models.back().get(), &frame8] { m->depth(frame8); };
+            }
             calls.emplace_back(&batch_rows.back(), fn);
             if (profile_top > 0 && (what == "DepthNet" || what == "pipeline"))
               print_profile(fmt::format("{} inference, FR {}, batch {}", what, batch_rows.back().fr, b), fn,

@@ -152,15 +152,17 @@ torch::Tensor rgb8_image(const uint8_t* rgb, int64_t height, int64_t width, int6
 
 const Config& ModelAccess::config(const Model& m) { return m.impl_->config; }
 
-Model ModelAccess::untrained(const Config& config, const std::string& device) {
+Model ModelAccess::untrained(const Config& config, const std::string& device, const std::string& precision) {
   return guarded("an untrained model", [&] {
     auto impl = std::make_shared<Model::Impl>();
     impl->config = config;
     impl->nets = Networks::create(config, true);  // the caller seeds (run.seed)
     impl->device = select_device(device);
     impl->nets.to(impl->device);
-    impl->nets.prepare_inference(true);
+    const bool bf16 = use_bf16(precision, impl->device);
+    impl->nets.prepare_inference(true, bf16);
     impl->spec = spec_of(config, true, "untrained (" + config.run.name + ", seed " + std::to_string(config.run.seed) + ")");
+    impl->spec.precision = bf16 ? "bf16" : "fp32";
     return Model(impl);
   });
 }

@@ -11,7 +11,8 @@ namespace geo {
 struct ModelAccess {
   static const Config& config(const Model& model);
   // Networks of `config` with LibTorch's initialisation (seed the generator first for a fixed one).
-  static Model untrained(const Config& config, const std::string& device);
+  // `precision` as LoadOptions::precision (geo_bench times the library path in both).
+  static Model untrained(const Config& config, const std::string& device, const std::string& precision = "fp32");
 };
 
 }  // namespace geo
