@@ -150,6 +150,21 @@ torch::Tensor rgb8_image(const uint8_t* rgb, int64_t height, int64_t width, int6
   return hwc.permute({2, 0, 1}).contiguous();
 }
 
+namespace {
+
+// Networks created and loaded -> on the device, eval mode, BatchNorm folded, in the precision asked.
+void make_ready(Model::Impl& impl, const std::string& device, const std::string& precision, bool has_flow,
+                const std::string& source) {
+  impl.device = select_device(device);
+  impl.nets.to(impl.device);
+  const bool bf16 = use_bf16(precision, impl.device);
+  impl.nets.prepare_inference(true, bf16);
+  impl.spec = spec_of(impl.config, has_flow, source);
+  impl.spec.precision = bf16 ? "bf16" : "fp32";
+}
+
+}  // namespace
+
 const Config& ModelAccess::config(const Model& m) { return m.impl_->config; }
 
 Model ModelAccess::untrained(const Config& config, const std::string& device, const std::string& precision) {
@@ -157,12 +172,8 @@ Model ModelAccess::untrained(const Config& config, const std::string& device, co
     auto impl = std::make_shared<Model::Impl>();
     impl->config = config;
     impl->nets = Networks::create(config, true);  // the caller seeds (run.seed)
-    impl->device = select_device(device);
-    impl->nets.to(impl->device);
-    const bool bf16 = use_bf16(precision, impl->device);
-    impl->nets.prepare_inference(true, bf16);
-    impl->spec = spec_of(config, true, "untrained (" + config.run.name + ", seed " + std::to_string(config.run.seed) + ")");
-    impl->spec.precision = bf16 ? "bf16" : "fp32";
+    make_ready(*impl, device, precision, true,
+               "untrained (" + config.run.name + ", seed " + std::to_string(config.run.seed) + ")");
     return Model(impl);
   });
 }
@@ -190,12 +201,7 @@ Model Model::load(const std::string& path, const LoadOptions& options) {
     impl->nets = create_quietly(impl->config, has_flow);
     impl->nets.load(archive, file, false);
     if (options.threads > 0) torch::set_num_threads(options.threads);
-    impl->device = select_device(options.device);
-    impl->nets.to(impl->device);
-    const bool bf16 = use_bf16(options.precision, impl->device);
-    impl->nets.prepare_inference(true, bf16);  // eval mode, BatchNorm folded into the convolutions
-    impl->spec = spec_of(impl->config, has_flow, file);
-    impl->spec.precision = bf16 ? "bf16" : "fp32";
+    make_ready(*impl, options.device, options.precision, has_flow, file);
     return Model(impl);
   });
 }

@@ -209,26 +209,20 @@ LossTerms total_loss(const RigidTerms& rigid, const FlowTerms* flow, const LossW
   return t;
 }
 
-std::vector<std::pair<std::string, torch::Tensor>> LossTerms::named() const {
-  std::vector<std::pair<std::string, torch::Tensor>> out;
+std::vector<std::pair<std::string, double>> LossTerms::values() const {
+  std::vector<const char*> names;
+  std::vector<torch::Tensor> scalars;
   for (const auto& [name, v] : {std::pair<const char*, const torch::Tensor&>{"rigid", rigid}, {"flow", flow},
                                 {"disp_smooth", disp_smooth}, {"flow_smooth", flow_smooth},
                                 {"flow_consistency", flow_consistency}, {"total", total}})
-    if (v.defined()) out.emplace_back(name, v);
-  return out;
-}
-
-torch::Tensor LossTerms::stacked() const {
-  std::vector<torch::Tensor> scalars;
-  for (const auto& t : named()) scalars.push_back(t.second.detach().reshape({}).to(torch::kFloat64));
-  return scalars.empty() ? torch::zeros({0}, torch::kFloat64) : torch::stack(scalars);
-}
-
-std::vector<std::pair<std::string, double>> LossTerms::values() const {
-  const auto terms = named();
-  const auto host = stacked().cpu().contiguous();
+    if (v.defined()) {
+      names.push_back(name);
+      scalars.push_back(v.detach().reshape({}).to(torch::kFloat64));
+    }
   std::vector<std::pair<std::string, double>> out;
-  for (size_t i = 0; i < terms.size(); ++i) out.emplace_back(terms[i].first, host.data_ptr<double>()[i]);
+  if (scalars.empty()) return out;
+  const auto host = torch::stack(scalars).cpu();  // one device-to-host copy
+  for (size_t i = 0; i < names.size(); ++i) out.emplace_back(names[i], host[static_cast<int64_t>(i)].item<double>());
   return out;
 }
 

@@ -68,10 +68,6 @@ struct LossTerms {
   torch::Tensor rigid, flow, disp_smooth, flow_smooth, flow_consistency;
   torch::Tensor total;  // eq. 16: the weighted sum of the defined terms
 
-  // (name, tensor) of every defined term and the total, in the order of values().
-  std::vector<std::pair<std::string, torch::Tensor>> named() const;
-  // Their values as one float64 tensor on their device, in named()'s order (no host copy).
-  torch::Tensor stacked() const;
   // (name, value) of every defined term and the total, for logging (one device-to-host copy).
   std::vector<std::pair<std::string, double>> values() const;
 };

@@ -159,18 +159,12 @@ void Networks::prepare_inference(bool fold, bool bf16) {
 
 namespace {
 
-torch::Tensor to_float32(const torch::Tensor& t) { return t.scalar_type() == torch::kFloat32 ? t : t.to(torch::kFloat32); }
-std::vector<torch::Tensor> to_float32(std::vector<torch::Tensor> ts) {
-  for (auto& t : ts) t = to_float32(t);
-  return ts;
-}
-
-// A network's forward in run.precision: under bf16 autocast for bf16, its outputs back in float32
-// (the losses, warping and geometry run in float32).
+// A network's forward in run.precision: under bf16 autocast for bf16. The networks return float32
+// (their forward casts its outputs), so the losses, warping and geometry run in float32.
 template <class F>
 auto network_pass(const Config& config, const torch::Device& device, F forward) {
   Bf16Autocast autocast(config.run.precision == Precision::kBf16, device);
-  return to_float32(forward());
+  return forward();
 }
 
 }  // namespace

@@ -94,10 +94,19 @@ torch::Tensor MultiTensorAdam::step(LossClosure closure) {
   return loss;
 }
 
-torch::Tensor gradient_norm(const std::vector<torch::Tensor>& parameters) {
+namespace {
+
+std::vector<torch::Tensor> defined_gradients(const std::vector<torch::Tensor>& parameters) {
   std::vector<torch::Tensor> grads;
   for (const auto& p : parameters)
     if (p.grad().defined()) grads.push_back(p.grad());
+  return grads;
+}
+
+}  // namespace
+
+torch::Tensor gradient_norm(const std::vector<torch::Tensor>& parameters) {
+  const auto grads = defined_gradients(parameters);
   if (grads.empty()) return {};
   return torch::stack(at::_foreach_norm(grads)).norm();
 }
@@ -147,9 +156,7 @@ StepResult TrainStep::run(const torch::Tensor& tgt, const torch::Tensor& srcs, c
     // torch::nn::utils::clip_grad_norm_'s rule, on the norm already computed.
     const double coef = clip / (r.grad_norm + 1e-6);
     if (coef < 1) {
-      std::vector<torch::Tensor> grads;
-      for (const auto& p : params_)
-        if (p.grad().defined()) grads.push_back(p.grad());
+      auto grads = defined_gradients(params_);
       at::_foreach_mul_(grads, coef);
     }
   }
