@@ -40,7 +40,7 @@
 #include "data/packed.h"
 #include "geometry/camera.h"
 #include "train/distributed.h"
-#include "train/networks.h"
+#include "pipeline/networks.h"
 #include "train/train_step.h"
 #ifdef GEO_BENCH_PNG
 #include "train/data_source.h"
@@ -215,7 +215,7 @@ std::pair<geo::Config, geo::Networks> networks_with_fr(const geo::Config& config
   geo::Config c = config;
   c.model.use_fr = fr;
   torch::manual_seed(0);
-  auto nets = geo::Networks::create(c, with_flow);
+  auto nets = geo::Networks::create(geo::NetworkSpec::of(c), with_flow);
   nets.to(device);
   return {c, nets};
 }
@@ -398,7 +398,6 @@ int main(int argc, char** argv) {
     // Parameter counts and FLOPs (batch 1).
     for (bool fr : frs) {
       auto made = networks_with_fr(config, fr, true, torch::kCPU);
-      const geo::Config& c = made.first;
       geo::Networks& nets = made.second;
       nets.prepare_inference(false);
       torch::InferenceMode guard;
@@ -419,7 +418,7 @@ int main(int argc, char** argv) {
       f.gflops = gflops_of([&] { nets.flow(flow_in); });
       rows.push_back(f);
       Row all{"params", "pipeline", tag, 1, d.params + geo::count_parameters(*nets.pose) + f.params};
-      all.gflops = gflops_of([&] { geo::predict_pair(nets, img, img, K, c.loss); });
+      all.gflops = gflops_of([&] { geo::predict_pair(nets, img, img, K); });
       rows.push_back(all);
     }
 
@@ -456,17 +455,16 @@ int main(int argc, char** argv) {
             const bool pose = what == "PoseNet";
             if (pose && made_fr[k] != made_fr[0]) continue;  // no FR in the PoseNet: once per precision
             geo::Networks& nets = made[k].second;
-            const geo::LossConfig& loss = made[k].first.loss;
             batch_rows.push_back(Row{"infer", std::string(what) + (made_bf16[k] ? " bf16" : ""),
                                      pose ? "-" : (made_fr[k] ? "on" : "off"), b});
             std::function<void()> fn;
             if (what == "DepthNet") fn = [&nets, &img] { nets.depth(img); };
             if (pose) fn = [&nets, &img, &srcs] { nets.pose(img, srcs); };
             if (what == "FlowNet") fn = [&nets, &flow_in] { nets.flow(flow_in); };
-            if (what == "pipeline") fn = [&nets, &img, &img2, &K, &loss] { geo::predict_pair(nets, img, img2, K, loss); };
+            if (what == "pipeline") fn = [&nets, &img, &img2, &K] { geo::predict_pair(nets, img, img2, K); };
             if (what == "Model::depth") {  // the library's call: an 8-bit RGB frame in, depth at its size out
               models.push_back(std::make_unique<geo::Model>(geo::ModelAccess::untrained(
-                  made[k].first, device.str(), made_bf16[k] ? "bf16" : "fp32")));
+                  geo::NetworkSpec::of(made[k].first), "untrained", device.str(), made_bf16[k] ? "bf16" : "fp32")));
               fn = [m = models.back().get(), &frame8] { m->depth(frame8); };
             }
             calls.emplace_back(&batch_rows.back(), fn);

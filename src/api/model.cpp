@@ -1,21 +1,17 @@
 // geo::Model (include/geo/geo.h): the networks of a checkpoint or exported model file behind an
-// inference-only API. Built on the training layers' Networks and predict_pair, so inference is the
-// same computation geo_eval scores.
+// inference-only API. Built on the pipeline layer (src/pipeline: Networks, predict_pair and the
+// checkpoint format), as training and evaluation are, so inference is the computation geo_eval scores.
 #include "geo/geo.h"
 
 #include "api/model_access.h"
 
-#include "core/config.h"
-#include "core/files.h"
 #include "core/runtime.h"
-#include "core/state_io.h"
 #include "geometry/pose.h"
-#include "train/checkpoints.h"
-#include "train/networks.h"
+#include "pipeline/checkpoint.h"
+#include "pipeline/networks.h"
 
 #include <ATen/CPUGeneratorImpl.h>
 #include <torch/torch.h>
-#include <yaml-cpp/yaml.h>
 
 #include <filesystem>
 #include <mutex>
@@ -24,8 +20,7 @@
 namespace geo {
 
 struct Model::Impl {
-  Config config;
-  Networks nets;
+  Networks nets;  // and their NetworkSpec
   torch::Device device = torch::kCPU;
   ModelSpec spec;
 };
@@ -34,8 +29,6 @@ namespace {
 
 namespace fs = std::filesystem;
 namespace F = torch::nn::functional;
-
-constexpr const char* kFormat = "geo-model 1";
 
 // Runs `f`, turning any failure into a geo::Error that says what was being done.
 template <class Fn> auto guarded(const std::string& what, Fn&& f) -> decltype(f()) {
@@ -51,21 +44,8 @@ template <class Fn> auto guarded(const std::string& what, Fn&& f) -> decltype(f(
   }
 }
 
-// The part of a config a model needs to be used: model.*, the input size and sequence length, and
-// what the FlowNet's input depends on (loss.ssim_alpha, image_range, sampler). Nothing of training.
-std::string spec_yaml(const Config& c) {
-  const YAML::Node all = YAML::Load(to_yaml(c));
-  YAML::Node out;
-  out["model"] = all["model"];
-  for (const char* k : {"height", "width", "seq_length"}) out["data"][k] = all["data"][k];
-  for (const char* k : {"ssim_alpha", "image_range", "sampler"}) out["loss"][k] = all["loss"][k];
-  YAML::Emitter e;
-  e << out;
-  return e.c_str();
-}
-
-ModelSpec spec_of(const Config& c, bool has_flow, const std::string& source) {
-  return ModelSpec{c.data.height, c.data.width, c.data.seq_length, c.model.encoder_depth, c.model.use_fr, has_flow, source};
+ModelSpec public_spec(const NetworkSpec& s, bool has_flow, const std::string& source) {
+  return ModelSpec{s.height, s.width, s.seq_length, s.model.encoder_depth, s.model.use_fr, has_flow, source};
 }
 
 // LoadOptions::precision.
@@ -78,14 +58,14 @@ bool use_bf16(const std::string& precision, const torch::Device& device) {
 
 // Networks are created with random weights that the file then replaces: the process's random
 // generator is left as it was (a library must not move its user's seeds).
-Networks create_quietly(const Config& config, bool with_flow) {
+Networks create_quietly(const NetworkSpec& spec, bool with_flow) {
   auto gen = at::detail::getDefaultCPUGenerator();
   at::Tensor state;
   {
     std::lock_guard<std::mutex> lock(gen.mutex());  // not held while creating: that draws from it
     state = gen.get_state();
   }
-  Networks n = Networks::create(config, with_flow);
+  Networks n = Networks::create(spec, with_flow);
   std::lock_guard<std::mutex> lock(gen.mutex());
   gen.set_state(state);
   return n;
@@ -159,21 +139,18 @@ void make_ready(Model::Impl& impl, const std::string& device, const std::string&
   impl.nets.to(impl.device);
   const bool bf16 = use_bf16(precision, impl.device);
   impl.nets.prepare_inference(true, bf16);
-  impl.spec = spec_of(impl.config, has_flow, source);
+  impl.spec = public_spec(impl.nets.spec, has_flow, source);
   impl.spec.precision = bf16 ? "bf16" : "fp32";
 }
 
 }  // namespace
 
-const Config& ModelAccess::config(const Model& m) { return m.impl_->config; }
-
-Model ModelAccess::untrained(const Config& config, const std::string& device, const std::string& precision) {
+Model ModelAccess::untrained(const NetworkSpec& spec, const std::string& name, const std::string& device,
+                             const std::string& precision) {
   return guarded("an untrained model", [&] {
     auto impl = std::make_shared<Model::Impl>();
-    impl->config = config;
-    impl->nets = Networks::create(config, true);  // the caller seeds (run.seed)
-    make_ready(*impl, device, precision, true,
-               "untrained (" + config.run.name + ", seed " + std::to_string(config.run.seed) + ")");
+    impl->nets = Networks::create(spec, true);  // the caller seeds
+    make_ready(*impl, device, precision, true, name);
     return Model(impl);
   });
 }
@@ -181,27 +158,12 @@ Model ModelAccess::untrained(const Config& config, const std::string& device, co
 Model Model::load(const std::string& path, const LoadOptions& options) {
   return guarded("loading geo model '" + path + "'", [&] {
     const std::string file = fs::is_directory(path) ? resolve_checkpoint(path) : path;
-    auto archive = open_archive(file);
+    CheckpointFile checkpoint(file);
     auto impl = std::make_shared<Impl>();
-    c10::IValue format;
-    if (archive.try_read("geo_model_format", format)) {
-      if (!format.isString() || format.toStringRef() != kFormat)
-        throw Error(file + ": model file format '" + (format.isString() ? format.toStringRef() : "?") + "', this geo reads '" +
-                    kFormat + "'");
-      c10::IValue spec;
-      if (!archive.try_read("spec", spec) || !spec.isString()) throw Error(file + ": model file without its spec");
-      impl->config = parse_config(spec.toStringRef(), file + " [spec]");
-    } else {
-      auto config = checkpoint_config(archive, file);
-      if (!config) throw Error(file + ": neither a geo_export model nor a geo_train checkpoint (no spec, no config)");
-      impl->config = *config;
-    }
-    torch::serialize::InputArchive flow;
-    const bool has_flow = archive.try_read("flow", flow);
-    impl->nets = create_quietly(impl->config, has_flow);
-    impl->nets.load(archive, file, false);
+    impl->nets = create_quietly(checkpoint.spec(), checkpoint.has_flow());
+    checkpoint.load_networks(impl->nets, false);
     if (options.threads > 0) torch::set_num_threads(options.threads);
-    make_ready(*impl, options.device, options.precision, has_flow, file);
+    make_ready(*impl, options.device, options.precision, checkpoint.has_flow(), file);
     return Model(impl);
   });
 }
@@ -271,7 +233,7 @@ torch::Tensor Model::flow(const torch::Tensor& from, const torch::Tensor& to, co
       bool batched3 = false;
       prev = prepare(*impl_, previous, &H3, &W3, &batched3, "flow (previous)");
     }
-    auto f = predict_pair(impl_->nets, a, b, K, impl_->config.loss, prev).flow;  // [B,2,h,w]
+    auto f = predict_pair(impl_->nets, a, b, K, prev).flow;  // [B,2,h,w]
     if (f.size(2) != H || f.size(3) != W) {
       f = to_size(f, H, W);
       f.select(1, 0).mul_(static_cast<double>(W) / static_cast<double>(impl_->spec.width));
@@ -283,11 +245,7 @@ torch::Tensor Model::flow(const torch::Tensor& from, const torch::Tensor& to, co
 
 void Model::save(const std::string& path, bool half) const {
   guarded("writing geo model '" + path + "'", [&] {
-    torch::serialize::OutputArchive a;
-    a.write("geo_model_format", c10::IValue(std::string(kFormat)));
-    a.write("spec", c10::IValue(spec_yaml(impl_->config)));
-    impl_->nets.save(a, half ? std::optional<torch::ScalarType>(torch::kHalf) : std::nullopt);
-    save_archive(a, path);
+    write_model_file(path, impl_->nets, half);
   });
 }
 

@@ -1,18 +1,19 @@
-// What geo's own tools need of a geo::Model beyond the public API (include/geo/geo.h): the config
-// the networks were built from, and an untrained model of a config (geo_eval's "before training"
-// baseline). Not installed.
+// What geo's own tools need of a geo::Model beyond the public API (include/geo/geo.h): an untrained
+// model of a spec (geo_eval's "before training" baseline, geo_bench's library row). Not installed.
 #pragma once
 
-#include "core/config.h"
 #include "geo/geo.h"
+#include "pipeline/networks.h"
+
+#include <string>
 
 namespace geo {
 
 struct ModelAccess {
-  static const Config& config(const Model& model);
-  // Networks of `config` with LibTorch's initialisation (seed the generator first for a fixed one).
-  // `precision` as LoadOptions::precision (geo_bench times the library path in both).
-  static Model untrained(const Config& config, const std::string& device, const std::string& precision = "fp32");
+  // Networks of `spec` with LibTorch's initialisation (seed the generator first for a fixed one);
+  // `name` becomes ModelSpec::source. `precision` as LoadOptions::precision.
+  static Model untrained(const NetworkSpec& spec, const std::string& name, const std::string& device,
+                         const std::string& precision = "fp32");
 };
 
 }  // namespace geo

@@ -1,7 +1,7 @@
 #include "eval/predictor.h"
 
 #include "api/model_access.h"
-#include "train/checkpoints.h"
+#include "pipeline/checkpoint.h"
 
 #include <filesystem>
 
@@ -19,10 +19,8 @@ Predictor::Predictor(const std::string& checkpoint, const std::string& device)
 Predictor::Predictor(const Config& config, const std::string& device)
     : path_("untrained (" + config.run.name + ", seed " + std::to_string(config.run.seed) + ")") {
   torch::manual_seed(static_cast<uint64_t>(config.run.seed));
-  model_ = ModelAccess::untrained(config, device.empty() ? "auto" : device);
+  model_ = ModelAccess::untrained(NetworkSpec::of(config), path_, device.empty() ? "auto" : device);
 }
-
-const Config& Predictor::config() const { return ModelAccess::config(*model_); }
 
 torch::Tensor Predictor::depth(const torch::Tensor& image) { return model_->depth(image).unsqueeze(1); }
 

@@ -18,7 +18,7 @@ class Predictor {
   explicit Predictor(const std::string& checkpoint, const std::string& device = "auto");
   // An untrained model of this config (seeded with run.seed): the "before training" baseline.
   Predictor(const Config& config, const std::string& device);
-  const Config& config() const;
+  int64_t seq_length() const { return model_->spec().seq_length; }
   const std::string& path() const { return path_; }
   int64_t height() const { return model_->spec().height; }
   int64_t width() const { return model_->spec().width; }

@@ -269,7 +269,7 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
   // its frames in the target's frame (the target's pose is the identity).
   std::vector<torch::Tensor> snippet_poses(static_cast<size_t>(n));
   if (pred) {
-    const int64_t L = pred->config().data.seq_length, k = (L - 1) / 2;
+    const int64_t L = pred->seq_length(), k = (L - 1) / 2;
     auto image = [&](int64_t f) {
       const std::string p = seq + "/image_2/" + numbered("%06lld", static_cast<long long>(f)) + ".png";
       require_file(p, "odometry image");

@@ -2,9 +2,9 @@
 
 #include "core/files.h"
 #include "core/state_io.h"
+#include "pipeline/checkpoint.h"
 
 #include <algorithm>
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <stdexcept>
@@ -25,37 +25,6 @@ std::string read_first_line(const std::string& path) {
 bool is_best_name(const std::string& name) { return name.rfind("best", 0) == 0; }
 
 }  // namespace
-
-void write_train_state(torch::serialize::OutputArchive& archive, const TrainState& s) {
-  archive.write("meta", torch::tensor({static_cast<double>(s.stage), static_cast<double>(s.iteration), s.best_score},
-                                      torch::kFloat64));
-}
-
-TrainState read_train_state(torch::serialize::InputArchive& archive, const std::string& source) {
-  torch::Tensor meta;
-  if (!archive.try_read("meta", meta) || meta.numel() != 3)
-    throw std::runtime_error(source + ": not a geo training checkpoint (no train state 'meta' of 3 values)");
-  meta = meta.to(torch::kFloat64);
-  TrainState s;
-  s.stage = static_cast<int64_t>(meta[0].item<double>());
-  s.iteration = static_cast<int64_t>(meta[1].item<double>());
-  s.best_score = meta[2].item<double>();
-  return s;
-}
-
-std::string checkpoint_name(const std::string& stage, int64_t iteration) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "-%08lld.pt", static_cast<long long>(iteration));
-  return stage + buf;
-}
-
-std::string stage_of_checkpoint(const std::string& name) {
-  const auto dash = name.rfind('-');
-  if (dash == std::string::npos || dash == 0 || name.size() < 4 || name.substr(name.size() - 3) != ".pt") return "";
-  const std::string digits = name.substr(dash + 1, name.size() - 3 - dash - 1);
-  if (digits.empty() || !std::all_of(digits.begin(), digits.end(), ::isdigit)) return "";
-  return name.substr(0, dash);
-}
 
 CheckpointManager::CheckpointManager(std::string dir, int keep_last, bool read_only)
     : dir_(std::move(dir)), keep_last_(std::max(1, keep_last)) {
@@ -109,8 +78,7 @@ std::string CheckpointManager::latest() const {
 void CheckpointManager::check_resumable(const std::string& path) const {
   auto readable = [](const std::string& p, std::string* why) {
     try {
-      auto a = open_archive(p);
-      read_train_state(a, p);
+      CheckpointFile(p).train_state();
       return true;
     } catch (const std::exception& e) {
       if (why) *why = e.what();
@@ -133,21 +101,6 @@ void CheckpointManager::check_resumable(const std::string& path) const {
     }
   throw std::runtime_error("cannot resume: checkpoints/latest names a checkpoint that cannot be used: " + why + "." +
                            offer);
-}
-
-std::string resolve_checkpoint(const std::string& path) {
-  if (fs::is_regular_file(path)) return path;
-  if (!fs::is_directory(path)) throw std::runtime_error("checkpoint '" + path + "' does not exist");
-  const std::string latest = read_first_line(path + "/checkpoints/latest");
-  if (latest.empty())
-    throw std::runtime_error("run folder '" + path + "' has no checkpoint (checkpoints/latest missing or empty)");
-  const std::string stage = stage_of_checkpoint(latest);
-  const std::string best = path + "/checkpoints/best-" + stage + ".pt";
-  if (!stage.empty() && fs::is_regular_file(best)) return best;
-  const std::string file = path + "/checkpoints/" + latest;
-  if (!fs::is_regular_file(file))
-    throw std::runtime_error("run folder '" + path + "': checkpoints/latest names " + latest + ", which does not exist");
-  return file;
 }
 
 }  // namespace geo

@@ -5,7 +5,7 @@
 
 #include "core/config.h"
 #include "train/distributed.h"
-#include "train/networks.h"
+#include "train/compute_losses.h"
 
 #include <memory>
 

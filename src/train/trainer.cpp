@@ -3,14 +3,13 @@
 #include "core/files.h"
 #include "core/logging.h"
 #include "core/runtime.h"
-#include "core/state_io.h"
 #ifdef GEO_WITH_OPENCV
 #include "data/image_io.h"
 #endif
 #include "data/loader.h"
 #include "train/data_source.h"
 #include "train/distributed.h"
-#include "train/networks.h"
+#include "train/compute_losses.h"
 #include "train/train_step.h"
 #include "train/validate.h"
 
@@ -66,7 +65,7 @@ class Run {
     data_ = open_training_data(cfg_.data);
     bool with_flow = false;
     for (const auto& s : cfg_.stages) with_flow = with_flow || s.uses_flow();
-    nets_ = Networks::create(cfg_, with_flow);
+    nets_ = Networks::create(NetworkSpec::of(cfg_), with_flow);
     nets_.to(device_);
     if (group_) averager_ = std::make_unique<GradientAverager>(*group_);
     if (resuming) restore();
@@ -137,11 +136,10 @@ class Run {
     if (resume_from_.empty())
       throw std::runtime_error(dir_ + ": no checkpoint to resume from (checkpoints/latest missing)");
     checkpoints_.check_resumable(resume_from_);
-    auto a = open_archive(resume_from_);
-    nets_.load(a, resume_from_, false);
-    state_ = read_train_state(a, resume_from_);
-    c10::IValue world;
-    const int64_t was = a.try_read("world_size", world) && world.isInt() ? world.toInt() : 1;
+    CheckpointFile file(resume_from_);
+    file.load_networks(nets_, false);
+    state_ = file.train_state();
+    const int64_t was = state_.world_size;
     const int64_t now = group_ ? group_->size() : 1;
     if (was != now && writer_)
       spdlog::warn("{} was written by a run of {} process(es), this one has {}: training continues from it with the "
@@ -157,15 +155,15 @@ class Run {
     const std::string spec = state_.stage == 0 && !opts_.init.empty() ? opts_.init : s.init;
     if (spec.empty()) return;
     const std::string path = resolve_checkpoint(spec);
-    auto a = open_archive(path);
+    CheckpointFile file(path);
     // One line saying which setting differs, before the key-by-key comparison of the weights.
-    if (const auto trained = checkpoint_config(a, path)) {
-      const std::string diff = architecture_difference(*trained, cfg_);
+    if (file.config() || file.is_model_file()) {
+      const std::string diff = architecture_difference(file.spec(), nets_.spec);
       if (!diff.empty())
         throw std::runtime_error(path + ": its networks were trained with " + diff +
                                  "; set those keys to match or initialise from another checkpoint");
     }
-    nets_.load(a, path, true);
+    file.load_networks(nets_, true);
     spdlog::info("stage {}: networks initialised from {}", s.name, path);
   }
 
@@ -178,11 +176,7 @@ class Run {
     }
     TrainStep step(nets_, cfg_, s);
     step.set_gradient_averager(averager_.get());
-    if (!resume_from_.empty()) {
-      auto a = open_archive(resume_from_);
-      torch::serialize::InputArchive opt;
-      if (a.try_read("optimizer", opt)) step.optimizer().load(opt);
-    }
+    if (!resume_from_.empty()) CheckpointFile(resume_from_).load_optimizer(step.optimizer());
     const LrSchedule lr = LrSchedule::of(s);
     LoaderOptions lo;
     lo.batch_size = s.batch_size;
@@ -294,13 +288,9 @@ class Run {
   void save(TrainStep& step, bool best) {
     for (auto& sink : sinks_) sink->flush();
     const std::string path = checkpoints_.save(stage().name, state_.iteration, best, [&](torch::serialize::OutputArchive& a) {
-      nets_.save(a);
-      torch::serialize::OutputArchive opt;
-      step.optimizer().save(opt);
-      a.write("optimizer", opt);
-      write_train_state(a, state_);
-      a.write("config", c10::IValue(to_yaml(cfg_)));
-      a.write("world_size", c10::IValue(static_cast<int64_t>(group_ ? group_->size() : 1)));
+      TrainState state = state_;
+      state.world_size = group_ ? group_->size() : 1;
+      write_checkpoint(a, CheckpointContents{nets_, &step.optimizer(), state, cfg_});
     });
     spdlog::info("checkpoint {}{}", path, best ? " (best of stage " + stage().name + ")" : "");
   }

@@ -4,7 +4,7 @@
 
 #include "core/config.h"
 #include "data/snippets.h"
-#include "train/networks.h"
+#include "train/compute_losses.h"
 
 #include <functional>
 #include <memory>

@@ -9,7 +9,7 @@
 #include "core/state_io.h"
 #include "eval/predictor.h"
 #include "geometry/pose.h"
-#include "train/networks.h"
+#include "pipeline/checkpoint.h"
 
 #include <gtest/gtest.h>
 
@@ -26,10 +26,9 @@ const std::string& checkpoint() {
   static const std::string path = [] {
     const Config c = parse_config("model: {encoder_depth: 18}\ndata: {height: 64, width: 208}\n", "api.yaml");
     torch::manual_seed(1);
-    Networks nets = Networks::create(c, true);
+    Networks nets = Networks::create(NetworkSpec::of(c), true);
     torch::serialize::OutputArchive a;
-    nets.save(a);
-    a.write("config", c10::IValue(to_yaml(c)));
+    write_checkpoint(a, CheckpointContents{nets, nullptr, TrainState{}, c});
     const std::string p = test::fresh_dir("api") + "/ckpt.pt";
     save_archive(a, p);
     return p;
@@ -43,13 +42,9 @@ torch::Tensor image(int64_t H, int64_t W, double shift = 0) {
 
 // The networks of the checkpoint, run directly (what the evaluation ran before it used the API).
 struct Direct {
-  Config config;
   Networks nets;
   Direct() {
-    auto a = open_archive(checkpoint());
-    config = *checkpoint_config(a, checkpoint());
-    nets = Networks::create(config, true);
-    nets.load(a, checkpoint(), false);
+    nets = CheckpointFile(checkpoint()).networks();
     nets.prepare_inference(true);
   }
 };
@@ -64,7 +59,7 @@ TEST(Api, SameDepthPoseAndFlowAsTheNetworksThemselves) {
   const auto a = image(64, 208), b = image(64, 208, 0.1);
   EXPECT_TRUE(torch::equal(m.depth(a), (1.0 / d.nets.depth->forward(a.unsqueeze(0)).disp[0])[0][0]));
   const auto K = torch::tensor({100.f, 0.f, 104.f, 0.f, 100.f, 32.f, 0.f, 0.f, 1.f}).view({3, 3});
-  EXPECT_TRUE(torch::equal(m.flow(a, b, K), predict_pair(d.nets, a.unsqueeze(0), b.unsqueeze(0), K.unsqueeze(0), d.config.loss).flow[0]));
+  EXPECT_TRUE(torch::equal(m.flow(a, b, K), predict_pair(d.nets, a.unsqueeze(0), b.unsqueeze(0), K.unsqueeze(0)).flow[0]));
   const auto vec = d.nets.pose->forward(a.unsqueeze(0), {a.unsqueeze(0), b.unsqueeze(0)});  // (a, a, b)
   EXPECT_TRUE(torch::equal(m.relative_pose(a, b), pose_vec_to_matrix(vec[0])[1]));
   EXPECT_EQ(m.pose({b, a, b}).sizes(), (torch::IntArrayRef{2, 4, 4}));

@@ -1,7 +1,7 @@
 // CUDA against CPU: what scripts/gpu_check.sh runs on a GPU machine. Every test skips when no CUDA
 // device is visible (the CPU build and CI compile them, they run where a GPU is).
 #include "core/config.h"
-#include "train/networks.h"
+#include "train/compute_losses.h"
 #include "train/trainer.h"
 
 #include <gtest/gtest.h>
@@ -44,9 +44,9 @@ TEST(Cuda, Fp32StepMatchesTheCpuStep) {
   StageConfig stage = c.stages[0];
   stage.train = NetworkSet{true, true, true};
   torch::manual_seed(7);
-  Networks cpu = Networks::create(c, true);
+  Networks cpu = Networks::create(NetworkSpec::of(c), true);
   torch::manual_seed(7);
-  Networks gpu = Networks::create(c, true);
+  Networks gpu = Networks::create(NetworkSpec::of(c), true);
   gpu.to(torch::Device(torch::kCUDA, 0));
   for (Networks* n : {&cpu, &gpu}) {
     n->set_modes(stage);

@@ -169,9 +169,7 @@ void fill_state(torch::serialize::OutputArchive& a, int64_t stage, int64_t it) {
 }
 
 TrainState state_of(const std::string& path) {
-  torch::serialize::InputArchive a;
-  a.load_from(path);
-  return read_train_state(a, path);
+  return CheckpointFile(path).train_state();
 }
 
 TEST(CheckpointManager, RotationKeepsBestFilesAndLatest) {
@@ -245,7 +243,7 @@ TEST(ResolveCheckpoint, FilesFoldersAndErrors) {
 
 TEST(Networks, GeoNetBatchNormByDefaultAndTrainableSetOncePerStage) {
   Config c = parse_config("model: {encoder_depth: 18}\n");
-  Networks n = Networks::create(c, true);
+  Networks n = Networks::create(NetworkSpec::of(c), true);
   int bns = 0;
   for (const auto& m : n.depth->modules())
     if (const auto* bn = m->as<torch::nn::BatchNorm2d>()) {
@@ -269,7 +267,7 @@ TEST(Networks, GeoNetBatchNormByDefaultAndTrainableSetOncePerStage) {
 
   // LibTorch's convention as the option: learned gamma, eps 1e-5, momentum 0.1.
   c = parse_config("model: {encoder_depth: 18, bn_eps: 1.0e-5, bn_momentum: 0.1, bn_scale: true}\n");
-  Networks t = Networks::create(c, false);
+  Networks t = Networks::create(NetworkSpec::of(c), false);
   t.set_trainable(c.stages[0]);
   EXPECT_EQ(t.trainable_parameters().size(), t.depth->parameters().size() + t.pose->parameters().size());
   for (const auto& m : t.pose->modules())
@@ -289,7 +287,7 @@ TEST(ComputeLosses, NumScalesSetsTheScalesOfEveryTerm) {
   for (int scales : {1, 4}) {
     Config c = parse_config("model: {encoder_depth: 18, num_scales: " + std::to_string(scales) + "}\n");
     c.stages[0].train = NetworkSet{true, true, true};
-    Networks n = Networks::create(c, true);
+    Networks n = Networks::create(NetworkSpec::of(c), true);
     // Batch 2 at 64x128: BatchNorm in training needs more than one value per channel at the
     // PoseNet's 1x1 output.
     const auto tgt = torch::rand({2, 3, 64, 128}), srcs = torch::rand({2, 2, 3, 64, 128});
@@ -380,7 +378,7 @@ TEST(GradientNorm, OneReductionOverAllGradients) {
 TEST(TrainStep, ClipsToTheBoundAndReportsTheNormBefore) {
   torch::manual_seed(5);
   Config c = parse_config("model: {encoder_depth: 18, num_scales: 1}\noptimizer: {grad_clip: 0.001}\n");
-  Networks n = Networks::create(c, false);
+  Networks n = Networks::create(NetworkSpec::of(c), false);
   TrainStep step(n, c, c.stages[0]);
   const auto tgt = torch::rand({2, 3, 64, 128}), srcs = torch::rand({2, 2, 3, 64, 128});
   const auto K = torch::tensor({60.f, 0.f, 64.f, 0.f, 60.f, 32.f, 0.f, 0.f, 1.f}).view({1, 3, 3}).repeat({2, 1, 1});
@@ -400,7 +398,7 @@ TEST(Precision, Bf16NetworksWithFloat32Losses) {
   StageConfig stage = c.stages[0];
   stage.train = NetworkSet{true, true, true};
   torch::manual_seed(5);
-  Networks n = Networks::create(c, true);
+  Networks n = Networks::create(NetworkSpec::of(c), true);
   n.set_modes(stage);
   n.set_trainable(stage);
   const auto tgt = torch::rand({2, 3, 64, 128}), srcs = torch::rand({2, 2, 3, 64, 128});

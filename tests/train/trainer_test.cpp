@@ -44,9 +44,7 @@ run: {threads: 2, seed: 3}
 using test::metrics;
 
 TrainState state_of(const std::string& checkpoint) {
-  torch::serialize::InputArchive a;
-  a.load_from(checkpoint);
-  return read_train_state(a, checkpoint);
+  return CheckpointFile(checkpoint).train_state();
 }
 
 // val.csv rows of one stage: iteration -> score.

@@ -1,0 +1,32 @@
+# The include side of geo's layers (cmake/layers.cmake checks the link side); run by ctest as
+#   cmake -DSOURCE_DIR=<repo> -P cmake/check_includes.cmake
+# Fails naming the file and the include that crosses a layer.
+set(errors "")
+
+# forbid(<glob> <regex of forbidden include targets> <why>)
+function(forbid glob regex why)
+  file(GLOB files ${SOURCE_DIR}/${glob})
+  if(NOT files)
+    message(FATAL_ERROR "check_includes: no files match ${glob}")
+  endif()
+  foreach(f IN LISTS files)
+    file(STRINGS ${f} lines REGEX "^[ \t]*#[ \t]*include")
+    foreach(line IN LISTS lines)
+      if(line MATCHES "${regex}")
+        file(RELATIVE_PATH rel ${SOURCE_DIR} ${f})
+        set(errors "${errors}${rel}: '${line}' (${why})\n" PARENT_SCOPE)
+      endif()
+    endforeach()
+  endforeach()
+endfunction()
+
+forbid("src/pipeline/*" "[\"<](train|eval|data|api)/" "the pipeline layer sits below training, evaluation and data")
+forbid("src/api/*" "[\"<](train|eval|data)/" "the library is built on the pipeline layer only")
+forbid("src/eval/*" "[\"<]train/" "evaluation does not depend on training")
+# The public header: LibTorch and the standard library only (no OpenCV, yaml-cpp, spdlog, fmt, geo internals).
+forbid("include/geo/*.h" "\"|<(opencv|yaml|spdlog|fmt|CLI)" "the public header includes LibTorch and the standard library only")
+
+if(errors)
+  message(FATAL_ERROR "includes that cross geo's layers:\n${errors}")
+endif()
+message(STATUS "geo's layers: every include is within its layer")

@@ -1,0 +1,186 @@
+#include "pipeline/checkpoint.h"
+
+#include "core/state_io.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+
+namespace fs = std::filesystem;
+
+namespace geo {
+namespace {
+
+constexpr const char* kModelFormat = "geo-model 1";
+
+void write_networks(torch::serialize::OutputArchive& archive, const Networks& nets,
+                    std::optional<torch::ScalarType> floating) {
+  auto put = [&](const char* key, const torch::nn::Module& m) {
+    torch::serialize::OutputArchive sub;
+    write_state(m, sub, floating);
+    archive.write(key, sub);
+  };
+  put("depth", *nets.depth);
+  put("pose", *nets.pose);
+  if (nets.flow) put("flow", *nets.flow);
+}
+
+std::string read_first_line(const std::string& path) {
+  std::ifstream in(path);
+  std::string line;
+  std::getline(in, line);
+  return line;
+}
+
+}  // namespace
+
+void write_checkpoint(torch::serialize::OutputArchive& a, const CheckpointContents& c) {
+  write_networks(a, c.networks, std::nullopt);
+  if (c.optimizer) {
+    torch::serialize::OutputArchive opt;
+    c.optimizer->save(opt);
+    a.write("optimizer", opt);
+  }
+  write_train_state(a, c.state);
+  a.write("config", c10::IValue(to_yaml(c.config)));
+}
+
+void write_train_state(torch::serialize::OutputArchive& a, const TrainState& s) {
+  torch::serialize::OutputArchive state;
+  state.write("stage", c10::IValue(s.stage));
+  state.write("iteration", c10::IValue(s.iteration));
+  state.write("best_score", c10::IValue(s.best_score));
+  state.write("world_size", c10::IValue(s.world_size));
+  a.write("train_state", state);
+}
+
+void write_model_file(const std::string& path, const Networks& nets, bool half) {
+  torch::serialize::OutputArchive a;
+  a.write("geo_model_format", c10::IValue(std::string(kModelFormat)));
+  a.write("spec", c10::IValue(nets.spec.to_yaml()));
+  write_networks(a, nets, half ? std::optional<torch::ScalarType>(torch::kHalf) : std::nullopt);
+  save_archive(a, path);
+}
+
+CheckpointFile::CheckpointFile(std::string path) : path_(std::move(path)), archive_(open_archive(path_)) {
+  torch::serialize::InputArchive flow;
+  has_flow_ = archive_.try_read("flow", flow);
+  c10::IValue format;
+  if (archive_.try_read("geo_model_format", format)) {
+    if (!format.isString() || format.toStringRef() != kModelFormat)
+      throw std::runtime_error(path_ + ": model file format '" + (format.isString() ? format.toStringRef() : "?") +
+                               "', this geo reads '" + kModelFormat + "'");
+    c10::IValue spec;
+    if (!archive_.try_read("spec", spec) || !spec.isString())
+      throw std::runtime_error(path_ + ": model file without its spec");
+    model_file_ = true;
+    spec_ = NetworkSpec::parse(spec.toStringRef(), path_ + " [spec]");
+    return;
+  }
+  c10::IValue yaml;
+  if (archive_.try_read("config", yaml) && yaml.isString()) {
+    config_ = parse_config(yaml.toStringRef(), path_ + " [config]");
+    spec_ = NetworkSpec::of(*config_);
+  }
+}
+
+NetworkSpec CheckpointFile::spec() const {
+  if (!spec_)
+    throw std::runtime_error(path_ + ": neither a geo_export model nor a geo_train checkpoint (no spec, no config)");
+  return *spec_;
+}
+
+TrainState CheckpointFile::train_state() {
+  if (model_file_)
+    throw std::runtime_error(path_ + ": a geo_export model file, not a training checkpoint (it has no train state)");
+  TrainState s;
+  torch::serialize::InputArchive typed;
+  if (archive_.try_read("train_state", typed)) {
+    auto get = [&](const char* key) {
+      c10::IValue v;
+      if (!typed.try_read(key, v)) throw std::runtime_error(path_ + ": train_state without '" + key + "'");
+      return v;
+    };
+    const auto stage = get("stage"), iteration = get("iteration"), best = get("best_score"), world = get("world_size");
+    if (!stage.isInt() || !iteration.isInt() || !best.isDouble() || !world.isInt())
+      throw std::runtime_error(path_ + ": train_state holds values of the wrong types");
+    s.stage = stage.toInt();
+    s.iteration = iteration.toInt();
+    s.best_score = best.toDouble();
+    s.world_size = world.toInt();
+  } else {  // before the typed state: float64 [stage, iteration, best] and an int "world_size"
+    torch::Tensor meta;
+    if (!archive_.try_read("meta", meta) || meta.numel() != 3)
+      throw std::runtime_error(path_ + ": not a geo training checkpoint (no train state)");
+    meta = meta.to(torch::kFloat64);
+    s.stage = static_cast<int64_t>(meta[0].item<double>());
+    s.iteration = static_cast<int64_t>(meta[1].item<double>());
+    s.best_score = meta[2].item<double>();
+    c10::IValue world;
+    if (archive_.try_read("world_size", world) && world.isInt()) s.world_size = world.toInt();
+  }
+  if (s.stage < 0 || s.iteration < 0 || s.world_size < 1 || std::isnan(s.best_score))
+    throw std::runtime_error(path_ + ": implausible train state (stage " + std::to_string(s.stage) + ", iteration " +
+                             std::to_string(s.iteration) + ", world size " + std::to_string(s.world_size) + ")");
+  return s;
+}
+
+void CheckpointFile::load_networks(Networks& nets, bool allow_missing_flow) {
+  auto get = [&](const char* key, torch::nn::Module& m) {
+    torch::serialize::InputArchive sub;
+    if (!archive_.try_read(key, sub)) return false;
+    read_state(m, sub, path_ + " [" + key + "]");
+    return true;
+  };
+  if (!get("depth", *nets.depth)) throw std::runtime_error(path_ + ": no DepthNet in this checkpoint");
+  if (!get("pose", *nets.pose)) throw std::runtime_error(path_ + ": no PoseNet in this checkpoint");
+  if (nets.flow && !get("flow", *nets.flow) && !allow_missing_flow)
+    throw std::runtime_error(path_ + ": no FlowNet in this checkpoint");
+}
+
+Networks CheckpointFile::networks() {
+  Networks nets = Networks::create(spec(), has_flow_);
+  load_networks(nets, false);
+  return nets;
+}
+
+bool CheckpointFile::load_optimizer(torch::optim::Optimizer& optimizer) {
+  torch::serialize::InputArchive opt;
+  if (!archive_.try_read("optimizer", opt)) return false;
+  optimizer.load(opt);
+  return true;
+}
+
+std::string checkpoint_name(const std::string& stage, int64_t iteration) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "-%08lld.pt", static_cast<long long>(iteration));
+  return stage + buf;
+}
+
+std::string stage_of_checkpoint(const std::string& name) {
+  const auto dash = name.rfind('-');
+  if (dash == std::string::npos || dash == 0 || name.size() < 4 || name.substr(name.size() - 3) != ".pt") return "";
+  const std::string digits = name.substr(dash + 1, name.size() - 3 - dash - 1);
+  if (digits.empty() || !std::all_of(digits.begin(), digits.end(), ::isdigit)) return "";
+  return name.substr(0, dash);
+}
+
+std::string resolve_checkpoint(const std::string& path) {
+  if (fs::is_regular_file(path)) return path;
+  if (!fs::is_directory(path)) throw std::runtime_error("checkpoint '" + path + "' does not exist");
+  const std::string latest = read_first_line(path + "/checkpoints/latest");
+  if (latest.empty())
+    throw std::runtime_error("run folder '" + path + "' has no checkpoint (checkpoints/latest missing or empty)");
+  const std::string stage = stage_of_checkpoint(latest);
+  const std::string best = path + "/checkpoints/best-" + stage + ".pt";
+  if (!stage.empty() && fs::is_regular_file(best)) return best;
+  const std::string file = path + "/checkpoints/" + latest;
+  if (!fs::is_regular_file(file))
+    throw std::runtime_error("run folder '" + path + "': checkpoints/latest names " + latest + ", which does not exist");
+  return file;
+}
+
+}  // namespace geo

@@ -1,0 +1,96 @@
+// The one owner of geo's two file formats (LibTorch archives), and of finding the checkpoint a run
+// folder stands for. Nothing else reads or writes their keys.
+//
+//   training checkpoint (geo_train)     model file (geo_export)
+//     depth, pose, [flow]  networks       geo_model_format "geo-model 1"
+//     optimizer            Adam state     spec            NetworkSpec as YAML
+//     train_state          TrainState     depth, pose, [flow]  networks (fp32 or fp16)
+//     config               the run's config as YAML
+//
+// Checkpoints written before the typed train state (a float64 "meta" [stage, iteration, best] and a
+// separate "world_size") are still read.
+//
+// In a run folder:
+//   checkpoints/<stage>-<iteration>.pt   training checkpoints (train/checkpoints.h rotates them)
+//   checkpoints/best-<stage>.pt          the stage's checkpoint with the lowest validation score
+//   checkpoints/latest                   the name of the newest checkpoint
+#pragma once
+
+#include "core/config.h"
+#include "pipeline/networks.h"
+
+#include <torch/torch.h>
+
+#include <limits>
+#include <optional>
+#include <string>
+
+namespace geo {
+
+// Where training stands.
+struct TrainState {
+  int64_t stage = 0;       // index into the config's stages
+  int64_t iteration = 0;   // iterations done in that stage
+  double best_score = std::numeric_limits<double>::infinity();  // the stage's best validation score
+  int64_t world_size = 1;  // processes of the run that wrote it (train/distributed.h)
+};
+
+// A training checkpoint's contents, written by write_checkpoint. The optimizer is optional (tests,
+// tools); networks and config are not.
+struct CheckpointContents {
+  const Networks& networks;
+  const torch::optim::Optimizer* optimizer = nullptr;
+  TrainState state;
+  const Config& config;
+};
+void write_checkpoint(torch::serialize::OutputArchive& archive, const CheckpointContents& contents);
+// The train state alone (write_checkpoint's part of it; tests of the run folder's rotation).
+void write_train_state(torch::serialize::OutputArchive& archive, const TrainState& state);
+
+// A model file for deployment: the networks' weights (`half`: stored as float16) and their spec;
+// written durably to `path`.
+void write_model_file(const std::string& path, const Networks& networks, bool half);
+
+// A checkpoint or model file opened for reading. Every error names the file.
+class CheckpointFile {
+ public:
+  // Throws "<path>: not a readable geo/LibTorch file ..." for anything LibTorch cannot open.
+  explicit CheckpointFile(std::string path);
+
+  const std::string& path() const { return path_; }
+  bool is_model_file() const { return model_file_; }  // written by geo_export
+  bool has_flow() const { return has_flow_; }         // holds a FlowNet
+  // The networks' spec: the model file's, or the one of the training config.
+  NetworkSpec spec() const;
+  // The training config (training checkpoints), nullopt for model files.
+  const std::optional<Config>& config() const { return config_; }
+  // Throws "<path>: not a geo training checkpoint ..." for model files and foreign files.
+  TrainState train_state();
+  // Weights into `nets` (strict per network; a network absent from the file is an error unless
+  // `allow_missing_flow` and it is the FlowNet).
+  void load_networks(Networks& nets, bool allow_missing_flow);
+  // Networks created from the file's spec (a FlowNet when it holds one) with its weights.
+  Networks networks();
+  // The optimizer's state, if the file holds one; returns whether it did.
+  bool load_optimizer(torch::optim::Optimizer& optimizer);
+
+ private:
+  std::string path_;
+  torch::serialize::InputArchive archive_;
+  bool model_file_ = false;
+  bool has_flow_ = false;
+  std::optional<Config> config_;
+  std::optional<NetworkSpec> spec_;
+};
+
+// "<stage>-<iteration, 8 digits>.pt"
+std::string checkpoint_name(const std::string& stage, int64_t iteration);
+// The stage part of a checkpoint name ("s2-00000004.pt" -> "s2"); "" if it is not one.
+std::string stage_of_checkpoint(const std::string& name);
+
+// The checkpoint a path names: a .pt file as given; a run folder -> the best checkpoint of the stage
+// its latest checkpoint belongs to (best-<stage>.pt), else that latest checkpoint. Throws naming the
+// path when there is none.
+std::string resolve_checkpoint(const std::string& path);
+
+}  // namespace geo
