@@ -302,12 +302,17 @@ struct DistributedConfig {
   int timeout_s = 1800;          // a collective waiting longer (a lost or hung peer) fails the run
   bool shard_data = true;        // each process reads its own shard of the stream; false = all read it all
   int64_t verify_interval = 0;   // every N steps compare a checksum of the weights across processes (0 = never)
+  // BatchNorm statistics over the batches of all processes (PyTorch's SyncBatchNorm) instead of each
+  // process's own (GeoNet at batch 4 per GPU; DDP's default). Costs two small all-reduces per
+  // BatchNorm layer and step.
+  bool sync_batchnorm = false;
 
   template <class V> void fields(V& v) {
     v("backend", backend);
     v("timeout_s", timeout_s);
     v("shard_data", shard_data);
     v("verify_interval", verify_interval);
+    v("sync_batchnorm", sync_batchnorm);
   }
   void validate(Checker& c) const;
 };

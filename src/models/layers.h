@@ -4,9 +4,25 @@
 #include <torch/torch.h>
 
 #include <functional>
+#include <memory>
 #include <string>
 
 namespace geo {
+
+// Sums a tensor in place over every process of a data-parallel group (an all-reduce), for
+// synchronised BatchNorm; train/distributed.h makes one from a process group.
+using SumAcrossProcesses = std::function<void(torch::Tensor&)>;
+
+// BatchNorm (training mode) over the batches of all processes together (PyTorch's SyncBatchNorm):
+// forward all-reduces per channel the sum, the sum of squares and the count, normalises with the
+// global mean and (biased) variance and updates bn's running statistics with them (the unbiased
+// variance, as BatchNorm2d); backward all-reduces the sums of dy and dy*x_hat, so each process gets
+// the gradient of the sum of every process's loss with respect to its own inputs, as one process
+// over the concatenated batch would. The gradients of gamma and beta are this process's own (the
+// gradient averaging adds them up). Every process must call it in the same order.
+// `sum` is kept alive by the autograd graph until backward has run.
+torch::Tensor sync_batch_norm(const torch::Tensor& x, torch::nn::BatchNorm2dImpl& bn,
+                              std::shared_ptr<const SumAcrossProcesses> sum);
 
 // conv (k x k, stride, symmetric padding k/2) -> BatchNorm -> ReLU (relu optional). The conv has
 // no bias because BatchNorm follows (GeoNet's slim.conv2d with batch_norm).
@@ -28,6 +44,8 @@ struct ConvBnImpl : torch::nn::Module {
   torch::nn::Conv2d conv{nullptr};
   torch::nn::BatchNorm2d bn{nullptr};
   bool relu;
+  // Set: BatchNorm in training mode is sync_batch_norm over the processes `sync` sums over.
+  std::shared_ptr<const SumAcrossProcesses> sync;
 
  private:
   using ConvFn = std::function<torch::Tensor(const torch::Tensor&, const torch::Tensor&, const torch::Tensor&)>;
@@ -44,6 +62,10 @@ TORCH_MODULE(ConvBn);
 // kernels stacked, then the phases interleaved. x [B,Ci,h,w], weight [Co,Ci,3,3], bias [Co] or
 // undefined -> [B,Co,2h,2w]. Differentiable in x, weight and bias.
 torch::Tensor conv3x3_of_upsampled(const torch::Tensor& x, const torch::Tensor& weight, const torch::Tensor& bias);
+
+// Every ConvBn inside `module` normalises with statistics over all processes (`sum`) in training
+// mode, or with its own batch's again (nullptr); returns how many.
+int set_batchnorm_sync(torch::nn::Module& module, std::shared_ptr<const SumAcrossProcesses> sum);
 
 // Folds every ConvBn inside `module` (see ConvBnImpl::fold_batchnorm); returns how many.
 int fold_batchnorm(torch::nn::Module& module, torch::Dtype dtype = torch::kFloat32);

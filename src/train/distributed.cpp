@@ -352,6 +352,13 @@ void GradientAverager::average(const std::vector<torch::Tensor>& parameters, boo
   flush(bucket_items, owners);
 }
 
+std::shared_ptr<const SumAcrossProcesses> sum_across(ProcessGroup& group) {
+  return std::make_shared<const SumAcrossProcesses>([&group](torch::Tensor& t) {
+    std::vector<torch::Tensor> one = {t};
+    group.all_reduce_sum(one);
+  });
+}
+
 void broadcast_module(ProcessGroup& group, torch::nn::Module& module) {
   torch::NoGradGuard no_grad;
   std::vector<torch::Tensor> tensors;

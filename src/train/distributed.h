@@ -17,6 +17,7 @@
 #pragma once
 
 #include "core/config.h"
+#include "models/layers.h"
 
 #include <torch/torch.h>
 
@@ -94,6 +95,10 @@ class GradientAverager {
   int64_t bucket_bytes_;
   int64_t buckets_ = 0, bytes_ = 0;
 };
+
+// An in-place sum over the group (all_reduce_sum of one tensor) for synchronised BatchNorm
+// (models/layers.h: set_batchnorm_sync). The group must outlive it.
+std::shared_ptr<const SumAcrossProcesses> sum_across(ProcessGroup& group);
 
 // rank 0's parameters and buffers copied into every process's module.
 void broadcast_module(ProcessGroup& group, torch::nn::Module& module);

@@ -68,6 +68,15 @@ class Run {
     nets_ = Networks::create(NetworkSpec::of(cfg_), with_flow);
     nets_.to(device_);
     if (group_) averager_ = std::make_unique<GradientAverager>(*group_);
+    if (group_ && cfg_.run.distributed.sync_batchnorm) {
+      const auto sum = sum_across(*group_);
+      int layers = set_batchnorm_sync(*nets_.depth, sum) + set_batchnorm_sync(*nets_.pose, sum);
+      if (nets_.flow) layers += set_batchnorm_sync(*nets_.flow, sum);
+      if (writer_)
+        spdlog::info("BatchNorm synchronised across the {} processes ({} layers: 2 all-reduces each per step){}",
+                     group_->size(), layers,
+                     cfg_.model.use_fr && cfg_.model.fr_spatial_bn ? "; FR's spatial BatchNorm keeps per-process statistics" : "");
+    }
     if (resuming) restore();
     else init_networks(stage());  // here, so that a bad --init stops the run before it starts
     if (writer_) {

@@ -2,6 +2,10 @@
 #include <gtest/gtest.h>
 #include <torch/torch.h>
 
+#include <condition_variable>
+#include <mutex>
+#include <thread>
+
 #include "models/depth_net.h"
 #include "models/layers.h"
 
@@ -75,6 +79,99 @@ TEST(Layers, FoldedDepthNetMatchesTheUnfoldedOne) {
   const auto ref = net(x).disp[0].clone();
   fold_batchnorm(*net);
   EXPECT_LT((net(x).disp[0] - ref).abs().max().item<double>(), 1e-4);
+}
+
+// `n` processes played by threads: each call waits for all n and hands each the total.
+class ThreadSum {
+ public:
+  explicit ThreadSum(int n) : n_(n) {}
+  void operator()(torch::Tensor& t) {
+    std::unique_lock<std::mutex> lock(m_);
+    const int64_t generation = generation_;
+    total_ = arrived_ == 0 ? t.clone() : total_ + t;
+    if (++arrived_ == n_) {
+      result_ = total_;
+      arrived_ = 0;
+      ++generation_;
+      ++calls;
+      cv_.notify_all();
+    } else {
+      cv_.wait(lock, [&] { return generation_ != generation; });
+    }
+    t.copy_(result_);
+  }
+  int calls = 0;
+
+ private:
+  int n_, arrived_ = 0;
+  int64_t generation_ = 0;
+  torch::Tensor total_, result_;
+  std::mutex m_;
+  std::condition_variable cv_;
+};
+
+torch::nn::BatchNorm2d bn_of(int64_t c) {
+  torch::nn::BatchNorm2d bn(torch::nn::BatchNorm2dOptions(c).eps(1e-3).momentum(0.3));
+  torch::NoGradGuard g;
+  bn->weight.copy_(torch::tensor({1.5f, 0.5f, 2.0f}));
+  bn->bias.copy_(torch::tensor({0.1f, -0.2f, 0.3f}));
+  return bn;
+}
+
+TEST(SyncBatchNorm, TwoProcessesEqualOneOverTheConcatenatedBatch) {
+  torch::manual_seed(5);
+  const auto x = torch::randn({4, 3, 5, 6}) * 2 + 1, r = torch::randn({4, 3, 5, 6});
+  // One process over the whole batch, PyTorch's own BatchNorm.
+  auto full = bn_of(3);
+  const auto xf = x.clone().requires_grad_();
+  const auto yf = full(xf);
+  (yf * r).sum().backward();
+  // Two processes of two samples each; each backpropagates its own part of the same loss.
+  ThreadSum sum(2);
+  const auto reduce = std::make_shared<const SumAcrossProcesses>(std::ref(sum));
+  std::vector<torch::nn::BatchNorm2d> bns = {bn_of(3), bn_of(3)};
+  std::vector<torch::Tensor> xs(2), ys(2);
+  std::vector<std::thread> threads;
+  for (int p = 0; p < 2; ++p)
+    threads.emplace_back([&, p] {
+      xs[p] = x.narrow(0, 2 * p, 2).clone().requires_grad_();
+      ys[p] = sync_batch_norm(xs[p], *bns[p], reduce);
+      (ys[p] * r.narrow(0, 2 * p, 2)).sum().backward();
+    });
+  for (auto& t : threads) t.join();
+  EXPECT_EQ(sum.calls, 2);  // statistics forward, gradient sums backward
+  auto close = [](const torch::Tensor& a, const torch::Tensor& b) { return torch::allclose(a, b, 1e-5, 1e-5); };
+  EXPECT_TRUE(close(torch::cat({ys[0], ys[1]}).detach(), yf.detach()));
+  EXPECT_TRUE(close(torch::cat({xs[0].grad(), xs[1].grad()}), xf.grad()));
+  EXPECT_TRUE(close(bns[0]->weight.grad() + bns[1]->weight.grad(), full->weight.grad()));
+  EXPECT_TRUE(close(bns[0]->bias.grad() + bns[1]->bias.grad(), full->bias.grad()));
+  for (const auto& bn : bns) {  // running statistics as one process's (unbiased variance over all 120 values)
+    EXPECT_TRUE(close(bn->running_mean, full->running_mean));
+    EXPECT_TRUE(close(bn->running_var, full->running_var));
+  }
+  // Per-process statistics really differ here: what makes the test able to fail.
+  auto own = bn_of(3);
+  EXPECT_FALSE(close(own(x.narrow(0, 0, 2)), yf.narrow(0, 0, 2).detach()));
+}
+
+TEST(SyncBatchNorm, ConvBnUsesItInTrainingOnly) {
+  torch::manual_seed(6);
+  ConvBn plain(2, 3, 3), synced(2, 3, 3);
+  {
+    torch::NoGradGuard g;
+    synced->conv->weight.copy_(plain->conv->weight);
+  }
+  int calls = 0;
+  auto one = std::make_shared<const SumAcrossProcesses>([&calls](torch::Tensor&) { ++calls; });  // a group of one
+  EXPECT_EQ(set_batchnorm_sync(*synced, one), 1);
+  const auto x = torch::randn({2, 2, 4, 5});
+  EXPECT_TRUE(torch::allclose(synced(x), plain(x), 1e-5, 1e-6));
+  EXPECT_EQ(calls, 1);
+  synced->eval();
+  plain->eval();
+  EXPECT_TRUE(torch::allclose(synced(x), plain(x), 1e-5, 1e-6));  // running statistics, no collective
+  EXPECT_EQ(calls, 1);
+  EXPECT_EQ(set_batchnorm_sync(*synced, nullptr), 1);
 }
 
 }  // namespace
