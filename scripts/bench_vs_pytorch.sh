@@ -45,7 +45,7 @@ import json, sys
 out, rounds, threads = sys.argv[1], int(sys.argv[2]), sys.argv[3]
 flags = open("/proc/cpuinfo").read().split("flags\t\t: ")[1].split("\n")[0].split()
 shown = [f for f in ("avx2", "avx512f", "avx512_bf16", "amx_bf16") if f in flags]
-model = [l.split(": ", 1)[1] for l in open("/proc/cpuinfo") if l.startswith("model name")][0]
+model = [l.split(": ", 1)[1].strip() for l in open("/proc/cpuinfo") if l.startswith("model name")][0]
 print(f"CPU: {model}, {threads} threads, flags: {' '.join(shown)}")
 for r in range(1, rounds + 1):
     py = json.load(open(f"{out}/pytorch-{r}.json"))

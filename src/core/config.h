@@ -306,6 +306,9 @@ struct DistributedConfig {
   // process's own (GeoNet at batch 4 per GPU; DDP's default). Costs two small all-reduces per
   // BatchNorm layer and step.
   bool sync_batchnorm = false;
+  // Start each gradient bucket's all-reduce during backward, as soon as its gradients exist (as
+  // DistributedDataParallel); false: all after backward.
+  bool overlap = true;
 
   template <class V> void fields(V& v) {
     v("backend", backend);
@@ -313,6 +316,7 @@ struct DistributedConfig {
     v("shard_data", shard_data);
     v("verify_interval", verify_interval);
     v("sync_batchnorm", sync_batchnorm);
+    v("overlap", overlap);
   }
   void validate(Checker& c) const;
 };

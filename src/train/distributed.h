@@ -74,26 +74,74 @@ class ProcessGroup {
   // Element-wise sum / maximum over processes, in place.
   virtual void all_reduce_sum(std::vector<torch::Tensor>& tensors) = 0;
   virtual void all_reduce_max(std::vector<torch::Tensor>& tensors) = 0;
+  // An in-place sum started now, finished by calling the returned function (once). Starts are
+  // collectives: every process starts the same sums in the same order. By default the sum runs at
+  // once; c10d groups return while Gloo's threads / NCCL's stream work on it.
+  virtual std::function<void()> start_all_reduce_sum(torch::Tensor& tensor) {
+    std::vector<torch::Tensor> one{tensor};
+    all_reduce_sum(one);
+    return [] {};
+  }
   // A short string shared from rank 0 (e.g. the run folder); rank 0 passes it, the others get it.
   // `failed` on rank 0 makes the others throw with `value` as the reason.
   virtual std::string share_from_rank0(const std::string& key, const std::string& value, bool failed = false) = 0;
 };
 
 // Averages gradients over the group on flattened buckets of at most `bucket_bytes` (one all-reduce
-// per bucket instead of one per tensor), in place. Parameters without a gradient contribute zeros.
+// per bucket instead of one per tensor), in place, as DistributedDataParallel does. Buckets are
+// filled in reverse parameter order (the order backward computes gradients in). Parameters without a
+// gradient contribute zeros and get none.
+//
+// Two ways to use it:
+//   average(parameters): after backward, all buckets at once.
+//   attach(parameters) once, then per step begin_step(), backward, finish(): gradient hooks copy
+//   each gradient into its bucket as backward computes it and start the bucket's all-reduce as soon
+//   as the bucket is complete (buckets start in the same order on every process), so communication
+//   overlaps the rest of backward; finish() starts what is left and waits for all.
 class GradientAverager {
  public:
   GradientAverager(ProcessGroup& group, int64_t bucket_bytes = 25 << 20) : group_(group), bucket_bytes_(bucket_bytes) {}
+  ~GradientAverager() { detach(); }
+  GradientAverager(const GradientAverager&) = delete;
+  GradientAverager& operator=(const GradientAverager&) = delete;
+
   // `poison`: this process's step is not finite; its contribution is NaN so that every process
   // sees a non-finite average and skips the same step.
   void average(const std::vector<torch::Tensor>& parameters, bool poison = false);
-  int64_t buckets() const { return buckets_; }  // of the last call
-  int64_t bytes() const { return bytes_; }      // of the last call
+
+  void attach(const std::vector<torch::Tensor>& parameters);  // registers the gradient hooks
+  void detach();                                              // removes them
+  void begin_step();
+  void finish(bool poison = false);
+
+  int64_t buckets() const { return static_cast<int64_t>(buckets_.size()); }
+  int64_t bytes() const { return bytes_; }
+  // Buckets whose all-reduce started during backward (from a gradient hook) in the last step.
+  int64_t started_during_backward() const { return started_early_; }
 
  private:
+  struct Bucket {
+    std::vector<size_t> members;  // indices into params_
+    std::vector<int64_t> offsets; // of each member in `flat`
+    torch::Tensor flat;
+    size_t ready = 0;
+    bool started = false;
+    std::function<void()> wait;
+  };
+  void build(const std::vector<torch::Tensor>& parameters);
+  void mark_ready(size_t index, const torch::Tensor& grad);
+  void start(Bucket& b, bool poison);
+
   ProcessGroup& group_;
   int64_t bucket_bytes_;
-  int64_t buckets_ = 0, bytes_ = 0;
+  std::vector<torch::Tensor> params_;
+  std::vector<size_t> bucket_of_;            // param index -> bucket
+  std::vector<size_t> slot_of_;              // param index -> member position in its bucket
+  std::vector<char> ready_;                  // param index -> gradient copied this step
+  std::vector<Bucket> buckets_;
+  size_t next_ = 0;                          // the next bucket to start
+  std::vector<unsigned> hooks_;              // hook handles of params_ (attached)
+  int64_t bytes_ = 0, started_early_ = 0;
 };
 
 // An in-place sum over the group (all_reduce_sum of one tensor) for synchronised BatchNorm

@@ -126,6 +126,12 @@ TrainStep::TrainStep(Networks& nets, const Config& config, const StageConfig& st
   adam_ = make_adam(params_, stage_.learning_rate, config_.optimizer);
 }
 
+void TrainStep::set_gradient_averager(GradientAverager* averager, bool overlap) {
+  averager_ = averager;
+  overlap_ = averager && overlap;
+  if (overlap_) averager_->attach(params_);
+}
+
 StepResult TrainStep::run(const torch::Tensor& tgt, const torch::Tensor& srcs, const torch::Tensor& K,
                           double lr) {
   for (auto& group : adam_->param_groups())
@@ -137,10 +143,12 @@ StepResult TrainStep::run(const torch::Tensor& tgt, const torch::Tensor& srcs, c
   // grid_sample's CPU backward crashes on NaN coordinates), then the gradient norm.
   r.losses = r.out.losses.values();
   const bool loss_finite = std::isfinite(r.losses.back().second);  // the total
+  if (overlap_) averager_->begin_step();
   if (loss_finite) r.out.losses.total.backward();
   // Distributed: every process takes part, finite or not; a non-finite one sends NaN, so the
   // averaged gradients are non-finite everywhere and every process skips the step.
-  if (averager_) averager_->average(params_, !loss_finite);
+  if (overlap_) averager_->finish(!loss_finite);
+  else if (averager_) averager_->average(params_, !loss_finite);
   torch::Tensor norm;
   if (loss_finite || averager_) {
     norm = gradient_norm(params_);

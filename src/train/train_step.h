@@ -58,9 +58,11 @@ class TrainStep {
   // tgt [B,3,H,W], srcs [B,N,3,H,W], K [B,3,3] on the networks' device.
   StepResult run(const torch::Tensor& tgt, const torch::Tensor& srcs, const torch::Tensor& K, double lr);
   torch::optim::Adam& optimizer() { return *adam_; }
-  // Distributed training: gradients are averaged over the process group after backward, before
-  // the finiteness check, clipping and Adam (a non-finite step on any process is skipped by all).
-  void set_gradient_averager(GradientAverager* averager) { averager_ = averager; }
+  // Distributed training: gradients are averaged over the process group before the finiteness
+  // check, clipping and Adam (a non-finite step on any process is skipped by all). `overlap`: each
+  // bucket's all-reduce starts during backward, as soon as its gradients exist
+  // (run.distributed.overlap); else all start after backward.
+  void set_gradient_averager(GradientAverager* averager, bool overlap = false);
 
  private:
   Networks& nets_;
@@ -69,6 +71,7 @@ class TrainStep {
   std::vector<torch::Tensor> params_;
   std::unique_ptr<torch::optim::Adam> adam_;
   GradientAverager* averager_ = nullptr;
+  bool overlap_ = false;
 };
 
 }  // namespace geo

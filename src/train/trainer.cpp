@@ -184,7 +184,7 @@ class Run {
       if (nets_.flow) broadcast_module(*group_, *nets_.flow);
     }
     TrainStep step(nets_, cfg_, s);
-    step.set_gradient_averager(averager_.get());
+    step.set_gradient_averager(averager_.get(), cfg_.run.distributed.overlap);
     if (!resume_from_.empty()) CheckpointFile(resume_from_).load_optimizer(step.optimizer());
     const LrSchedule lr = LrSchedule::of(s);
     LoaderOptions lo;

@@ -124,6 +124,54 @@ TEST(GradientAverager, AveragesInBucketsAndPoisonsNonFiniteSteps) {
   EXPECT_TRUE(torch::isnan(b.grad()).all().item<bool>());
 }
 
+// With hooks attached, a bucket's all-reduce starts during backward, as soon as its gradients are
+// computed: the second layer's gradient exists (and is sent) before backward reaches the first.
+TEST(GradientAverager, HooksStartBucketsDuringBackwardInBucketOrder) {
+  struct Recording : MirrorGroup {
+    Recording() : MirrorGroup(2) {}
+    std::function<void()> start_all_reduce_sum(torch::Tensor& t) override {
+      events.push_back("start " + std::to_string(t.numel()));
+      auto* self = this;
+      return [self, t]() mutable {
+        self->events.push_back("wait " + std::to_string(t.numel()));
+        t.mul_(2);  // the mirror's sum
+      };
+    }
+    std::vector<std::string> events;
+  } group;
+  auto a = torch::full({3}, 2.f, torch::requires_grad()), b = torch::full({2}, 3.f, torch::requires_grad()),
+       unused = torch::zeros({4}, torch::requires_grad());
+  a.register_hook([&](torch::Tensor) { group.events.push_back("grad a"); });  // before the averager's hook
+  GradientAverager avg(group, 3 * sizeof(float));  // buckets (reverse order): unused | b | a
+  avg.attach({a, b, unused});
+  for (int step = 0; step < 2; ++step) {
+    group.events.clear();
+    avg.begin_step();
+    const auto x = torch::tensor({1.f, 2.f, 3.f});
+    ((x * a).sum() * b).sum().backward();  // d/da = x * sum(b) = 6x, d/db = sum(x * a) = 12
+    avg.finish();
+    // unused gets no gradient during backward, so no bucket can start before finish(): bucket order.
+    EXPECT_EQ(group.events, (std::vector<std::string>{"grad a", "start 4", "start 2", "start 3", "wait 4", "wait 2",
+                                                     "wait 3"}));
+    EXPECT_TRUE(torch::equal(a.grad(), torch::tensor({6.f, 12.f, 18.f})));  // (g + g) / 2
+    EXPECT_TRUE(torch::equal(b.grad(), torch::full({2}, 12.f)));
+    EXPECT_FALSE(unused.grad().defined());
+    a.mutable_grad().zero_();
+    b.mutable_grad().zero_();
+  }
+  // Without the blocking bucket first, b's bucket starts before backward reaches a.
+  GradientAverager early(group, 3 * sizeof(float));  // buckets: b | a
+  avg.detach();
+  early.attach({a, b});
+  group.events.clear();
+  early.begin_step();
+  ((torch::tensor({1.f, 2.f, 3.f}) * a).sum() * b).sum().backward();
+  early.finish();
+  EXPECT_EQ(group.events, (std::vector<std::string>{"start 2", "grad a", "start 3", "wait 2", "wait 3"}));
+  EXPECT_EQ(early.started_during_backward(), 2);
+  EXPECT_TRUE(torch::equal(b.grad(), torch::full({2}, 12.f)));
+}
+
 // ---- real processes ----
 
 const std::string& world() {
