@@ -379,6 +379,35 @@ TEST_F(Distributed, ShardedProcessesStayIdenticalAndAKillOfBothResumesExactly) {
   EXPECT_TRUE(bit_identical(weights(resolve_checkpoint(dir + "/killed")), weights(resolve_checkpoint(dir + "/whole"))));
 }
 
+// Two processes on disjoint shards of the in-memory synthetic world learn: rank 0's total loss over
+// the last 4 of 16 iterations is well below that of the first 4 (seeded, so deterministic; measured:
+// 6.21 -> 4.73). verify_interval 1 checks the weights stay identical on both after every step.
+TEST_F(Distributed, TwoShardedProcessesLearnOnTheSyntheticWorld) {
+  const auto dir = test::fresh_dir("dist_learn");
+  test::write_text(dir + "/c.yaml",
+                   "model: {encoder_depth: 18, bn_momentum: 0.1}\n"
+                   "data: {format: synthetic, height: 64, width: 208, num_workers: 1,"
+                   " synthetic: {drives: 1, frames_per_drive: 40}}\n"
+                   "stages:\n  - {name: s1, iterations: 16, train: [depth, pose, flow], batch_size: 1}\n"
+                   "logging: {interval: 1, summary_interval: 0, checkpoint_interval: 1000, val_interval: 0}\n"
+                   "run: {threads: 1, seed: 3, distributed: {verify_interval: 1, timeout_s: 60}}\n");
+  auto procs = launch(2, {"--config", dir + "/c.yaml", "--run-dir", dir + "/run"}, dir, free_local_port());
+  expect_all_exit(procs, 0, 240);
+  std::istringstream csv(losses(dir + "/run"));
+  std::string line;
+  std::getline(csv, line);  // header: stage_index,stage,iteration,total,...
+  std::vector<double> total;
+  while (std::getline(csv, line)) {
+    std::istringstream f(line);
+    std::string field;
+    for (int i = 0; i < 4; ++i) std::getline(f, field, ',');
+    total.push_back(std::stod(field));
+  }
+  ASSERT_EQ(total.size(), 16u);
+  const double first = (total[0] + total[1] + total[2] + total[3]) / 4, last = (total[12] + total[13] + total[14] + total[15]) / 4;
+  EXPECT_LT(last, 0.9 * first) << "first 4 iterations " << first << ", last 4 " << last;
+}
+
 TEST_F(Distributed, ALostProcessStopsTheOtherWithAMessage) {
   const auto dir = test::fresh_dir("dist_lost");
   auto procs = launch(2, {"--config", config_file(dir, 100000, true, 100000), "--run-dir", dir + "/run"}, dir, free_local_port());
