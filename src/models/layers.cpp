@@ -25,9 +25,30 @@ torch::Tensor ConvBnImpl::conv_bn_relu(const torch::Tensor& x, const ConvFn& con
   return relu ? torch::relu(y) : y;
 }
 
+namespace {
+
+// [4*Co, Ci, 2, 2] phase kernels of a [Co, Ci, 3, 3] kernel; the phases' outputs interleaved
+// (conv3x3_of_upsampled, below).
+torch::Tensor phase_kernels(const torch::Tensor& weight);
+torch::Tensor interleave_phases(const torch::Tensor& phases);
+
+// A convolution with kernels prepacked by at::mkldnn_reorder_conv2d_weight: the activations are
+// reordered into oneDNN's layout and back, the weights not.
+torch::Tensor packed_conv(const torch::Tensor& x, const torch::Tensor& weight, const torch::Tensor& bias,
+                          torch::IntArrayRef padding, torch::IntArrayRef stride) {
+  return at::mkldnn_convolution(x.contiguous().to_mkldnn(), weight, bias, padding, stride, {1, 1}, 1).to_dense();
+}
+
+}  // namespace
+
 torch::Tensor ConvBnImpl::forward(const torch::Tensor& x) {
   const auto& o = conv->options;
   const auto k = *o.kernel_size();
+  if (packed_weight_.defined() && x.device().is_cpu() && x.scalar_type() == folded_weight_.scalar_type()) {
+    TORCH_CHECK(!is_training(), "ConvBn: BatchNorm was folded for inference; this module cannot train");
+    const auto y = packed_conv(x, packed_weight_, packed_bias_, {k[0] / 2, k[1] / 2}, *o.stride());
+    return relu ? torch::relu(y) : y;
+  }
   return conv_bn_relu(x, [&](const torch::Tensor& in, const torch::Tensor& w, const torch::Tensor& b) {
     return torch::conv2d(in, w, b, o.stride(), {k[0] / 2, k[1] / 2}, {1, 1});  // padding as constructed
   });
@@ -39,6 +60,13 @@ torch::Tensor ConvBnImpl::forward_upsampled(const torch::Tensor& x) {
                   (*o.stride())[1] == 1,
               "forward_upsampled needs a 3x3 stride-1 ConvBn");
   if (x.size(2) * x.size(3) < kMinSubpixelArea) return forward(upsample2(x, UpsampleMode::kNearest));
+  if (packed_phase_weight_.defined() && x.device().is_cpu() && x.scalar_type() == folded_weight_.scalar_type()) {
+    TORCH_CHECK(!is_training(), "ConvBn: BatchNorm was folded for inference; this module cannot train");
+    const int64_t B = x.size(0), Co = folded_weight_.size(0), h = x.size(2), w = x.size(3);
+    const auto y = interleave_phases(
+        packed_conv(x, packed_phase_weight_, packed_phase_bias_, {1, 1}, {1, 1}).view({B, 2, 2, Co, h + 1, w + 1}));
+    return relu ? torch::relu(y) : y;
+  }
   return conv_bn_relu(x, conv3x3_of_upsampled);
 }
 
@@ -99,23 +127,34 @@ struct InterleavePhases : torch::autograd::Function<InterleavePhases> {
 
 }  // namespace
 
+namespace {
+
+torch::Tensor phase_kernels(const torch::Tensor& weight) {
+  const int64_t Co = weight.size(0), Ci = weight.size(1);
+  // The four 2x2 phase kernels as one matrix product (backward: one small GEMM, not a
+  // zero-filled weight-sized buffer per selected tap): [Co*Ci, 9] x [9, 16] -> [4*Co, Ci, 2, 2].
+  return weight.reshape({Co * Ci, 9})
+      .matmul(phase_matrix(weight.options()).t())
+      .view({Co, Ci, 4, 2, 2})
+      .permute({2, 0, 1, 3, 4})
+      .reshape({4 * Co, Ci, 2, 2});
+}
+
+torch::Tensor interleave_phases(const torch::Tensor& phases) { return InterleavePhases::apply(phases); }
+
+}  // namespace
+
 torch::Tensor conv3x3_of_upsampled(const torch::Tensor& x, const torch::Tensor& weight, const torch::Tensor& bias) {
   TORCH_CHECK(x.dim() == 4 && weight.dim() == 4 && weight.size(2) == 3 && weight.size(3) == 3 &&
                   weight.size(1) == x.size(1),
               "conv3x3_of_upsampled: x ", x.sizes(), " and weight ", weight.sizes(), " do not match");
-  const int64_t B = x.size(0), Co = weight.size(0), Ci = weight.size(1), h = x.size(2), w = x.size(3);
-  // The four 2x2 phase kernels as one matrix product (backward: one small GEMM, not a
-  // zero-filled weight-sized buffer per selected tap): [Co*Ci, 9] x [9, 16] -> [4*Co, Ci, 2, 2].
-  const auto kernels = weight.reshape({Co * Ci, 9})
-                           .matmul(phase_matrix(weight.options()).t())
-                           .view({Co, Ci, 4, 2, 2})
-                           .permute({2, 0, 1, 3, 4})
-                           .reshape({4 * Co, Ci, 2, 2});
+  const int64_t B = x.size(0), Co = weight.size(0), h = x.size(2), w = x.size(3);
+  const auto kernels = phase_kernels(weight);
   const auto b4 = bias.defined() ? bias.repeat({4}) : bias;
   // With padding 1 a 2x2 kernel gives (h+1)x(w+1) outputs; output r reads input rows r-1, r.
   // Phase a = 0 needs rows (i-1, i): r = i; phase a = 1 needs (i, i+1): r = i + 1.
   const auto y = torch::conv2d(x, kernels, b4, {1, 1}, {1, 1}, {1, 1}).view({B, 2, 2, Co, h + 1, w + 1});
-  return InterleavePhases::apply(y);
+  return interleave_phases(y);
 }
 
 namespace {
@@ -211,6 +250,30 @@ void ConvBnImpl::fold_batchnorm(torch::Dtype dtype) {
   const auto scale = bn->weight / torch::sqrt(bn->running_var + bn->options.eps());
   folded_weight_ = (conv->weight * scale.view({-1, 1, 1, 1})).to(dtype).contiguous();
   folded_bias_ = (bn->bias - bn->running_mean * scale).to(dtype);
+  if (conv->weight.device().is_cpu() && at::hasMKLDNN() && at::globalContext().userEnabledMkldnn()) prepack();
+}
+
+void ConvBnImpl::prepack() {
+  torch::NoGradGuard no_grad;
+  const auto& o = conv->options;
+  const auto k = *o.kernel_size();
+  const auto w32 = conv->weight * (bn->weight / torch::sqrt(bn->running_var + bn->options.eps())).view({-1, 1, 1, 1});
+  const auto b32 = folded_bias_.to(torch::kFloat32);  // oneDNN adds a float32 bias to bf16 products
+  const std::vector<int64_t> pad = {k[0] / 2, k[1] / 2};
+  try {
+    packed_weight_ = at::mkldnn_reorder_conv2d_weight(folded_weight_.to_mkldnn(), pad, *o.stride(), {1, 1}, 1);
+    packed_bias_ = b32;
+    if (k[0] == 3 && k[1] == 3 && (*o.stride())[0] == 1 && (*o.stride())[1] == 1) {
+      packed_phase_weight_ = at::mkldnn_reorder_conv2d_weight(
+          phase_kernels(w32).to(folded_weight_.scalar_type()).contiguous().to_mkldnn(), {1, 1}, {1, 1}, {1, 1}, 1);
+      packed_phase_bias_ = b32.repeat({4});
+    }
+    // A CPU without oneDNN's kernels for this type (bf16 without AVX-512) fails here, not later.
+    packed_conv(torch::zeros({1, folded_weight_.size(1), k[0], k[1]}, folded_weight_.options()), packed_weight_,
+                packed_bias_, pad, *o.stride());
+  } catch (const c10::Error&) {
+    packed_weight_ = packed_phase_weight_ = packed_bias_ = packed_phase_bias_ = torch::Tensor();
+  }
 }
 
 int fold_batchnorm(torch::nn::Module& module, torch::Dtype dtype) {

@@ -39,8 +39,13 @@ struct ConvBnImpl : torch::nn::Module {
   // bias (w' = w·γ/√(σ²+ε), b' = β − μ·γ/√(σ²+ε)), so forward is a single conv (+ ReLU). The folded
   // tensors are not registered: fold after loading weights and moving to the device; a folded
   // module refuses to run in training mode. `dtype`: the folded tensors' type (computed in float32).
+  // On CPU, where LibTorch has oneDNN (MKL-DNN), the folded kernels (and forward_upsampled's phase
+  // kernels) are also reordered once into oneDNN's blocked layout, so a call reorders only the
+  // activations, not the weights (PyTorch's torch.utils.mkldnn; at::conv2d reorders the weights
+  // on every call). Same results up to rounding.
   void fold_batchnorm(torch::Dtype dtype = torch::kFloat32);
   bool folded() const { return folded_weight_.defined(); }
+  bool prepacked() const { return packed_weight_.defined(); }
   torch::nn::Conv2d conv{nullptr};
   torch::nn::BatchNorm2d bn{nullptr};
   bool relu;
@@ -51,7 +56,10 @@ struct ConvBnImpl : torch::nn::Module {
   using ConvFn = std::function<torch::Tensor(const torch::Tensor&, const torch::Tensor&, const torch::Tensor&)>;
   // conv_fn(x, weight, bias) -> BatchNorm -> ReLU, or the folded conv -> ReLU.
   torch::Tensor conv_bn_relu(const torch::Tensor& x, const ConvFn& conv_fn);
+  void prepack();
   torch::Tensor folded_weight_, folded_bias_;
+  // oneDNN-blocked kernels (CPU, folded): the conv's, and forward_upsampled's four 2x2 phase kernels.
+  torch::Tensor packed_weight_, packed_phase_weight_, packed_bias_, packed_phase_bias_;
 };
 TORCH_MODULE(ConvBn);
 

@@ -53,6 +53,7 @@ TEST(Layers, FoldedBatchNormGivesTheSameOutputAndRefusesToTrain) {
   EXPECT_FALSE(cb->folded());
   EXPECT_EQ(fold_batchnorm(*cb), 1);
   EXPECT_TRUE(cb->folded());
+  EXPECT_EQ(cb->prepacked(), at::hasMKLDNN());  // oneDNN-blocked kernels where LibTorch has oneDNN
   EXPECT_LT((cb(x) - ref).abs().max().item<double>(), 1e-5);
   cb->train();
   EXPECT_THROW(cb(x), c10::Error);
@@ -60,7 +61,20 @@ TEST(Layers, FoldedBatchNormGivesTheSameOutputAndRefusesToTrain) {
   up->eval();
   const auto before = up->forward_upsampled(x).detach();
   fold_batchnorm(*up);
+  EXPECT_EQ(up->prepacked(), at::hasMKLDNN());
   EXPECT_LT((up->forward_upsampled(x) - before).abs().max().item<double>(), 1e-5);
+  // bf16 kernels: within bf16's rounding of the float32 result (the packed path where the CPU has it).
+  ConvBn half(3, 4, 3);
+  {
+    torch::NoGradGuard no_grad;
+    half->conv->weight.copy_(up->conv->weight);
+  }
+  half->eval();
+  fold_batchnorm(*half, torch::kBFloat16);
+  const auto xb = torch::randn({2, 3, 9, 11});
+  const auto want = up->forward_upsampled(xb);
+  const auto got = half->forward_upsampled(xb.to(torch::kBFloat16)).to(torch::kFloat32);
+  EXPECT_LT((got - want).abs().max().item<double>(), 0.05 * want.abs().max().item<double>());
   EXPECT_LT((before - up(nearest_x2(x))).abs().max().item<double>(), 1e-5);
   // Below kMinSubpixelArea pixels forward_upsampled takes the plain path: same contract.
   const auto small = torch::randn({2, 3, 2, 7});
