@@ -185,8 +185,8 @@ struct SyncBatchNormFn : torch::autograd::Function<SyncBatchNormFn> {
     const auto& x = saved[0];
     const auto w = saved[1].to(torch::kFloat32), mean = saved[2], invstd = saved[3];
     const double count = ctx->saved_data["count"].toDouble();
-    const auto holder = c10::static_intrusive_pointer_cast<SumHolder>(ctx->saved_data["sum"].toCapsule());
-    const SumAcrossProcesses& sum = *holder->fn;
+    const auto capsule = ctx->saved_data["sum"].toCapsule();  // keeps the holder alive while in use
+    const SumAcrossProcesses& sum = *static_cast<const SumHolder*>(capsule.get())->fn;
     const auto dy = grads[0].to(torch::kFloat32);
     const auto x_hat = (x.to(torch::kFloat32) - mean.view({1, -1, 1, 1})) * invstd.view({1, -1, 1, 1});
     const auto sum_dy = dy.sum({0, 2, 3}), sum_dy_xhat = (dy * x_hat).sum({0, 2, 3});
