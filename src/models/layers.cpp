@@ -41,11 +41,16 @@ torch::Tensor packed_conv(const torch::Tensor& x, const torch::Tensor& weight, c
 
 }  // namespace
 
+bool ConvBnImpl::uses_packed(const torch::Tensor& x, const torch::Tensor& packed) const {
+  if (!packed.defined() || !x.device().is_cpu() || x.scalar_type() != folded_weight_.scalar_type()) return false;
+  TORCH_CHECK(!is_training(), "ConvBn: BatchNorm was folded for inference; this module cannot train");
+  return true;
+}
+
 torch::Tensor ConvBnImpl::forward(const torch::Tensor& x) {
   const auto& o = conv->options;
   const auto k = *o.kernel_size();
-  if (packed_weight_.defined() && x.device().is_cpu() && x.scalar_type() == folded_weight_.scalar_type()) {
-    TORCH_CHECK(!is_training(), "ConvBn: BatchNorm was folded for inference; this module cannot train");
+  if (uses_packed(x, packed_weight_)) {
     const auto y = packed_conv(x, packed_weight_, packed_bias_, {k[0] / 2, k[1] / 2}, *o.stride());
     return relu ? torch::relu(y) : y;
   }
@@ -60,8 +65,7 @@ torch::Tensor ConvBnImpl::forward_upsampled(const torch::Tensor& x) {
                   (*o.stride())[1] == 1,
               "forward_upsampled needs a 3x3 stride-1 ConvBn");
   if (x.size(2) * x.size(3) < kMinSubpixelArea) return forward(upsample2(x, UpsampleMode::kNearest));
-  if (packed_phase_weight_.defined() && x.device().is_cpu() && x.scalar_type() == folded_weight_.scalar_type()) {
-    TORCH_CHECK(!is_training(), "ConvBn: BatchNorm was folded for inference; this module cannot train");
+  if (uses_packed(x, packed_phase_weight_)) {
     const int64_t B = x.size(0), Co = folded_weight_.size(0), h = x.size(2), w = x.size(3);
     const auto y = interleave_phases(
         packed_conv(x, packed_phase_weight_, packed_phase_bias_, {1, 1}, {1, 1}).view({B, 2, 2, Co, h + 1, w + 1}));
@@ -248,17 +252,16 @@ void ConvBnImpl::fold_batchnorm(torch::Dtype dtype) {
   if (folded()) return;
   torch::NoGradGuard no_grad;
   const auto scale = bn->weight / torch::sqrt(bn->running_var + bn->options.eps());
-  folded_weight_ = (conv->weight * scale.view({-1, 1, 1, 1})).to(dtype).contiguous();
-  folded_bias_ = (bn->bias - bn->running_mean * scale).to(dtype);
-  if (conv->weight.device().is_cpu() && at::hasMKLDNN() && at::globalContext().userEnabledMkldnn()) prepack();
+  const auto weight = conv->weight * scale.view({-1, 1, 1, 1}), bias = bn->bias - bn->running_mean * scale;
+  folded_weight_ = weight.to(dtype).contiguous();
+  folded_bias_ = bias.to(dtype);
+  if (conv->weight.device().is_cpu() && at::hasMKLDNN() && at::globalContext().userEnabledMkldnn())
+    prepack(weight, bias.to(torch::kFloat32));  // oneDNN adds a float32 bias to bf16 products
 }
 
-void ConvBnImpl::prepack() {
-  torch::NoGradGuard no_grad;
+void ConvBnImpl::prepack(const torch::Tensor& w32, const torch::Tensor& b32) {
   const auto& o = conv->options;
   const auto k = *o.kernel_size();
-  const auto w32 = conv->weight * (bn->weight / torch::sqrt(bn->running_var + bn->options.eps())).view({-1, 1, 1, 1});
-  const auto b32 = folded_bias_.to(torch::kFloat32);  // oneDNN adds a float32 bias to bf16 products
   const std::vector<int64_t> pad = {k[0] / 2, k[1] / 2};
   try {
     packed_weight_ = at::mkldnn_reorder_conv2d_weight(folded_weight_.to_mkldnn(), pad, *o.stride(), {1, 1}, 1);

@@ -56,7 +56,10 @@ struct ConvBnImpl : torch::nn::Module {
   using ConvFn = std::function<torch::Tensor(const torch::Tensor&, const torch::Tensor&, const torch::Tensor&)>;
   // conv_fn(x, weight, bias) -> BatchNorm -> ReLU, or the folded conv -> ReLU.
   torch::Tensor conv_bn_relu(const torch::Tensor& x, const ConvFn& conv_fn);
-  void prepack();
+  // The folded float32 kernel and bias -> the oneDNN-blocked ones (none where oneDNN cannot run them).
+  void prepack(const torch::Tensor& w32, const torch::Tensor& b32);
+  // `packed` is defined and applies to x (a CPU tensor of the folded type); a training module throws.
+  bool uses_packed(const torch::Tensor& x, const torch::Tensor& packed) const;
   torch::Tensor folded_weight_, folded_bias_;
   // oneDNN-blocked kernels (CPU, folded): the conv's, and forward_upsampled's four 2x2 phase kernels.
   torch::Tensor packed_weight_, packed_phase_weight_, packed_bias_, packed_phase_bias_;
