@@ -28,14 +28,16 @@ void write_networks(torch::serialize::OutputArchive& archive, const Networks& ne
   if (nets.flow) put("flow", *nets.flow);
 }
 
-std::string read_first_line(const std::string& path) {
-  std::ifstream in(path);
+}  // namespace
+
+std::string latest_checkpoint_name(const std::string& checkpoints_dir) {
+  std::ifstream in(checkpoints_dir + "/latest");
   std::string line;
   std::getline(in, line);
   return line;
 }
 
-}  // namespace
+bool is_best_checkpoint_name(const std::string& name) { return name.rfind("best", 0) == 0; }
 
 void write_checkpoint(torch::serialize::OutputArchive& a, const CheckpointContents& c) {
   write_networks(a, c.networks, std::nullopt);
@@ -171,7 +173,7 @@ std::string stage_of_checkpoint(const std::string& name) {
 std::string resolve_checkpoint(const std::string& path) {
   if (fs::is_regular_file(path)) return path;
   if (!fs::is_directory(path)) throw std::runtime_error("checkpoint '" + path + "' does not exist");
-  const std::string latest = read_first_line(path + "/checkpoints/latest");
+  const std::string latest = latest_checkpoint_name(path + "/checkpoints");
   if (latest.empty())
     throw std::runtime_error("run folder '" + path + "' has no checkpoint (checkpoints/latest missing or empty)");
   const std::string stage = stage_of_checkpoint(latest);

@@ -83,6 +83,11 @@ class CheckpointFile {
   std::optional<NetworkSpec> spec_;
 };
 
+// The checkpoint name in <checkpoints_dir>/latest, or "" when there is none.
+std::string latest_checkpoint_name(const std::string& checkpoints_dir);
+// best-<stage>.pt files are links to a stage's best checkpoint, not checkpoints of their own.
+bool is_best_checkpoint_name(const std::string& name);
+
 // "<stage>-<iteration, 8 digits>.pt"
 std::string checkpoint_name(const std::string& stage, int64_t iteration);
 // The stage part of a checkpoint name ("s2-00000004.pt" -> "s2"); "" if it is not one.

@@ -6,25 +6,12 @@
 
 #include <algorithm>
 #include <filesystem>
-#include <fstream>
 #include <stdexcept>
 #include <system_error>
 
 namespace fs = std::filesystem;
 
 namespace geo {
-namespace {
-
-std::string read_first_line(const std::string& path) {
-  std::ifstream in(path);
-  std::string line;
-  std::getline(in, line);
-  return line;
-}
-
-bool is_best_name(const std::string& name) { return name.rfind("best", 0) == 0; }
-
-}  // namespace
 
 CheckpointManager::CheckpointManager(std::string dir, int keep_last, bool read_only)
     : dir_(std::move(dir)), keep_last_(std::max(1, keep_last)) {
@@ -37,7 +24,7 @@ CheckpointManager::CheckpointManager(std::string dir, int keep_last, bool read_o
   std::vector<std::pair<fs::file_time_type, std::string>> found;
   for (const auto& e : fs::directory_iterator(this->dir())) {
     const std::string name = e.path().filename().string();
-    if (e.path().extension() == ".pt" && !is_best_name(name)) found.emplace_back(e.last_write_time(), name);
+    if (e.path().extension() == ".pt" && !is_best_checkpoint_name(name)) found.emplace_back(e.last_write_time(), name);
   }
   std::sort(found.begin(), found.end());
   for (const auto& f : found) kept_.push_back(f.second);
@@ -71,7 +58,7 @@ std::string CheckpointManager::save(const std::string& stage, int64_t iteration,
 }
 
 std::string CheckpointManager::latest() const {
-  const std::string name = read_first_line(dir() + "/latest");
+  const std::string name = latest_checkpoint_name(dir());
   return name.empty() ? "" : dir() + "/" + name;
 }
 
@@ -89,7 +76,7 @@ void CheckpointManager::check_resumable(const std::string& path) const {
   if (readable(path, &why)) return;
   std::vector<std::pair<fs::file_time_type, std::string>> others;
   for (const auto& e : fs::directory_iterator(dir()))
-    if (e.path().extension() == ".pt" && !is_best_name(e.path().filename().string()) && e.path().string() != path)
+    if (e.path().extension() == ".pt" && !is_best_checkpoint_name(e.path().filename().string()) && e.path().string() != path)
       others.emplace_back(e.last_write_time(), e.path().filename().string());
   std::sort(others.rbegin(), others.rend());
   std::string offer = " No other checkpoint in " + dir() + " is readable.";
