@@ -76,23 +76,31 @@ void apply_precision(Precision precision) {
 #define GEO_AUTOCAST_BY_DEVICE_TYPE 1
 #endif
 
+bool autocast_enabled(torch::DeviceType type) {
+#ifdef GEO_AUTOCAST_BY_DEVICE_TYPE
+  return at::autocast::is_autocast_enabled(type);
+#else
+  return type == torch::kCUDA ? at::autocast::is_enabled() : at::autocast::is_cpu_enabled();
+#endif
+}
+
 Bf16Autocast::Bf16Autocast(bool enabled, const torch::Device& device) : enabled_(enabled), type_(device.type()) {
   if (!enabled_) return;
   if (type_ != torch::kCPU && type_ != torch::kCUDA)
     throw std::runtime_error("run.precision bf16: autocast on " + device.str() + " is not supported (cpu or cuda)");
 #ifdef GEO_AUTOCAST_BY_DEVICE_TYPE
-  was_enabled_ = at::autocast::is_autocast_enabled(type_);
+  was_enabled_ = autocast_enabled(type_);
   was_dtype_ = at::autocast::get_autocast_dtype(type_);
   at::autocast::set_autocast_dtype(type_, at::kBFloat16);
   at::autocast::set_autocast_enabled(type_, true);
 #else
   if (type_ == torch::kCUDA) {
-    was_enabled_ = at::autocast::is_enabled();
+    was_enabled_ = autocast_enabled(type_);
     was_dtype_ = at::autocast::get_autocast_gpu_dtype();
     at::autocast::set_autocast_gpu_dtype(at::kBFloat16);
     at::autocast::set_enabled(true);
   } else {
-    was_enabled_ = at::autocast::is_cpu_enabled();
+    was_enabled_ = autocast_enabled(type_);
     was_dtype_ = at::autocast::get_autocast_cpu_dtype();
     at::autocast::set_autocast_cpu_dtype(at::kBFloat16);
     at::autocast::set_cpu_enabled(true);

@@ -33,6 +33,9 @@ void apply_precision(Precision precision);
 // While alive and `enabled`: the operations on `device`'s type run under autocast to bfloat16
 // (convolutions and matrix products in bf16, precision-sensitive operations in fp32; PyTorch's
 // autocast lists). Wrap only the networks' forward; cast their outputs back to float32.
+// Whether autocast is on for the device type (the one query that works on LibTorch 1.13 and 2.x).
+bool autocast_enabled(torch::DeviceType type);
+
 class Bf16Autocast {
  public:
   Bf16Autocast(bool enabled, const torch::Device& device);

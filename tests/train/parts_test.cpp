@@ -406,7 +406,7 @@ TEST(Precision, Bf16NetworksWithFloat32Losses) {
   const auto fp32 = compute_losses(n, tgt, srcs, K, stage, c).losses.values();
   Config b = parse_config("model: {encoder_depth: 18, num_scales: 2}\nrun: {precision: bf16}\n");
   auto out = compute_losses(n, tgt, srcs, K, stage, b);
-  EXPECT_FALSE(at::autocast::is_cpu_enabled());
+  EXPECT_FALSE(autocast_enabled(torch::kCPU));
   EXPECT_EQ(out.tgt_disp[0].scalar_type(), torch::kFloat32);
   EXPECT_EQ(out.fwd_full[0][0].scalar_type(), torch::kFloat32);
   EXPECT_EQ(out.losses.total.scalar_type(), torch::kFloat32);
@@ -426,9 +426,9 @@ TEST(Precision, Bf16NetworksWithFloat32Losses) {
     Bf16Autocast on(true, torch::kCPU);
     EXPECT_EQ(torch::conv2d(torch::rand({1, 2, 4, 4}), torch::rand({3, 2, 1, 1})).scalar_type(), torch::kBFloat16);
     Bf16Autocast off(false, torch::kCPU);
-    EXPECT_TRUE(at::autocast::is_cpu_enabled());
+    EXPECT_TRUE(autocast_enabled(torch::kCPU));
   }
-  EXPECT_FALSE(at::autocast::is_cpu_enabled());
+  EXPECT_FALSE(autocast_enabled(torch::kCPU));
 }
 
 }  // namespace

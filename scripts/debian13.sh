@@ -1,0 +1,87 @@
+#!/usr/bin/env bash
+# Runs one of geo's scripts on Debian 13 (trixie: LibTorch/PyTorch 2.6, GCC 14) from a Debian 12
+# machine: makes (or reuses) a Debian 13 root with mmdebstrap from the host's own Debian mirror,
+# copies the checkout into it and runs the script there.
+#   scripts/debian13.sh scripts/test.sh            the test suite on LibTorch 2.6
+#   scripts/debian13.sh scripts/demo.sh            the demo (its out/ lands in out/debian13/)
+#   GEO_OPENCV=0 scripts/debian13.sh scripts/test.sh   without OpenCV, as on a PyTorch GPU image
+#   scripts/debian13.sh bash                       a shell in the root, in the checkout's copy
+# Environment:
+#   GEO_DEBIAN13_ROOT  where the root lives (default: ~/.cache/geo/debian13; ~1.7 GB, made in
+#                      ~3-6 minutes, reused afterwards; delete the folder to make it anew)
+#   GEO_* variables are passed on to the script inside.
+# The root sees the checkout as /src/geo (a copy: build folders inside it are kept between runs, so
+# rebuilds are incremental), ../shared as /src/shared (read-only) and out/debian13 as /src/geo/out.
+# Mounts live in a private mount namespace: they are gone when the command ends, however it ends.
+# Needs root (or sudo), unshare and chroot (util-linux and coreutils: on every Debian).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+CHECKOUT="$(pwd)"
+(($#)) || { sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'; exit 2; }
+
+if [ "$(id -u)" -ne 0 ]; then
+  command -v sudo >/dev/null || { echo "geo debian13: needs root or sudo (mmdebstrap, chroot, mounts)" >&2; exit 1; }
+  exec sudo --preserve-env "$0" "$@"
+fi
+
+ROOT="${GEO_DEBIAN13_ROOT:-${HOME:-/root}/.cache/geo/debian13}"
+# Debian 13 packages the root starts with; scripts/setup.sh inside adds what it needs.
+PACKAGES=python3-torch,python3-yaml,python3-numpy,libtorch-dev,libgloo-dev,libopenblas0-pthread,g++,cmake,make,ccache,libyaml-cpp-dev,libcli11-dev,libspdlog-dev,libgtest-dev,libgmock-dev
+
+# The host's Debian mirror (its main archive, as apt uses it): never written into the repository.
+host_mirror() {
+  local codename
+  codename="$(. /etc/os-release && echo "${VERSION_CODENAME:-}")"
+  apt-cache policy 2>/dev/null |
+    awk -v c="$codename/main" '$3 == c && $2 ~ /^https?:\/\// { print $2; exit }'
+}
+
+if [ ! -x "$ROOT/usr/bin/g++" ] || [ ! -f "$ROOT/.geo-root-complete" ]; then
+  MIRROR="${GEO_DEBIAN_MIRROR:-$(host_mirror)}"
+  [ -n "$MIRROR" ] || { echo "geo debian13: no Debian mirror found in the host's apt sources (apt-cache policy); set GEO_DEBIAN_MIRROR" >&2; exit 1; }
+  if ! command -v mmdebstrap >/dev/null; then
+    echo "geo debian13: installing mmdebstrap"
+    apt-get update -q >/dev/null
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends mmdebstrap >/dev/null
+  fi
+  echo "geo debian13: making a Debian 13 root in $ROOT from $MIRROR (~3-6 minutes, ~1.7 GB)"
+  mkdir -p "$(dirname "$ROOT")"
+  rm -rf "$ROOT.partial"
+  mmdebstrap --variant=apt --include="$PACKAGES" trixie "$ROOT.partial" "$MIRROR"
+  touch "$ROOT.partial/.geo-root-complete"
+  rm -rf "$ROOT"
+  mv "$ROOT.partial" "$ROOT"
+fi
+
+# The checkout's files (tracked and untracked-but-not-ignored) replace the previous copy; the
+# copy's build folders and ccache stay.
+DEST="$ROOT/src/geo"
+mkdir -p "$DEST" "$ROOT/src/shared" "$CHECKOUT/out/debian13"
+find "$DEST" -mindepth 1 -maxdepth 1 ! -name 'build' ! -name 'build-*' ! -name out -exec rm -rf {} +
+if git -C "$CHECKOUT" rev-parse --git-dir >/dev/null 2>&1; then
+  git -C "$CHECKOUT" ls-files -z --cached --others --exclude-standard |
+    (cd "$CHECKOUT" && tar --null -T - -cf - 2>/dev/null) | tar -xf - -C "$DEST"
+else
+  tar --exclude=./build --exclude='./build-*' --exclude=./out -cf - -C "$CHECKOUT" . | tar -xf - -C "$DEST"
+fi
+mkdir -p "$DEST/out"
+
+ENV=(HOME=/root PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin LANG=C.UTF-8 TERM="${TERM:-dumb}")
+while IFS='=' read -r name _; do
+  [[ "$name" == GEO_* && "$name" != GEO_DEBIAN13_ROOT ]] && ENV+=("$name=${!name}")
+done < <(env)
+
+SHARED=""
+[ -d "$CHECKOUT/../shared" ] && SHARED="$(cd "$CHECKOUT/../shared" && pwd)"
+echo "geo debian13: running '$*' in $ROOT (Debian $(cat "$ROOT/etc/debian_version"))"
+# A private mount namespace: the kernel drops every mount below when the last process in it ends.
+exec unshare --mount --propagation private -- /bin/bash -euo pipefail -c '
+  root="$1" shared="$2" out="$3"; shift 3
+  mount -t proc proc "$root/proc"
+  mount --rbind /sys "$root/sys"
+  mount --rbind /dev "$root/dev"
+  [ -n "$shared" ] && mount --bind -o ro "$shared" "$root/src/shared"
+  mount --bind "$out" "$root/src/geo/out"
+  cp -L /etc/resolv.conf "$root/etc/resolv.conf" 2>/dev/null || true
+  exec chroot "$root" /usr/bin/env -i "$@"
+' geo-debian13 "$ROOT" "$SHARED" "$CHECKOUT/out/debian13" "${ENV[@]}" /bin/bash -c 'cd /src/geo && exec "$@"' geo "$@"
