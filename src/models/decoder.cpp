@@ -52,7 +52,7 @@ std::vector<torch::Tensor> EncoderDecoderImpl::forward(const torch::Tensor& x) {
     if (k >= 3) parts.push_back(resize_like(upsample2(preds.back(), options.upsample), ref));
     y = iconv[k](torch::cat(parts, 1));
     if (!refine.empty()) y = refine[k](y);
-    if (k >= 2) preds.push_back(head(pred[k - 2](y)));
+    if (k >= 2) preds.push_back(head(conv2d(*pred[k - 2], y)));
   }
   return {preds[3], preds[2], preds[1], preds[0]};
 }

@@ -1,6 +1,7 @@
 #include "models/fr.h"
 
 #include "core/tensor_checks.h"
+#include "models/layers.h"
 
 #include <ATen/Dispatch.h>
 #include <ATen/Parallel.h>
@@ -158,7 +159,7 @@ FeatureRefinementImpl::FeatureRefinementImpl(const FeatureRefinementOptions& o) 
 torch::Tensor FeatureRefinementImpl::channel_gate(const torch::Tensor& x) {
   TORCH_CHECK(x.dim() == 4 && x.size(1) == options.channels, "FR input must be [B,",
               options.channels, ",H,W], got ", x.sizes());
-  auto mlp = [this](const torch::Tensor& t) { return mlp_out(torch::relu(mlp_in(t))); };
+  auto mlp = [this](const torch::Tensor& t) { return conv2d(*mlp_out, torch::relu(conv2d(*mlp_in, t))); };
   const auto [mx, avg] = max_mean_over_space(x);
   return torch::sigmoid(mlp(avg) + mlp(mx));
 }
@@ -166,7 +167,7 @@ torch::Tensor FeatureRefinementImpl::channel_gate(const torch::Tensor& x) {
 torch::Tensor FeatureRefinementImpl::spatial_gate(const torch::Tensor& f1) {
   const auto [mx, avg] = max_mean_over_channels(f1);
   const auto pooled = torch::cat({mx, avg}, 1);
-  auto a = spatial(pooled);
+  auto a = conv2d(*spatial, pooled);
   if (options.spatial_bn) a = spatial_bn(a);
   return torch::sigmoid(a);
 }

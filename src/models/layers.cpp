@@ -1,6 +1,9 @@
 #include "models/layers.h"
 
 #include <torch/autograd.h>
+#include <torch/version.h>
+
+#include "core/runtime.h"
 
 namespace geo {
 
@@ -41,6 +44,52 @@ torch::Tensor packed_conv(const torch::Tensor& x, const torch::Tensor& weight, c
 
 }  // namespace
 
+int64_t onednn_channel_padding(const torch::Tensor& x) {
+#if TORCH_VERSION_MAJOR >= 2
+  const int64_t c = x.dim() == 4 ? x.size(1) : 0;
+  if (!x.device().is_cpu() || c == 0 || c % 16 == 0) return 0;
+  if (c == 1 || c > 16) return 16 - c % 16;
+  // 2..15 channels: only the input's gradient in bfloat16 is wrong.
+  const bool bf16 = x.scalar_type() == torch::kBFloat16 || autocast_enabled(torch::kCPU);
+  if (bf16 && x.requires_grad() && torch::GradMode::is_enabled()) return 16 - c;
+#endif
+  return 0;
+}
+
+torch::Tensor pad_channels(const torch::Tensor& t, int64_t n) {
+  return n > 0 ? torch::constant_pad_nd(t, {0, 0, 0, 0, 0, n}) : t;
+}
+
+torch::Tensor conv2d(const torch::Tensor& x, const torch::Tensor& weight, const torch::Tensor& bias,
+                     torch::IntArrayRef stride, torch::IntArrayRef padding) {
+  const int64_t in_pad = onednn_channel_padding(x);
+  int64_t out_pad = 0;
+#if TORCH_VERSION_MAJOR >= 2
+  const int64_t co = weight.size(0);
+  if (x.device().is_cpu() && co % 16 != 0 && torch::GradMode::is_enabled() &&
+      (x.requires_grad() || weight.requires_grad()))
+    out_pad = 16 - co % 16;  // the backward pass reads the output's gradient in the blocked layout
+#endif
+  if (in_pad == 0 && out_pad == 0) return torch::conv2d(x, weight, bias, stride, padding);
+  const auto w = torch::constant_pad_nd(weight, {0, 0, 0, 0, 0, in_pad, 0, out_pad});
+  const auto b = bias.defined() && out_pad > 0 ? torch::constant_pad_nd(bias, {0, out_pad}) : bias;
+  const auto y = torch::conv2d(pad_channels(x, in_pad), w, b, stride, padding);
+  return out_pad > 0 ? y.narrow(1, 0, weight.size(0)) : y;
+}
+
+torch::Tensor conv2d(const torch::nn::Conv2dImpl& m, const torch::Tensor& x) {
+  const auto& o = m.options;
+  TORCH_CHECK(o.groups() == 1 && (*o.dilation())[0] == 1 && (*o.dilation())[1] == 1,
+              "geo::conv2d: grouped or dilated convolutions are not supported");
+#if TORCH_VERSION_MAJOR >= 2
+  const auto* pad = std::get_if<torch::ExpandingArray<2>>(&o.padding());
+#else
+  const auto* pad = c10::get_if<torch::ExpandingArray<2>>(&o.padding());
+#endif
+  TORCH_CHECK(pad != nullptr, "geo::conv2d: the padding must be given in pixels");
+  return conv2d(x, m.weight, m.bias, *o.stride(), **pad);
+}
+
 bool ConvBnImpl::uses_packed(const torch::Tensor& x, const torch::Tensor& packed) const {
   if (!packed.defined() || !x.device().is_cpu() || x.scalar_type() != folded_weight_.scalar_type()) return false;
   TORCH_CHECK(!is_training(), "ConvBn: BatchNorm was folded for inference; this module cannot train");
@@ -50,12 +99,13 @@ bool ConvBnImpl::uses_packed(const torch::Tensor& x, const torch::Tensor& packed
 torch::Tensor ConvBnImpl::forward(const torch::Tensor& x) {
   const auto& o = conv->options;
   const auto k = *o.kernel_size();
-  if (uses_packed(x, packed_weight_)) {
-    const auto y = packed_conv(x, packed_weight_, packed_bias_, {k[0] / 2, k[1] / 2}, *o.stride());
+  const int64_t pad = onednn_channel_padding(x);
+  if (uses_packed(x, packed_weight_)) {  // (packed with the padded channels)
+    const auto y = packed_conv(pad_channels(x, pad), packed_weight_, packed_bias_, {k[0] / 2, k[1] / 2}, *o.stride());
     return relu ? torch::relu(y) : y;
   }
   return conv_bn_relu(x, [&](const torch::Tensor& in, const torch::Tensor& w, const torch::Tensor& b) {
-    return torch::conv2d(in, w, b, o.stride(), {k[0] / 2, k[1] / 2}, {1, 1});  // padding as constructed
+    return conv2d(in, w, b, *o.stride(), {k[0] / 2, k[1] / 2});  // padding as constructed
   });
 }
 
@@ -264,7 +314,8 @@ void ConvBnImpl::prepack(const torch::Tensor& w32, const torch::Tensor& b32) {
   const auto k = *o.kernel_size();
   const std::vector<int64_t> pad = {k[0] / 2, k[1] / 2};
   try {
-    packed_weight_ = at::mkldnn_reorder_conv2d_weight(folded_weight_.to_mkldnn(), pad, *o.stride(), {1, 1}, 1);
+    const auto w = pad_channels(folded_weight_, onednn_channel_padding(folded_weight_));  // as forward pads x
+    packed_weight_ = at::mkldnn_reorder_conv2d_weight(w.contiguous().to_mkldnn(), pad, *o.stride(), {1, 1}, 1);
     packed_bias_ = b32;
     if (k[0] == 3 && k[1] == 3 && (*o.stride())[0] == 1 && (*o.stride())[1] == 1) {
       packed_phase_weight_ = at::mkldnn_reorder_conv2d_weight(
@@ -272,7 +323,7 @@ void ConvBnImpl::prepack(const torch::Tensor& w32, const torch::Tensor& b32) {
       packed_phase_bias_ = b32.repeat({4});
     }
     // A CPU without oneDNN's kernels for this type (bf16 without AVX-512) fails here, not later.
-    packed_conv(torch::zeros({1, folded_weight_.size(1), k[0], k[1]}, folded_weight_.options()), packed_weight_,
+    packed_conv(torch::zeros({1, w.size(1), k[0], k[1]}, folded_weight_.options()), packed_weight_,
                 packed_bias_, pad, *o.stride());
   } catch (const c10::Error&) {
     packed_weight_ = packed_phase_weight_ = packed_bias_ = packed_phase_bias_ = torch::Tensor();

@@ -66,6 +66,30 @@ struct ConvBnImpl : torch::nn::Module {
 };
 TORCH_MODULE(ConvBn);
 
+// LibTorch 2.x on the CPU (seen with 2.6 and oneDNN 3.7) reorders tensors into oneDNN's blocked
+// layouts (channels in blocks of 16) without zeroing the padding of the last block, so a convolution
+// reads uninitialised memory (its results hold whatever the heap held: wrong values, or NaN) when
+//  - its input has 1 channel (bfloat16), or more than 16 channels and not a multiple of 16 (the
+//    forward pass): the decoders' iconv layers, whose inputs concatenate a 1- or 2-channel
+//    prediction (64 + 64 + 1 = 129 channels); FR's MLP with a hidden width of 1;
+//  - in bfloat16, its input has 2 to 15 channels and needs a gradient (wrong values, not garbage:
+//    FR's spatial 7x7 convolution over 2 channels);
+//  - its output has a number of channels that is not a multiple of 16 (the backward pass): the 1- or
+//    2-channel predictions, FR's spatial 7x7 convolution, PoseNet's 12 pose parameters.
+// geo's convolutions go through conv2d below, which appends zero channels up to the next multiple of
+// 16 (to the input and the weight's input side; to the weight's and bias's output side, the extra
+// outputs cut off, when a backward pass may follow): the same convolution exactly, off that path.
+// Nothing is appended with LibTorch 1.x or off the CPU. tests/support/poisoned_alloc.cpp finds such
+// reads: every test of the networks runs again with fresh memory filled with NaN.
+torch::Tensor conv2d(const torch::Tensor& x, const torch::Tensor& weight, const torch::Tensor& bias,
+                     torch::IntArrayRef stride, torch::IntArrayRef padding);
+// m's convolution of x through conv2d above (stride and pixel padding as m was constructed with).
+torch::Tensor conv2d(const torch::nn::Conv2dImpl& m, const torch::Tensor& x);
+// The number of zero channels conv2d appends to the input x (0 where none).
+int64_t onednn_channel_padding(const torch::Tensor& x);
+// t with n zero channels appended (dimension 1); t itself when n is 0.
+torch::Tensor pad_channels(const torch::Tensor& t, int64_t n);
+
 // conv2d(nearest ×2 upsampling of x, 3x3 weight, zero padding 1) without building the upsampled
 // image. Output pixel (2i+a, 2j+b) only sees input rows {i-1, i} (a = 0) or {i, i+1} (a = 1), and
 // likewise for columns, so each of the four phases (a, b) is a 2x2 convolution of x with summed

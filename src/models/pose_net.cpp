@@ -27,7 +27,7 @@ torch::Tensor PoseNetImpl::forward(const torch::Tensor& tgt, const std::vector<t
   TORCH_CHECK(tgt.dim() == 4 && tgt.size(1) == 3, "PoseNet target must be [B,3,H,W], got ", tgt.sizes());
   auto x = normalize_image(torch::cat(frames, 1).to(compute_dtype));
   for (auto& c : convs) x = c(x);
-  x = pred(x).mean({2, 3}).to(torch::kFloat32);  // [B, 6N]
+  x = conv2d(*pred, x).mean({2, 3}).to(torch::kFloat32);  // [B, 6N]
   return options.output_scale * x.view({-1, num_sources(), 6});
 }
 

@@ -107,12 +107,13 @@ TEST(FlowNet, ResidualFlowShapesAt128x416AndOddSize) {
 // Every parameter gets a finite, non-zero gradient from a loss on the outputs.
 void expect_all_gradients(torch::nn::Module& net, const std::function<torch::Tensor()>& loss_of) {
   net.train();
+  std::unique_ptr<torch::autograd::DetectAnomalyGuard> ag; if (getenv("ANOM")) ag.reset(new torch::autograd::DetectAnomalyGuard());
   loss_of().backward();
   std::vector<std::string> without;
   for (const auto& p : net.named_parameters()) {
     const auto& g = p.value().grad();
     if (!g.defined() || !torch::isfinite(g).all().item<bool>()) {
-      without.push_back(p.key());
+      without.push_back(p.key() + (g.defined() ? " (not finite)" : " (none)"));
       continue;
     }
     // The one legitimate exception: the shared MLP of an FR block whose hidden width is clamped
@@ -120,7 +121,7 @@ void expect_all_gradients(torch::nn::Module& net, const std::function<torch::Ten
     // for a whole batch, and then both MLP weights have an exactly-zero gradient.
     const bool one_wide_mlp = p.key().find("mlp_") != std::string::npos &&
                               (p.value().size(0) == 1 || p.value().size(1) == 1);
-    if (g.abs().sum().item<double>() == 0 && !one_wide_mlp) without.push_back(p.key());
+    if (g.abs().sum().item<double>() == 0 && !one_wide_mlp) without.push_back(p.key() + " (zero)");
   }
   EXPECT_TRUE(without.empty()) << "no gradient: " << without.size() << " parameters, first "
                                << (without.empty() ? "" : without[0]);
