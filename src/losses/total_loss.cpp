@@ -54,6 +54,14 @@ torch::Tensor from_loss_range(const torch::Tensor& image, const LossConfig& cfg)
   return lo == 0.0 && hi == 1.0 ? image : (image - lo) / (hi - lo);
 }
 
+RigidView rigid_view(const torch::Tensor& src, const torch::Tensor& tgt, const torch::Tensor& flow,
+                     const LossConfig& cfg) {
+  RigidView v;
+  v.warp = warp(src, flow, out_of_view(cfg));
+  v.error_channels = photometric_error_channels(v.warp.image, tgt, cfg.ssim_alpha);
+  return v;
+}
+
 RigidTerms rigid_terms(const LossInputs& in, const LossConfig& cfg) {
   check_shape(in.tgt, "tgt", {-1, 3, -1, -1});
   const auto B = in.tgt.size(0);
@@ -78,7 +86,6 @@ RigidTerms rigid_terms(const LossInputs& in, const LossConfig& cfg) {
   }
 
   RigidTerms out;
-  const OutOfView sampler = out_of_view(cfg);
   out.tgt_pyr = image_pyramid(to_loss_range(in.tgt, cfg), S);
   const auto Ks = intrinsics_pyramid(in.K, S);
   std::vector<torch::Tensor> rigid_per_scale, smooth_per_scale;
@@ -102,12 +109,12 @@ RigidTerms rigid_terms(const LossInputs& in, const LossConfig& cfg) {
       const auto& tgt = out.tgt_pyr[s];
       out.fwd_flow[i][s] = rigid_flow(1.0 / in.tgt_disp[s], src_from_tgt[i], Ks[s]);
       out.bwd_flow[i][s] = rigid_flow(1.0 / in.src_disp[i][s], tgt_from_src[i], Ks[s]);
-      const auto fw = warp(src, out.fwd_flow[i][s], sampler);
-      const auto bw = warp(tgt, out.bwd_flow[i][s], sampler);
+      const auto fv_ = rigid_view(src, tgt, out.fwd_flow[i][s], cfg);
+      const auto bv_ = rigid_view(tgt, src, out.bwd_flow[i][s], cfg);
+      const Warped &fw = fv_.warp, &bw = bv_.warp;
+      const torch::Tensor &fwd_channels = fv_.error_channels, &bwd_channels = bv_.error_channels;
       out.fwd_warp[i][s] = fw.image;
       out.bwd_warp[i][s] = bw.image;
-      const auto fwd_channels = photometric_error_channels(fw.image, tgt, cfg.ssim_alpha);
-      const auto bwd_channels = photometric_error_channels(bw.image, src, cfg.ssim_alpha);
       out.fwd_error[i][s] = fwd_channels.mean(1, true);
       out.bwd_error[i][s] = bwd_channels.mean(1, true);
       if (s == 0) {  // FlowNet input (used without gradient)

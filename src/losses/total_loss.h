@@ -48,6 +48,16 @@ struct RigidTerms {
   torch::Tensor disp_smooth;  // L_ds: sum over scales of smoothness / 2^s over all frames
 };
 
+// One direction of the rigid step: `src` warped into the view of `tgt` by `flow` (loss.sampler) and
+// the per-channel photometric error of the warp against tgt; src and tgt in the loss range. What
+// rigid_terms computes for every source and scale, and inference for the FlowNet's input.
+struct RigidView {
+  Warped warp;
+  torch::Tensor error_channels;  // [B,3,h,w]
+};
+RigidView rigid_view(const torch::Tensor& src, const torch::Tensor& tgt, const torch::Tensor& flow,
+                     const LossConfig& cfg);
+
 // Computes L_br and L_ds. Throws on inconsistent shapes, naming the argument.
 RigidTerms rigid_terms(const LossInputs& in, const LossConfig& cfg);
 

@@ -169,6 +169,17 @@ void Networks::prepare_inference(bool fold, bool bf16) {
   if (flow) prepare(*flow, flow->compute_dtype);  // null for checkpoints without a FlowNet
 }
 
+torch::Tensor rigid_flow_net_input(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& rigid_flow,
+                                   const LossConfig& loss, torch::Tensor warped, torch::Tensor error_norm) {
+  torch::NoGradGuard no_grad;
+  if (!warped.defined() || !error_norm.defined()) {
+    const auto view = rigid_view(to_loss_range(src, loss), to_loss_range(tgt, loss), rigid_flow, loss);
+    warped = view.warp.image;
+    error_norm = channel_l2_norm(view.error_channels);
+  }
+  return flow_net_input(tgt, src, from_loss_range(warped, loss), rigid_flow, error_norm);
+}
+
 PairPrediction predict_pair(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& src,
                             const torch::Tensor& K, const torch::Tensor& prev) {
   TORCH_CHECK(tgt.dim() == 4 && tgt.size(1) == 3 && src.sizes() == tgt.sizes(), "predict_pair: tgt ",
@@ -181,15 +192,10 @@ PairPrediction predict_pair(Networks& nets, const torch::Tensor& tgt, const torc
   p.src_from_tgt = pose_vec_to_matrix(nets.pose->forward(tgt, snippet).select(1, before));
   p.rigid_flow = rigid_flow(1.0 / p.disp, p.src_from_tgt, K);
   p.flow = p.rigid_flow;
-  if (nets.flow) {
-    const LossConfig loss = nets.spec.flow_input.as_loss_config();
-    // As in training (compute_losses): warp and error in the loss range.
-    const auto warped = warp(to_loss_range(src, loss), p.rigid_flow, out_of_view(loss)).image;
-    const auto error =
-        channel_l2_norm(photometric_error_channels(warped, to_loss_range(tgt, loss), loss.ssim_alpha));
-    p.flow = p.rigid_flow + nets.flow->forward(flow_net_input(tgt, src, from_loss_range(warped, loss),
-                                                              p.rigid_flow, error)).flow[0];
-  }
+  if (nets.flow)
+    p.flow = p.rigid_flow +
+             nets.flow->forward(rigid_flow_net_input(tgt, src, p.rigid_flow, nets.spec.flow_input.as_loss_config()))
+                 .flow[0];
   return p;
 }
 

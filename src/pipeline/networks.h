@@ -81,6 +81,14 @@ struct Networks {
 // the rigid flow tgt -> src at full resolution, and, when a FlowNet exists, its residual added (its
 // input built with nets.spec.flow_input, as in training).
 // tgt, src [B,3,H,W], K [B,3,3] on the networks' device; call under NoGradGuard/InferenceMode.
+// The FlowNet's input for the pair tgt <- src (both [B,3,H,W] in [0,1]) from the rigid step at full
+// scale: the rigid flow tgt -> src, the source warped by it and the L2 norm over colour channels of
+// the warp's photometric error (loss range, as rigid_terms computes them: pass them when at hand,
+// else they are computed here with rigid_view). No gradient flows into the rigid step (GeoNet).
+// Training (compute_losses) and inference (predict_pair) both feed the FlowNet this.
+torch::Tensor rigid_flow_net_input(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& rigid_flow,
+                                   const LossConfig& loss, torch::Tensor warped = {}, torch::Tensor error_norm = {});
+
 struct PairPrediction {
   torch::Tensor disp;          // [B,1,H,W] target disparity
   torch::Tensor src_from_tgt;  // [B,4,4]

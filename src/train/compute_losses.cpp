@@ -56,13 +56,12 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
   TORCH_CHECK(nets.flow, "the stage trains flow but no FlowNet was created");
   // Both directions of every source in one FlowNet pass: [fwd_0..fwd_N-1, bwd_0..bwd_N-1].
   std::vector<torch::Tensor> inputs;
-  // The warps are in the loss range (loss.image_range); flow_net_input takes [0,1] images.
   for (int64_t i = 0; i < N; ++i)
-    inputs.push_back(flow_net_input(tgt, src_list[i], from_loss_range(out.rigid.fwd_warp[i][0].detach(), config.loss),
-                                    out.rigid.fwd_flow[i][0].detach(), out.rigid.fwd_error_norm[i].detach()));
+    inputs.push_back(rigid_flow_net_input(tgt, src_list[i], out.rigid.fwd_flow[i][0], config.loss,
+                                          out.rigid.fwd_warp[i][0], out.rigid.fwd_error_norm[i]));
   for (int64_t i = 0; i < N; ++i)
-    inputs.push_back(flow_net_input(src_list[i], tgt, from_loss_range(out.rigid.bwd_warp[i][0].detach(), config.loss),
-                                    out.rigid.bwd_flow[i][0].detach(), out.rigid.bwd_error_norm[i].detach()));
+    inputs.push_back(rigid_flow_net_input(src_list[i], tgt, out.rigid.bwd_flow[i][0], config.loss,
+                                          out.rigid.bwd_warp[i][0], out.rigid.bwd_error_norm[i]));
   std::optional<torch::NoGradGuard> frozen;
   if (!stage.trains(Net::kFlow)) frozen.emplace();
   auto residual = network_pass(config, tgt.device(), [&] { return nets.flow->forward(torch::cat(inputs, 0)).flow; });

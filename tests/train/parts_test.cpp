@@ -301,6 +301,34 @@ TEST(ComputeLosses, NumScalesSetsTheScalesOfEveryTerm) {
   }
 }
 
+// Training and inference feed the FlowNet the same input (rigid_flow_net_input): in eval mode the
+// training forward's full flow to the next frame equals predict_pair's for the same weights and
+// frames. Not bit for bit: training runs the DepthNet over the target and its sources in one batch,
+// inference over the target alone, and oneDNN's convolutions round differently per batch size.
+TEST(ComputeLosses, FullFlowEqualsInferencesFlow) {
+  torch::manual_seed(9);
+  Config c = parse_config("model: {encoder_depth: 18, num_scales: 2}\n");
+  StageConfig stage = c.stages[0];
+  stage.train = NetworkSet{true, true, true};
+  Networks n = Networks::create(NetworkSpec::of(c), true);
+  n.depth->eval();
+  n.pose->eval();
+  n.flow->eval();
+  const auto tgt = torch::rand({2, 3, 64, 128}), srcs = torch::rand({2, 2, 3, 64, 128});
+  const auto K = torch::tensor({60.f, 0.f, 64.f, 0.f, 60.f, 32.f, 0.f, 0.f, 1.f}).view({1, 3, 3}).repeat({2, 1, 1});
+  torch::NoGradGuard no_grad;
+  const auto out = compute_losses(n, tgt, srcs, K, stage, c);
+  const auto p = predict_pair(n, tgt, srcs.select(1, 1), K, srcs.select(1, 0));
+  const auto& trained = out.fwd_full[1][0];
+  ASSERT_EQ(p.flow.sizes(), trained.sizes());
+  const double scale = trained.abs().max().item<double>();
+  EXPECT_GT(scale, 0.1);
+  EXPECT_LT((p.flow - trained).abs().max().item<double>(), 1e-4 * scale);
+  EXPECT_LT((p.rigid_flow - out.rigid.fwd_flow[1][0]).abs().max().item<double>(), 1e-4 * scale);
+  // The residual is not zero: the comparison covers the FlowNet, not only the rigid flow.
+  EXPECT_GT((trained - out.rigid.fwd_flow[1][0]).abs().max().item<double>(), 1e-3 * scale);
+}
+
 }  // namespace
 }  // namespace geo
 
