@@ -54,16 +54,30 @@ if [ ! -x "$ROOT/usr/bin/g++" ] || [ ! -f "$ROOT/.geo-root-complete" ]; then
 fi
 
 # The checkout's files (tracked and untracked-but-not-ignored) replace the previous copy; the
-# copy's build folders and ccache stay.
+# copy's build folders and ccache stay. Only files whose content changed are written (and so get
+# the current time): an object file built from an older copy is then never newer than its source,
+# whatever the times of the checkout's files.
 DEST="$ROOT/src/geo"
-mkdir -p "$DEST" "$ROOT/src/shared" "$CHECKOUT/out/debian13"
-find "$DEST" -mindepth 1 -maxdepth 1 ! -name 'build' ! -name 'build-*' ! -name out -exec rm -rf {} +
+STAGE="$ROOT/src/.geo-incoming"
+rm -rf "$STAGE"
+mkdir -p "$DEST" "$STAGE" "$ROOT/src/shared" "$CHECKOUT/out/debian13"
 if git -C "$CHECKOUT" rev-parse --git-dir >/dev/null 2>&1; then
   git -C "$CHECKOUT" ls-files -z --cached --others --exclude-standard |
-    (cd "$CHECKOUT" && tar --null -T - -cf - 2>/dev/null) | tar -xf - -C "$DEST"
+    (cd "$CHECKOUT" && tar --null -T - -cf - 2>/dev/null) | tar -xf - -C "$STAGE"
 else
-  tar --exclude=./build --exclude='./build-*' --exclude=./out -cf - -C "$CHECKOUT" . | tar -xf - -C "$DEST"
+  tar --exclude=./build --exclude='./build-*' --exclude=./out -cf - -C "$CHECKOUT" . | tar -xf - -C "$STAGE"
 fi
+(cd "$DEST" && find . \( -path ./out -o -path ./build -o -path './build-*' \) -prune -o \( -type f -o -type l \) -print0) |
+  while IFS= read -r -d '' f; do [ -e "$STAGE/$f" ] || [ -L "$STAGE/$f" ] || rm -f "$DEST/$f"; done
+(cd "$STAGE" && find . \( -type f -o -type l \) -print0) |
+  while IFS= read -r -d '' f; do
+    if [ -L "$STAGE/$f" ] || ! cmp -s "$STAGE/$f" "$DEST/$f"; then
+      mkdir -p "$(dirname "$DEST/$f")"
+      rm -f "$DEST/$f"
+      cp -P --preserve=mode "$STAGE/$f" "$DEST/$f"
+    fi
+  done
+rm -rf "$STAGE"
 mkdir -p "$DEST/out"
 
 ENV=(HOME=/root PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin LANG=C.UTF-8 TERM="${TERM:-dumb}")

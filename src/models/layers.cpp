@@ -66,9 +66,7 @@ torch::Tensor conv2d(const torch::Tensor& x, const torch::Tensor& weight, const 
   int64_t out_pad = 0;
 #if TORCH_VERSION_MAJOR >= 2
   const int64_t co = weight.size(0);
-  if (x.device().is_cpu() && co % 16 != 0 && torch::GradMode::is_enabled() &&
-      (x.requires_grad() || weight.requires_grad()))
-    out_pad = 16 - co % 16;  // the backward pass reads the output's gradient in the blocked layout
+  if (x.device().is_cpu() && co % 16 != 0) out_pad = 16 - co % 16;
 #endif
   if (in_pad == 0 && out_pad == 0) return torch::conv2d(x, weight, bias, stride, padding);
   const auto w = torch::constant_pad_nd(weight, {0, 0, 0, 0, 0, in_pad, 0, out_pad});

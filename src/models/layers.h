@@ -66,21 +66,22 @@ struct ConvBnImpl : torch::nn::Module {
 };
 TORCH_MODULE(ConvBn);
 
-// LibTorch 2.x on the CPU (seen with 2.6 and oneDNN 3.7) reorders tensors into oneDNN's blocked
-// layouts (channels in blocks of 16) without zeroing the padding of the last block, so a convolution
-// reads uninitialised memory (its results hold whatever the heap held: wrong values, or NaN) when
-//  - its input has 1 channel (bfloat16), or more than 16 channels and not a multiple of 16 (the
-//    forward pass): the decoders' iconv layers, whose inputs concatenate a 1- or 2-channel
-//    prediction (64 + 64 + 1 = 129 channels); FR's MLP with a hidden width of 1;
-//  - in bfloat16, its input has 2 to 15 channels and needs a gradient (wrong values, not garbage:
-//    FR's spatial 7x7 convolution over 2 channels);
-//  - its output has a number of channels that is not a multiple of 16 (the backward pass): the 1- or
-//    2-channel predictions, FR's spatial 7x7 convolution, PoseNet's 12 pose parameters.
+// LibTorch 2.x on the CPU (seen with 2.6 and oneDNN 3.7) gets convolutions wrong whose channel
+// counts are not multiples of 16, oneDNN's block: it leaves the padding of the last block
+// uninitialised (results hold whatever the heap held: wrong values, or NaN), or computes the tail
+// channels wrongly:
+//  - an input of 1 channel (bfloat16), or of more than 16 channels and not a multiple of 16: the
+//    decoders' iconv layers, whose inputs concatenate a 1- or 2-channel prediction (64 + 64 + 1 =
+//    129 channels; float32 outputs 3-16% off, NaN on NaN-filled memory); FR's MLP of hidden width 1;
+//  - an output of a number of channels that is not a multiple of 16: in bfloat16 the output itself
+//    (the 1- and 2-channel disparity and flow predictions 20-100% off), in both types the input's
+//    gradient (FR's spatial 7x7 convolution, PoseNet's 12 pose parameters);
+//  - in bfloat16, an input of 2 to 15 channels whose gradient is needed (a third off).
 // geo's convolutions go through conv2d below, which appends zero channels up to the next multiple of
 // 16 (to the input and the weight's input side; to the weight's and bias's output side, the extra
-// outputs cut off, when a backward pass may follow): the same convolution exactly, off that path.
-// Nothing is appended with LibTorch 1.x or off the CPU. tests/support/poisoned_alloc.cpp finds such
-// reads: every test of the networks runs again with fresh memory filled with NaN.
+// outputs cut off): the same convolution exactly, off those paths. Nothing is appended with
+// LibTorch 1.x or off the CPU. tests/support/poisoned_alloc.cpp finds reads of uninitialised
+// memory: the networks' tests run again with fresh memory filled with NaN.
 torch::Tensor conv2d(const torch::Tensor& x, const torch::Tensor& weight, const torch::Tensor& bias,
                      torch::IntArrayRef stride, torch::IntArrayRef padding);
 // m's convolution of x through conv2d above (stride and pixel padding as m was constructed with).

@@ -1,6 +1,7 @@
 #include "train/distributed.h"
 
 #include <spdlog/spdlog.h>
+#include <torch/version.h>
 
 #include <cerrno>
 #include <chrono>
@@ -141,7 +142,19 @@ class C10dGroup : public ProcessGroup {
     so.waitWorkers = true;
     so.timeout = timeout;
     try {
-      store_ = c10::make_intrusive<c10d::TCPStore>(l.master_addr, so);
+      try {
+        store_ = c10::make_intrusive<c10d::TCPStore>(l.master_addr, so);
+      } catch (const std::exception& e) {
+#if TORCH_VERSION_MAJOR > 2 || (TORCH_VERSION_MAJOR == 2 && TORCH_VERSION_MINOR >= 4)
+        // LibTorch 2.4+ asks for the libuv store by default; builds without libuv (Debian's) refuse
+        // it: the classic store then, as torchrun does with USE_LIBUV=0.
+        if (std::string(e.what()).find("libuv") == std::string::npos) throw;
+        so.useLibUV = false;
+        store_ = c10::make_intrusive<c10d::TCPStore>(l.master_addr, so);
+#else
+        throw;
+#endif
+      }
     } catch (const std::exception& e) {
       throw std::runtime_error(
           l.rank == 0 ? "rank 0 could not open the rendezvous at " + where + " (MASTER_ADDR:MASTER_PORT; port in use?) " +
