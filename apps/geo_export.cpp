@@ -9,19 +9,38 @@
 #include <filesystem>
 
 #include "geo/geo.h"
+#include "pipeline/checkpoint.h"
 
 namespace fs = std::filesystem;
 
 int main(int argc, char** argv) {
   CLI::App app{"geo_export: weights-only model file (for geo::Model, geo_infer) from a geo_train checkpoint"};
   std::string checkpoint, out;
-  bool half = false;
+  bool half = false, force = false;
   app.add_option("--checkpoint", checkpoint, "checkpoint file or run folder (its best checkpoint)")->required();
   app.add_option("--out", out, "model file to write")->required();
+  app.add_flag("--force", force, "replace --out even when it is not a geo_export model file");
   app.add_flag("--half", half, "store the weights as float16 (half the size; computed in float32 when loaded)");
   CLI11_PARSE(app, argc, argv);
   try {
     const geo::Model model = geo::Model::load(checkpoint);
+    // Never replace the input (a run folder's best-<stage>.pt is a hard link to a checkpoint), nor,
+    // unasked, a file that is not a model file (a training checkpoint holds Adam's state and the run's
+    // config, which a model file does not).
+    std::error_code ec;
+    if (fs::exists(out) && fs::equivalent(out, model.spec().source, ec))
+      throw std::runtime_error("--out '" + out + "' is the checkpoint being exported (" + model.spec().source +
+                               "): refusing to replace it");
+    if (fs::exists(out) && !force) {
+      bool model_file = false;
+      try {
+        model_file = geo::CheckpointFile(out).is_model_file();
+      } catch (const std::exception&) {
+      }
+      if (!model_file)
+        throw std::runtime_error("--out '" + out + "' exists and is not a geo_export model file (a training "
+                                 "checkpoint or another file): refusing to replace it; remove it or pass --force");
+    }
     model.save(out, half);
     // Check what was written: the same depth from both on a fixed image.
     const geo::Model back = geo::Model::load(out);

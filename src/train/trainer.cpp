@@ -204,7 +204,6 @@ class Run {
                  s.batch_size, s.learning_rate);
     const auto& log = cfg_.logging;
     int bad_in_row = 0;
-    bool pending_best = false;
     while (state_.iteration < s.iterations) {
       const Batch batch = loader.next();
       const bool async = device_.is_cuda();  // the batch stays alive until the step has read it
@@ -227,16 +226,14 @@ class Run {
       report_step(r, lr.at(state_.iteration - 1));
       const auto due = [&](int64_t every) { return every > 0 && (state_.iteration % every == 0 || state_.iteration == s.iterations); };
       if (writer_ && due(log.summary_interval)) write_summaries(batch, r.out);
-      if (writer_ && due(log.val_interval) && data_.val) pending_best = validate(signals) || pending_best;
+      // A new best is checkpointed at once: best-<stage>.pt holds exactly the weights that earned the score.
+      const bool new_best = writer_ && due(log.val_interval) && data_.val && validate(signals);
       const auto& dist = cfg_.run.distributed;
       if (group_ && dist.verify_interval > 0 && state_.iteration % dist.verify_interval == 0)
         verify_same_weights(*group_, nets_.trainable_parameters(), global_step());
       const int signal = agreed_signal(signals);
       const bool checkpoint = due(log.checkpoint_interval);
-      if (writer_ && (checkpoint || signal)) {
-        save(step, pending_best);
-        pending_best = false;
-      }
+      if (writer_ && (checkpoint || signal || new_best)) save(step, new_best);
       if (signal) {
         spdlog::warn("signal {} received: checkpoint written at stage {} iteration {}; continue with "
                      "geo_train --resume {}", signal, s.name, state_.iteration, dir_);

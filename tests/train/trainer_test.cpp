@@ -133,6 +133,31 @@ TEST(Trainer, FlowOnlyStageKeepsItsOwnBestChosenByTheFlowLoss) {
   EXPECT_FALSE(std::filesystem::exists(ck + "/s1-00000001.pt"));
 }
 
+TEST(Trainer, BestHoldsTheValidatedWeightsWhenTheIntervalsDiffer) {
+  // Validation every 3 iterations, checkpoints every 4: a new best is checkpointed when it is
+  // validated, so best-<stage>.pt is the checkpoint of the iteration with the lowest val.csv score
+  // (not the next regular checkpoint, whose weights were never validated).
+  auto cfg = tiny_config();
+  cfg.stages.resize(1);
+  cfg.stages[0].iterations = 9;
+  cfg.stages[0].learning_rate = 1e-3;
+  cfg.logging.val_interval = 3;
+  cfg.logging.checkpoint_interval = 4;
+  cfg.logging.keep_last = 10;
+  TrainOptions o;
+  o.run_dir = test::fresh_dir("bestintervals") + "/run";
+  ASSERT_EQ(train(cfg, o), 0);
+  const auto scores = val_scores(o.run_dir, "s1");
+  ASSERT_EQ(scores.size(), 3u);  // iterations 3, 6, 9
+  const auto best = std::min_element(scores.begin(), scores.end(), [](auto& a, auto& b) { return a.second < b.second; });
+  const auto b = state_of(o.run_dir + "/checkpoints/best-s1.pt");
+  EXPECT_EQ(b.iteration, best->first);
+  EXPECT_NEAR(b.best_score, best->second, 1e-7);
+  // The regular checkpoints are still written (4, 8) beside the validated ones (3 and any later best).
+  EXPECT_TRUE(std::filesystem::exists(o.run_dir + "/checkpoints/s1-00000004.pt"));
+  EXPECT_TRUE(std::filesystem::exists(o.run_dir + "/checkpoints/s1-00000003.pt"));
+}
+
 TEST(Trainer, TwoStageRunResolvesToTheLastStagesBest) {
   auto cfg = tiny_config();
   cfg.logging.checkpoint_interval = 1;
@@ -324,7 +349,10 @@ TEST(Trainer, ASigtermDuringValidationEndsItAndCheckpointsAtOnce) {
   const auto scores = val_scores(o.run_dir, "s1");
   EXPECT_EQ(scores.size(), 1u);
   EXPECT_EQ(scores.count(1), 1u);
-  EXPECT_EQ(state_of(resolve_checkpoint(o.run_dir)).iteration, 2);
+  // The signal's checkpoint is the latest; the best is iteration 1's, written when it was validated.
+  const std::string ck = o.run_dir + "/checkpoints";
+  EXPECT_EQ(state_of(ck + "/" + latest_checkpoint_name(ck)).iteration, 2);
+  EXPECT_EQ(state_of(resolve_checkpoint(o.run_dir)).iteration, 1);
 }
 
 TEST(Trainer, ASecondWriterOnARunFolderIsRefused) {
