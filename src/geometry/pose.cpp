@@ -2,6 +2,8 @@
 
 #include "core/tensor_checks.h"
 
+#include <cmath>
+
 namespace geo {
 
 torch::Tensor euler_to_rotation(const torch::Tensor& angles) {
@@ -30,7 +32,9 @@ torch::Tensor assemble(const torch::Tensor& R, const torch::Tensor& t) {
 
 torch::Tensor pose_vec_to_matrix(const torch::Tensor& pose_vec) {
   check_shape(pose_vec, "pose_vec", {-1, 6});
-  return assemble(euler_to_rotation(pose_vec.narrow(1, 3, 3)), pose_vec.narrow(1, 0, 3));
+  // GeoNet's euler2mat clips each angle to [-pi, pi] (tf.clip_by_value: no gradient outside).
+  const auto angles = pose_vec.narrow(1, 3, 3).clamp(-M_PI, M_PI);
+  return assemble(euler_to_rotation(angles), pose_vec.narrow(1, 0, 3));
 }
 
 torch::Tensor matrix_to_pose_vec(const torch::Tensor& T) {

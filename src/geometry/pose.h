@@ -13,7 +13,7 @@
 
 namespace geo {
 
-// [B,6] -> [B,4,4].
+// [B,6] -> [B,4,4]; each angle clipped to [-pi, pi] first (GeoNet's euler2mat).
 torch::Tensor pose_vec_to_matrix(const torch::Tensor& pose_vec);
 
 // [B,4,4] -> [B,6] with ry in [-pi/2, pi/2] and rx, rz in (-pi, pi]. Inverse of

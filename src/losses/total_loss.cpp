@@ -143,7 +143,8 @@ RigidTerms rigid_terms(const LossInputs& in, const LossConfig& cfg) {
                     static_cast<double>(int64_t{1} << s);
     smooth = smooth.defined() ? smooth + sm : sm;
   }
-  out.rigid = rigid;
+  // GeoNet's factor num_source / 2 (its L_br is the mean over the sources stacked on the batch, times it).
+  out.rigid = cfg.rigid_source_factor ? rigid * (static_cast<double>(N) / 2.0) : rigid;
   out.disp_smooth = smooth;
   return out;
 }

@@ -45,6 +45,17 @@ TEST(Pose, RotationOrderIsRxRyRz) {
   expect_close(Tt[0][3], torch::tensor({0., 0., 0., 1.}, kDouble), 0);
 }
 
+TEST(Pose, AnglesAreClippedToPlusMinusPiAsGeoNet) {
+  // rx = 4 rad is clipped to pi: the rotation of pi (R = diag(1, -1, -1)), not of 4 rad; the
+  // clipped angle passes no gradient.
+  auto v = vec({0, 0, 0, 4.0, 0, 0}).requires_grad_(true);
+  const auto T = geo::pose_vec_to_matrix(v);
+  expect_close(T[0].narrow(0, 0, 3).narrow(1, 0, 3), torch::diag(torch::tensor({1., -1., -1.}, kDouble)), 1e-12);
+  T.sum().backward();
+  EXPECT_EQ(v.grad()[0][3].item<double>(), 0.0);
+  expect_close(geo::pose_vec_to_matrix(vec({0, 0, 0, 0, -7.0, 0})), geo::pose_vec_to_matrix(vec({0, 0, 0, 0, -M_PI, 0})), 0);
+}
+
 TEST(Pose, InverseAndComposition) {
   torch::manual_seed(4);
   const auto a = geo::pose_vec_to_matrix(torch::rand({5, 6}, kDouble));

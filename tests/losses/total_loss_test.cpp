@@ -75,6 +75,31 @@ TEST(TotalLoss, ImageRangeScalesL1AndTheEdgeWeights) {
   EXPECT_NEAR(geo::rigid_terms(sc.in, geonet).disp_smooth.item<double>(), 0.001 * std::exp(-0.08), 1e-12);
 }
 
+TEST(TotalLoss, RigidLossCarriesGeoNetsSourceFactor) {
+  // GeoNet: L_br x num_source / 2. The same source four times (a 5-frame snippet) has the mean
+  // over sources of one source; GeoNet's factor doubles it, 2 sources (3 frames) leave it as is.
+  auto one = shifted_plane(2, 0.5).in;
+  geo::LossConfig off, geonet;
+  off.rigid_source_factor = false;
+  EXPECT_TRUE(geonet.rigid_source_factor);  // the default
+  const double single = geo::rigid_terms(one, off).rigid.item<double>();
+  EXPECT_GT(single, 0.01);
+  auto sources = [&](int n) {
+    auto in = one;
+    in.srcs.assign(n, one.srcs[0]);
+    in.src_disp.assign(n, one.src_disp[0]);
+    in.poses = one.poses.repeat({1, n, 1});
+    return in;
+  };
+  EXPECT_NEAR(geo::rigid_terms(sources(4), off).rigid.item<double>(), single, 1e-12);
+  EXPECT_NEAR(geo::rigid_terms(sources(4), geonet).rigid.item<double>(), 2 * single, 1e-12);
+  EXPECT_NEAR(geo::rigid_terms(sources(2), geonet).rigid.item<double>(), single, 1e-12);
+  EXPECT_NEAR(geo::rigid_terms(sources(1), geonet).rigid.item<double>(), 0.5 * single, 1e-12);
+  // The smoothness term has no such factor.
+  EXPECT_NEAR(geo::rigid_terms(sources(4), geonet).disp_smooth.item<double>(),
+              geo::rigid_terms(sources(4), off).disp_smooth.item<double>(), 1e-15);
+}
+
 TEST(TotalLoss, FlowReconstructionMaskIsEq13OrGeoNetsConsistencyMask) {
   // Forward flow u = 1; the backward flow disagrees by 2.5 px on a 2x2 block. Eq. 13 calls those
   // pixels occluded (6.25 > 0.01 (1 + 2.25) + 0.5), GeoNet's consistency bound max(3, 0.05) keeps
