@@ -80,6 +80,13 @@ class Model {
   // instead of (from, from, to).
   torch::Tensor flow(const torch::Tensor& from, const torch::Tensor& to, const torch::Tensor& intrinsics = {},
                      const torch::Tensor& previous = {}) const;
+  // flow() with, beside it, the rigid flow of depth and motion alone (no FlowNet residual): what
+  // each of the paper's two stages contributes. Same shapes; equal when the model has no FlowNet.
+  struct FlowParts {
+    torch::Tensor full, rigid;
+  };
+  FlowParts flow_parts(const torch::Tensor& from, const torch::Tensor& to, const torch::Tensor& intrinsics = {},
+                       const torch::Tensor& previous = {}) const;
 
   // Writes the weights only (no optimiser, no training config) with the spec: geo_export.
   // `half`: weights stored as float16 (half the size; loaded back as float32).

@@ -23,6 +23,7 @@ struct Model::Impl {
   Networks nets;  // and their NetworkSpec
   torch::Device device = torch::kCPU;
   ModelSpec spec;
+  std::optional<Config> training_config;  // a training checkpoint's config (none for model files)
 };
 
 namespace {
@@ -155,6 +156,8 @@ Model ModelAccess::untrained(const NetworkSpec& spec, const std::string& name, c
   });
 }
 
+const std::optional<Config>& ModelAccess::training_config(const Model& model) { return model.impl_->training_config; }
+
 Model Model::load(const std::string& path, const LoadOptions& options) {
   return guarded("loading geo model '" + path + "'", [&] {
     const std::string file = fs::is_directory(path) ? resolve_checkpoint(path) : path;
@@ -164,6 +167,7 @@ Model Model::load(const std::string& path, const LoadOptions& options) {
     checkpoint.load_networks(impl->nets, false);
     if (options.threads > 0) torch::set_num_threads(options.threads);
     make_ready(*impl, options.device, options.precision, checkpoint.has_flow(), file);
+    impl->training_config = checkpoint.config();
     return Model(impl);
   });
 }
@@ -218,6 +222,11 @@ torch::Tensor Model::relative_pose(const torch::Tensor& from, const torch::Tenso
 
 torch::Tensor Model::flow(const torch::Tensor& from, const torch::Tensor& to, const torch::Tensor& intrinsics,
                           const torch::Tensor& previous) const {
+  return flow_parts(from, to, intrinsics, previous).full;
+}
+
+Model::FlowParts Model::flow_parts(const torch::Tensor& from, const torch::Tensor& to, const torch::Tensor& intrinsics,
+                                   const torch::Tensor& previous) const {
   return guarded("geo::Model::flow", [&] {
     torch::InferenceMode guard;
     int64_t H = 0, W = 0, H2 = 0, W2 = 0;
@@ -233,13 +242,16 @@ torch::Tensor Model::flow(const torch::Tensor& from, const torch::Tensor& to, co
       bool batched3 = false;
       prev = prepare(*impl_, previous, &H3, &W3, &batched3, "flow (previous)");
     }
-    auto f = predict_pair(impl_->nets, a, b, K, prev).flow;  // [B,2,h,w]
-    if (f.size(2) != H || f.size(3) != W) {
-      f = to_size(f, H, W);
-      f.select(1, 0).mul_(static_cast<double>(W) / static_cast<double>(impl_->spec.width));
-      f.select(1, 1).mul_(static_cast<double>(H) / static_cast<double>(impl_->spec.height));
-    }
-    return batched ? f : f[0];
+    const auto p = predict_pair(impl_->nets, a, b, K, prev);
+    auto at_image_size = [&](torch::Tensor f) {  // [B,2,h,w] network pixels -> the images' pixels
+      if (f.size(2) != H || f.size(3) != W) {
+        f = to_size(f, H, W);
+        f.select(1, 0).mul_(static_cast<double>(W) / static_cast<double>(impl_->spec.width));
+        f.select(1, 1).mul_(static_cast<double>(H) / static_cast<double>(impl_->spec.height));
+      }
+      return batched ? f : f[0];
+    };
+    return FlowParts{at_image_size(p.flow), at_image_size(p.rigid_flow)};
   });
 }
 

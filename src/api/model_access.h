@@ -5,6 +5,7 @@
 #include "geo/geo.h"
 #include "pipeline/networks.h"
 
+#include <optional>
 #include <string>
 
 namespace geo {
@@ -14,6 +15,8 @@ struct ModelAccess {
   // `name` becomes ModelSpec::source. `precision` as LoadOptions::precision.
   static Model untrained(const NetworkSpec& spec, const std::string& name, const std::string& device,
                          const std::string& precision = "fp32");
+  // The config a training checkpoint carries (nullopt for geo_export's model files and untrained models).
+  static const std::optional<Config>& training_config(const Model& model);
 };
 
 }  // namespace geo

@@ -75,6 +75,10 @@ struct ModelConfig {
   double bn_eps = 1e-3;              // GeoNet (slim); LibTorch: 1e-5
   double bn_momentum = 0.001;        // GeoNet (slim decay 0.999); LibTorch: 0.1
   bool bn_scale = false;             // learn gamma: GeoNet false (slim scale=False); LibTorch true
+  // The FlowNet's prediction convs start at zero, so stage 2 starts from stage 1's flow (the full
+  // flow is the rigid flow until the residual learns); GeoNet: Xavier, a random residual of a few
+  // pixels that stage 2 first has to unlearn (docs/geonet_fidelity.md).
+  bool flow_zero_init = false;
 
   template <class V> void fields(V& v) {
     v("encoder_depth", encoder_depth);
@@ -88,6 +92,7 @@ struct ModelConfig {
     v("bn_eps", bn_eps);
     v("bn_momentum", bn_momentum);
     v("bn_scale", bn_scale);
+    v("flow_zero_init", flow_zero_init);
   }
   void validate(Checker& c) const;
 };
@@ -188,6 +193,9 @@ struct LossConfig {
   FlowMask flow_mask = FlowMask::kOcclusion;
   bool min_reprojection = false;     // per-pixel minimum over sources (monodepth2; off)
   bool automask = false;             // auto-mask static pixels (monodepth2; off)
+  // GeoNet's L_br carries a factor num_source / 2 (geonet_model.py: build_losses): 1 for 3-frame
+  // snippets, 2 for the 5-frame odometry snippets, where it weighs L_br twice against L_ds.
+  bool rigid_source_factor = true;
 
   template <class V> void fields(V& v) {
     v("ssim_alpha", ssim_alpha);
@@ -202,6 +210,7 @@ struct LossConfig {
     v("flow_mask", flow_mask);
     v("min_reprojection", min_reprojection);
     v("automask", automask);
+    v("rigid_source_factor", rigid_source_factor);
   }
   void validate(Checker& c) const;
 };

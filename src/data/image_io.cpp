@@ -171,6 +171,27 @@ void write_depth_png(const std::string& path, const torch::Tensor& depth) {
   write_raw(path, m16);
 }
 
+torch::Tensor read_object_map(const std::string& path) {
+  cv::Mat m = read_raw(path, cv::IMREAD_UNCHANGED);
+  if (m.depth() != CV_8U || m.channels() != 1)
+    throw std::runtime_error("object map '" + path + "' must be 8-bit single-channel (KITTI obj_map), got " +
+                             std::to_string(m.channels()) + " channel(s) of " + pixel_depth_name(m.depth()));
+  return torch::from_blob(m.data, {m.rows, m.cols}, torch::kUInt8).clone();
+}
+
+void write_object_map(const std::string& path, const torch::Tensor& objects) {
+  auto o = objects.detach().to(torch::kCPU);
+  if (o.dim() == 3 && o.size(0) == 1) o = o.squeeze(0);
+  check_shape(o, "object map", {-1, -1});
+  const double lo = o.min().item<double>(), hi = o.max().item<double>();
+  if (lo < 0 || hi > 255)
+    throw std::runtime_error("object map '" + path + "': values must lie in 0..255, got " + std::to_string(lo) +
+                             ".." + std::to_string(hi));
+  o = o.to(torch::kUInt8).contiguous();
+  const cv::Mat m(static_cast<int>(o.size(0)), static_cast<int>(o.size(1)), CV_8UC1, o.data_ptr<uint8_t>());
+  write_raw(path, m);
+}
+
 torch::Tensor colorize_disparity(const torch::Tensor& disp) {
   auto d = disp.detach().to(torch::kCPU, torch::kFloat32).reshape({disp.size(-2), disp.size(-1)});
   const float hi = std::max(d.max().item<float>(), 1e-6f);

@@ -37,6 +37,12 @@ torch::Tensor read_depth_png(const std::string& path);
 // depth [1,H,W] or [H,W] in metres (0 = invalid; values above 255.99 are clamped).
 void write_depth_png(const std::string& path, const torch::Tensor& depth);
 
+// KITTI 2015 object map (obj_map/%06d_10.png): 8-bit grey, 0 = background, k > 0 = the k-th moving
+// object (the devkit's foreground). Read as [H,W] uint8; written from any integer or float [H,W]
+// (or [1,H,W]) with values in 0..255.
+torch::Tensor read_object_map(const std::string& path);
+void write_object_map(const std::string& path, const torch::Tensor& objects);
+
 // 8-bit BGR visualisations written as PNG: disparity through a colour map, flow through the
 // Middlebury colour wheel (max_flow <= 0: the image's own maximum).
 torch::Tensor colorize_disparity(const torch::Tensor& disp);  // [1,H,W] -> [3,H,W] in [0,1]

@@ -19,6 +19,11 @@ std::string SplitEntry::drive() const {
   return slash == std::string::npos ? folder : folder.substr(slash + 1);
 }
 
+std::string SplitEntry::scene() const {
+  const std::string d = drive();
+  return d.substr(0, d.rfind("_sync"));
+}
+
 std::string SplitEntry::image_path(const std::string& root, int64_t offset) const {
   char name[32];
   std::snprintf(name, sizeof name, "%010lld.png", static_cast<long long>(frame + offset));
@@ -108,8 +113,7 @@ size_t exclude_entries(std::vector<SplitEntry>& entries, const std::set<std::str
   entries.erase(std::remove_if(entries.begin(), entries.end(),
                                [&](const SplitEntry& e) {
                                  const std::string drive = e.drive();
-                                 const std::string scene = drive.substr(0, drive.rfind("_sync"));
-                                 return test_scenes.count(scene) > 0 ||
+                                 return test_scenes.count(e.scene()) > 0 ||
                                         static_frames.count(static_key(drive, e.frame)) > 0;
                                }),
                 entries.end());

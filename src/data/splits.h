@@ -20,6 +20,7 @@ struct SplitEntry {
   int camera() const { return side == 'r' ? 3 : 2; }
   std::string date() const;   // first path component of folder ("2011_09_26")
   std::string drive() const;  // last path component of folder ("2011_09_26_drive_0022_sync")
+  std::string scene() const;  // drive() without "_sync" ("2011_09_26_drive_0022", as scene lists name it)
   // <root>/<folder>/image_0c/data/%010d.png for frame + offset.
   std::string image_path(const std::string& root, int64_t offset = 0) const;
 };

@@ -318,6 +318,14 @@ SynthFrame render_frame(const SynthScene& scene, int64_t frame, const SynthOptio
   return out;
 }
 
+torch::Tensor synth_object_map(const SynthScene& scene, const torch::Tensor& object) {
+  auto map = torch::zeros(object.sizes(), torch::kUInt8);
+  int k = 0;
+  for (int id = 0; id < static_cast<int>(scene.boxes().size()); ++id)
+    if (scene.is_moving(id)) map.masked_fill_(object == id, std::min(++k, 255));
+  return map;
+}
+
 SynthFlow render_flow(const SynthScene& scene, int64_t frame, const SynthOptions& o) {
   const int64_t H = o.height, W = o.width;
   const auto& k = o.intrinsics;

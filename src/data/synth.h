@@ -96,6 +96,9 @@ struct SynthFrame {
   RigidPose pose;       // camera-to-world
 };
 SynthFrame render_frame(const SynthScene& scene, int64_t frame, const SynthOptions& options);
+// KITTI 2015's obj_map of a frame: 0 = static scene (ground, buildings, poles, boxes, sky),
+// k = the k-th moving car of the scene (1-based, in box order) -> [H,W] uint8.
+torch::Tensor synth_object_map(const SynthScene& scene, const torch::Tensor& object);
 
 struct SynthFlow {
   torch::Tensor flow;       // [2,H,W] float32 from `frame` to `frame + 1`, pixels

@@ -70,7 +70,7 @@ std::string join_lines(const std::vector<std::string>& lines) {
 void write_synth_world(const std::string& root, const SynthOptions& o,
                        const std::function<void(int64_t, int64_t, const std::string&)>& progress) {
   const int drives = o.train_drives + o.test_drives;
-  const int64_t total = drives * o.frames_per_drive + 2 * o.flow_pairs + o.odometry_frames;
+  const int64_t total = drives * o.frames_per_drive + 3 * o.flow_pairs + o.odometry_frames;
   int64_t done = 0;
   auto tick = [&](const std::string& what) {
     ++done;
@@ -111,21 +111,25 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
   write_file_atomic(raw + "/splits/eigen/test_scenes.txt", join_lines(test_scenes));
 
   const std::string flow = root + "/kitti2015/training";
-  for (const char* sub : {"/image_2", "/flow_occ", "/flow_noc", "/calib_cam_to_cam", "/depth"})
+  for (const char* sub : {"/image_2", "/flow_occ", "/flow_noc", "/obj_map", "/calib_cam_to_cam", "/depth"})
     fs::create_directories(flow + sub);
   for (int i = 0; i < o.flow_pairs; ++i) {
     const SynthScene scene(synth_drive_seed(o.seed, 1, i), 40);
     const int64_t f = 5 + (i * 7) % 30;
     const std::string name = numbered("%06lld", i);
+    const auto before = render_frame(scene, f - 1, o);  // KITTI 2015's multi-view frame 09
+    tick("flow pair");
     const auto a = render_frame(scene, f, o);
     tick("flow pair");
     const auto b = render_frame(scene, f + 1, o);
     tick("flow pair");
     const auto gt = render_flow(scene, f, o);
+    write_image(flow + "/image_2/" + name + "_09.png", before.image);
     write_image(flow + "/image_2/" + name + "_10.png", a.image);
     write_image(flow + "/image_2/" + name + "_11.png", b.image);
     write_flow_png(flow + "/flow_occ/" + name + "_10.png", gt.flow, gt.valid_occ);
     write_flow_png(flow + "/flow_noc/" + name + "_10.png", gt.flow, gt.valid_noc);
+    write_object_map(flow + "/obj_map/" + name + "_10.png", synth_object_map(scene, a.object));
     write_depth_png(flow + "/depth/" + name + "_10.png", a.depth);
     write_file_atomic(flow + "/calib_cam_to_cam/" + name + ".txt", cam_to_cam_text(o));
   }
@@ -153,7 +157,7 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
                     "Synthetic KITTI-format world written by geo_synth (preset " + o.preset +
                         ", seed " + std::to_string(o.seed) + ", " + std::to_string(o.width) + "x" +
                         std::to_string(o.height) + ").\nraw/ = KITTI raw layout with Eigen-style "
-                        "splits in raw/splits; kitti2015/ = KITTI 2015 flow layout; odometry/ = "
+                        "splits in raw/splits; kitti2015/ = KITTI 2015 flow layout (obj_map: the moving cars); odometry/ = "
                         "KITTI odometry layout.\nDense ground-truth depth: raw/<drive>/proj_depth/"
                         "groundtruth/image_02 and kitti2015/training/depth (uint16, depth x 256).\n");
 }

@@ -27,6 +27,13 @@ DepthErrors depth_errors(const torch::Tensor& gt_in, const torch::Tensor& pred_i
   return e;
 }
 
+double numpy_median(const torch::Tensor& values) {
+  const auto v = std::get<0>(values.reshape({-1}).to(torch::kFloat64).sort());
+  const int64_t n = v.numel();
+  TORCH_CHECK(n > 0, "the median of no values");
+  return n % 2 ? v[n / 2].item<double>() : 0.5 * (v[n / 2 - 1].item<double>() + v[n / 2].item<double>());
+}
+
 DepthErrors eigen_image_errors(const torch::Tensor& gt_in, const torch::Tensor& pred_in,
                                const EigenOptions& o, double* scale) {
   check_shape(gt_in, "ground-truth depth", {-1, -1});
@@ -51,7 +58,7 @@ DepthErrors eigen_image_errors(const torch::Tensor& gt_in, const torch::Tensor& 
   auto g = gt.masked_select(mask), p = pred.masked_select(mask);
   if (g.numel() == 0) return {};
   double s = 1.0;
-  if (o.median_scaling) s = g.median().item<double>() / p.median().item<double>();
+  if (o.median_scaling) s = numpy_median(g) / numpy_median(p);
   if (scale) *scale = s;
   return depth_errors(g, (p * s).clamp(o.min_depth, o.max_depth));
 }
@@ -69,19 +76,36 @@ torch::Tensor resize_flow(const torch::Tensor& flow, int64_t H, int64_t W, FlowR
   return r * factor;
 }
 
-FlowErrors flow_errors(const torch::Tensor& gt, const torch::Tensor& valid_in, const torch::Tensor& pred_in,
-                       FlowResize resize) {
+FlowErrorSums& FlowErrorSums::operator+=(const FlowErrorSums& other) {
+  epe_sum += other.epe_sum;
+  outliers += other.outliers;
+  pixels += other.pixels;
+  return *this;
+}
+
+FlowErrorSums flow_error_sums(const torch::Tensor& gt, const torch::Tensor& mask_in, const torch::Tensor& pred) {
   check_shape(gt, "ground-truth flow", {2, -1, -1});
-  const auto pred = resize_flow(pred_in, gt.size(1), gt.size(2), resize).to(torch::kFloat64);
-  const auto valid = valid_in.reshape({gt.size(1), gt.size(2)}) > 0.5;
+  check_shape(pred, "predicted flow", {2, gt.size(1), gt.size(2)});
+  const auto mask = mask_in.reshape({gt.size(1), gt.size(2)}).to(torch::kFloat32) > 0.5;
   const auto g = gt.to(torch::kFloat64);
-  const auto epe = (pred - g).pow(2).sum(0).sqrt().masked_select(valid);
-  const auto mag = g.pow(2).sum(0).sqrt().masked_select(valid);
-  FlowErrors e;
+  const auto epe = (pred.to(torch::kFloat64) - g).pow(2).sum(0).sqrt().masked_select(mask);
+  const auto mag = g.pow(2).sum(0).sqrt().masked_select(mask);
+  FlowErrorSums e;
   e.pixels = epe.numel();
   if (e.pixels == 0) return e;
-  e.epe = epe.mean().item<double>();
-  e.fl = ((epe > 3.0) & (epe > 0.05 * mag)).to(torch::kFloat64).mean().item<double>();
+  e.epe_sum = epe.sum().item<double>();
+  e.outliers = ((epe > 3.0) & (epe > 0.05 * mag)).sum().item<int64_t>();
+  return e;
+}
+
+FlowErrors flow_errors(const torch::Tensor& gt, const torch::Tensor& valid, const torch::Tensor& pred,
+                       FlowResize resize) {
+  check_shape(gt, "ground-truth flow", {2, -1, -1});
+  const auto sums = flow_error_sums(gt, valid, resize_flow(pred, gt.size(1), gt.size(2), resize));
+  FlowErrors e;
+  e.pixels = sums.pixels;
+  e.epe = sums.epe();
+  e.fl = sums.fl();
   return e;
 }
 

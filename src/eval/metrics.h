@@ -17,10 +17,14 @@ struct DepthErrors {
 // Errors over paired valid depths (1-D tensors of equal length, metres, > 0).
 DepthErrors depth_errors(const torch::Tensor& gt, const torch::Tensor& pred);
 
+// numpy's median (GeoNet's kitti_eval): the mean of the two middle values for an even count
+// (torch::median returns the lower one).
+double numpy_median(const torch::Tensor& values);
+
 struct EigenOptions {
   double min_depth = 1e-3, max_depth = 80;  // mask and clamp (Eigen et al. 2014 as in GeoNet's kitti_eval)
   bool garg_crop = true;                    // rows [0.408 H, 0.992 H), columns [0.036 W, 0.964 W)
-  bool median_scaling = true;               // monocular: scale by median(gt)/median(pred)
+  bool median_scaling = true;               // monocular: scale by median(gt)/median(pred), numpy's median
 };
 
 // One image of the Eigen protocol: pred depth [h,w] (any size; resized bilinearly to the ground
@@ -37,6 +41,19 @@ struct FlowErrors {
 // How a predicted flow is resized to the ground truth: nearest (GeoNet's flowlib, cv2 INTER_NEAREST:
 // source pixel floor(x * w / W)) or bilinear.
 enum class FlowResize { kNearest, kBilinear };
+
+// Flow errors summed over pixels, for errors pooled over a set of pairs (KITTI's devkit pools
+// Fl-bg / Fl-fg over all pixels of the dataset).
+struct FlowErrorSums {
+  double epe_sum = 0;
+  int64_t outliers = 0;  // EPE > 3 px and > 5% of |gt|
+  int64_t pixels = 0;
+  FlowErrorSums& operator+=(const FlowErrorSums& other);
+  double epe() const { return pixels ? epe_sum / static_cast<double>(pixels) : 0.0; }
+  double fl() const { return pixels ? static_cast<double>(outliers) / static_cast<double>(pixels) : 0.0; }
+};
+// gt and pred [2,H,W] of the same size (see resize_flow), mask [H,W] (or [1,H,W]) boolean or {0,1}.
+FlowErrorSums flow_error_sums(const torch::Tensor& gt, const torch::Tensor& mask, const torch::Tensor& pred);
 
 // pred [2,h,w] (resized to the ground truth with u, v scaled), gt [2,H,W], valid [1,H,W] or [H,W].
 FlowErrors flow_errors(const torch::Tensor& gt, const torch::Tensor& valid, const torch::Tensor& pred,

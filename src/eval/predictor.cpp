@@ -22,6 +22,8 @@ Predictor::Predictor(const Config& config, const std::string& device)
   model_ = ModelAccess::untrained(NetworkSpec::of(config), path_, device.empty() ? "auto" : device);
 }
 
+const std::optional<Config>& Predictor::training_config() const { return ModelAccess::training_config(*model_); }
+
 torch::Tensor Predictor::depth(const torch::Tensor& image) { return model_->depth(image).unsqueeze(1); }
 
 torch::Tensor Predictor::pose(const torch::Tensor& tgt, const std::vector<torch::Tensor>& srcs) {
@@ -32,9 +34,9 @@ torch::Tensor Predictor::pose(const torch::Tensor& tgt, const std::vector<torch:
   return model_->pose(frames);  // [B,N,4,4]
 }
 
-torch::Tensor Predictor::flow(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& K,
+Model::FlowParts Predictor::flow(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& K,
                               const torch::Tensor& prev) {
-  return model_->flow(tgt, src, K, prev);
+  return model_->flow_parts(tgt, src, K, prev);
 }
 
 

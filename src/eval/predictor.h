@@ -24,6 +24,9 @@ class Predictor {
   int64_t width() const { return model_->spec().width; }
   bool has_flow() const { return model_->spec().has_flow; }
   torch::Device device() const { return model_->device(); }
+  // The config a training checkpoint carries: what the model was trained on. nullopt for model
+  // files (geo_export) and untrained models.
+  const std::optional<Config>& training_config() const;
 
   // image [B,3,H,W] -> depth [B,1,H,W] in the network's (unknown) scale: 1 / disparity.
   torch::Tensor depth(const torch::Tensor& image);
@@ -33,8 +36,9 @@ class Predictor {
   // residual (rigid flow alone when the checkpoint has no FlowNet). The PoseNet sees the snippet
   // (tgt, tgt, src) for a 3-frame model: zero motion before the target, the pair after it.
   // `prev` (optional, [B,3,H,W]): the frame before tgt, for the PoseNet's snippet (prev, tgt, src).
-  torch::Tensor flow(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& K,
-                     const torch::Tensor& prev = {});
+  // `.rigid`: the rigid flow alone (equal to `.full` without a FlowNet).
+  Model::FlowParts flow(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& K,
+                        const torch::Tensor& prev = {});
 
  private:
   std::string path_;

@@ -1,10 +1,12 @@
 #include "eval/protocols.h"
 
+#include "core/logging.h"
 #include "core/progress.h"
 #include "data/calib.h"
 #include "data/image_io.h"
 #include "data/splits.h"
 #include "data/text_io.h"
+#include "data/training_lists.h"
 #include "data/velodyne_depth.h"
 #include "eval/metrics.h"
 #include "geometry/pose.h"
@@ -17,6 +19,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <limits>
+#include <set>
 #include <sstream>
 
 namespace fs = std::filesystem;
@@ -136,6 +139,9 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
     return r;
   }
   if (images == 0) throw std::runtime_error("no test image had valid ground-truth pixels");
+  std::set<std::string> drives;
+  for (const auto& e : entries) drives.insert(e.scene());
+  r.test_drives.assign(drives.begin(), drives.end());
   const char* names[7] = {"abs_rel", "sq_rel", "rmse", "rmse_log", "a1", "a2", "a3"};
   for (int k = 0; k < 7; ++k) r.metrics.emplace_back(names[k], sums[k] / static_cast<double>(images));
   r.counts = {{"images", images}, {"pixels", pixels}, {"listed", static_cast<int64_t>(entries.size())},
@@ -143,6 +149,40 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
               {"velodyne_points_non_finite", non_finite_points}};
   return r;
 }
+
+// One flow's scores over the pairs: EPE and Fl on flow_occ ("all") and flow_noc averaged over the
+// pairs (GeoNet's protocol), and on flow_occ's background and foreground pixels (obj_map = 0 / > 0)
+// pooled over the pixels of all pairs (KITTI's devkit, Fl-bg / Fl-fg).
+struct FlowScores {
+  double epe_occ = 0, epe_noc = 0, fl_occ = 0, fl_noc = 0;
+  FlowErrorSums bg, fg;
+  bool with_objects = false;
+
+  // flow: at the ground truth's size; foreground: [H,W] bool or undefined (no object map).
+  void add(const FlowMap& occ, const FlowMap& noc, const torch::Tensor& foreground, const torch::Tensor& flow) {
+    const auto o = flow_error_sums(occ.flow, occ.valid, flow), n = flow_error_sums(noc.flow, noc.valid, flow);
+    epe_occ += o.epe();
+    fl_occ += o.fl();
+    epe_noc += n.epe();
+    fl_noc += n.fl();
+    if (!foreground.defined()) return;
+    with_objects = true;
+    const auto valid = occ.valid[0] > 0.5;
+    bg += flow_error_sums(occ.flow, valid & ~foreground, flow);
+    fg += flow_error_sums(occ.flow, valid & foreground, flow);
+  }
+  void put(EvalResult& r, const std::string& prefix, int64_t pairs) const {
+    const double n = static_cast<double>(pairs);
+    r.metrics.insert(r.metrics.end(), {{prefix + "epe_all", epe_occ / n}, {prefix + "epe_noc", epe_noc / n},
+                                       {prefix + "fl_all", fl_occ / n}, {prefix + "fl_noc", fl_noc / n}});
+    if (!with_objects) return;
+    const double none = std::numeric_limits<double>::quiet_NaN();  // no such pixel: null in the JSON
+    r.metrics.insert(r.metrics.end(), {{prefix + "epe_bg", bg.pixels ? bg.epe() : none},
+                                       {prefix + "epe_fg", fg.pixels ? fg.epe() : none},
+                                       {prefix + "fl_bg", bg.pixels ? bg.fl() : none},
+                                       {prefix + "fl_fg", fg.pixels ? fg.fl() : none}});
+  }
+};
 
 torch::Tensor flow_calib_K(const std::string& root, const std::string& name) {
   for (const auto& dir : {root + "/training/calib_cam_to_cam", root + "/../data_scene_flow_calib/training/calib_cam_to_cam"}) {
@@ -172,19 +212,21 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
     std::sort(names.begin(), names.end());
   }
   if (names.empty()) throw std::runtime_error("no flow pairs to evaluate under " + root);
-  double epe_noc = 0, epe_occ = 0, fl_noc = 0, fl_occ = 0;
-  int64_t px_noc = 0, px_occ = 0, with_previous = 0;
+  FlowScores full, rigid;
+  int64_t with_previous = 0, with_objects = 0, px_occ = 0, px_noc = 0;
   std::vector<std::string> without_gt;  // pairs whose flow_occ or flow_noc has no valid pixel
   int64_t predictions_resized = 0;      // --predictions files whose size differs from the ground truth
   std::string resized;                  // the first of them
+  const bool split_stages = pred && pred->has_flow();  // rigid flow apart from the full flow
   Progress progress("kitti2015", static_cast<int64_t>(names.size()), 0, "pairs");
   for (size_t i = 0; i < names.size(); ++i) {
     const std::string t = root + "/training/image_2/" + names[i] + "_10.png";
     const std::string s = root + "/training/image_2/" + names[i] + "_11.png";
     const std::string gocc = root + "/training/flow_occ/" + names[i] + "_10.png";
     const std::string gnoc = root + "/training/flow_noc/" + names[i] + "_10.png";
+    const std::string objects = root + "/training/obj_map/" + names[i] + "_10.png";
     for (const auto* p : {&t, &s, &gocc, &gnoc}) require_file(*p, "pair " + names[i]);
-    torch::Tensor flow;
+    torch::Tensor flow, rigid_flow;
     if (pred) {
       int64_t H = 0, W = 0;
       const auto a = net_input(t, *pred, &H, &W), b = net_input(s, *pred);
@@ -199,7 +241,9 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
         prev = net_input(prev_path, *pred);
         ++with_previous;
       }
-      flow = pred->flow(a, b, K.to(torch::kFloat32).unsqueeze(0), prev)[0].cpu();
+      const auto parts = pred->flow(a, b, K.to(torch::kFloat32).unsqueeze(0), prev);
+      flow = parts.full[0].cpu();
+      rigid_flow = parts.rigid[0].cpu();
     } else if (o.trivial) {
       flow = torch::zeros({2, 1, 1});
     } else {
@@ -217,19 +261,29 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
                   std::to_string(occ.flow.size(1)) + "x" + std::to_string(occ.flow.size(2)) + ")";
       ++predictions_resized;
     }
-    const auto eo = flow_errors(occ.flow, occ.valid, flow, o.flow_resize);
-    const auto en = flow_errors(noc.flow, noc.valid, flow, o.flow_resize);
-    if (eo.pixels == 0 || en.pixels == 0) {  // an all-invalid ground truth would count as EPE 0
+    const int64_t n_occ = (occ.valid > 0.5).sum().item<int64_t>(), n_noc = (noc.valid > 0.5).sum().item<int64_t>();
+    if (n_occ == 0 || n_noc == 0) {  // an all-invalid ground truth would count as EPE 0
       without_gt.push_back(names[i]);
       progress.update(static_cast<int64_t>(i + 1));
       continue;
     }
-    epe_occ += eo.epe;
-    fl_occ += eo.fl;
-    epe_noc += en.epe;
-    fl_noc += en.fl;
-    px_occ += eo.pixels;
-    px_noc += en.pixels;
+    torch::Tensor foreground;  // [H,W] bool: KITTI 2015's obj_map > 0
+    if (fs::exists(objects)) {
+      foreground = read_object_map(objects) > 0;
+      if (foreground.size(0) != occ.flow.size(1) || foreground.size(1) != occ.flow.size(2))
+        throw std::runtime_error("object map '" + objects + "' is " + std::to_string(foreground.size(0)) + "x" +
+                                 std::to_string(foreground.size(1)) + ", its flow ground truth " +
+                                 std::to_string(occ.flow.size(1)) + "x" + std::to_string(occ.flow.size(2)));
+      ++with_objects;
+    }
+    const int64_t H = occ.flow.size(1), W = occ.flow.size(2);
+    full.add(occ, noc, foreground, resize_flow(flow, H, W, o.flow_resize));
+    if (split_stages) {
+      require_finite(rigid_flow, "the rigid flow prediction for pair " + names[i]);
+      rigid.add(occ, noc, foreground, resize_flow(rigid_flow, H, W, o.flow_resize));
+    }
+    px_occ += n_occ;
+    px_noc += n_noc;
     progress.update(static_cast<int64_t>(i + 1));
   }
   const int64_t scored = static_cast<int64_t>(names.size() - without_gt.size());
@@ -241,11 +295,17 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
     spdlog::warn("{} of {} flow predictions differ in size from their ground truth and were resized ({}, vectors "
                  "scaled); first: {}", predictions_resized, names.size(),
                  o.flow_resize == FlowResize::kNearest ? "nearest" : "bilinear", resized);
-  const double n = static_cast<double>(scored);
+  if (with_objects > 0 && with_objects < scored)
+    spdlog::warn("{} of {} pairs have no object map (training/obj_map/<pair>_10.png): background and foreground "
+                 "errors are over the other {} only", scored - with_objects, scored, with_objects);
   EvalResult r;
-  r.metrics = {{"epe_all", epe_occ / n}, {"epe_noc", epe_noc / n}, {"fl_all", fl_occ / n}, {"fl_noc", fl_noc / n}};
+  full.put(r, "", scored);
+  if (split_stages) rigid.put(r, "rigid_", scored);
   r.counts = {{"pairs", scored}, {"pixels_all", px_occ}, {"pixels_noc", px_noc},
-              {"pairs_without_ground_truth", static_cast<int64_t>(without_gt.size())}};
+              {"pairs_without_ground_truth", static_cast<int64_t>(without_gt.size())},
+              {"pairs_with_object_map", with_objects}};
+  if (with_objects > 0)
+    r.counts.insert(r.counts.end(), {{"pixels_bg", full.bg.pixels}, {"pixels_fg", full.fg.pixels}});
   if (!pred && !o.trivial) r.counts.emplace_back("predictions_resized", predictions_resized);
   if (pred) {
     r.counts.emplace_back("pairs_with_frame_09", with_previous);
@@ -337,6 +397,40 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
   return r;
 }
 
+
+// A geo_synth world (its README.txt at `data_root` or above `root`): its kitti2015/ and odometry/
+// scenes are rendered for them alone, none of them a raw drive.
+bool is_synth_world(const std::string& data_root, const std::string& root) {
+  for (const auto& dir : {data_root, root + "/.."}) {
+    const std::string readme = dir + "/README.txt";
+    if (fs::exists(readme) && read_text_file(readme).rfind("Synthetic KITTI-format world written by geo_synth", 0) == 0)
+      return true;
+  }
+  return false;
+}
+
+// Which test drives the model trained on: warned about and recorded in the result.
+void check_training_drives(EvalResult& r, const Predictor& pred) {
+  const auto& config = pred.training_config();
+  if (!config) {
+    r.training_drives_unknown = "the model carries no training config (a geo_export model file or an untrained model)";
+    return;
+  }
+  const auto trained = training_drives(config->data);
+  if (!trained.unknown.empty()) {
+    r.training_drives_unknown = trained.unknown;
+    spdlog::warn("cannot tell whether the model trained on test drives: {}", trained.unknown);
+    return;
+  }
+  for (const auto& d : r.test_drives)
+    if (trained.drives.count(d)) r.test_drives_in_training.push_back(d);
+  if (r.test_drives_in_training.empty()) return;
+  spdlog::warn("the model's training data (data.split {}) holds {} of the {} drives of this test set: {}. These "
+               "results are measured on training drives; train on data disjoint from the test set (README, KITTI)",
+               config->data.split, r.test_drives_in_training.size(), r.test_drives.size(),
+               join_list(r.test_drives_in_training, ", "));
+}
+
 }  // namespace
 
 std::string split_root(const std::string& split, const std::string& root) {
@@ -358,6 +452,18 @@ EvalResult evaluate(const EvalOptions& o, Predictor* pred) {
   r.split = o.split;
   r.source = pred ? pred->path() : o.trivial ? "trivial baseline" : !o.predictions.empty() ? o.predictions : "ground truth export";
   r.data_root = root;
+  if (!is_synth_world(o.data_root, root)) {
+    // Real KITTI: the 200 KITTI 2015 pairs come from the 29 raw drives of stereo/test_scenes_stereo.txt,
+    // an odometry sequence 00-10 from one raw drive.
+    if (o.split == "kitti2015") {
+      const std::string scenes = find_split_file(root, "stereo", "test_scenes_stereo.txt");
+      if (!scenes.empty())
+        for (const auto& d : read_scene_list(scenes)) r.test_drives.push_back(d);
+    } else if (o.split == "odometry") {
+      if (const auto d = odometry_raw_drive(o.sequence); !d.empty()) r.test_drives.push_back(d);
+    }
+  }
+  if (pred) check_training_drives(r, *pred);
   return r;
 }
 
@@ -378,7 +484,16 @@ std::string EvalResult::json() const {
   }
   s << "},\n  \"counts\": {";
   for (size_t i = 0; i < counts.size(); ++i) s << (i ? ", " : "") << q(counts[i].first) << ": " << counts[i].second;
-  s << "}\n}\n";
+  s << "}";
+  auto list = [&](const char* key, const std::vector<std::string>& items) {
+    s << ",\n  \"" << key << "\": [";
+    for (size_t i = 0; i < items.size(); ++i) s << (i ? ", " : "") << q(items[i]);
+    s << "]";
+  };
+  list("test_drives", test_drives);
+  list("test_drives_in_training", test_drives_in_training);
+  if (!training_drives_unknown.empty()) s << ",\n  \"training_drives_unknown\": " << q(training_drives_unknown);
+  s << "\n}\n";
   return s.str();
 }
 
@@ -397,6 +512,9 @@ EvalResult read_result(const std::string& path) {
       r.metrics.emplace_back(kv.first.as<std::string>(),
                              kv.second.IsNull() ? std::numeric_limits<double>::quiet_NaN() : kv.second.as<double>());
     for (const auto& kv : n["counts"]) r.counts.emplace_back(kv.first.as<std::string>(), kv.second.as<int64_t>());
+    for (const auto& d : n["test_drives"]) r.test_drives.push_back(d.as<std::string>());
+    for (const auto& d : n["test_drives_in_training"]) r.test_drives_in_training.push_back(d.as<std::string>());
+    r.training_drives_unknown = n["training_drives_unknown"].as<std::string>("");
   } catch (const std::exception& e) {
     throw std::runtime_error("results '" + path + "': not a geo_eval results file (" + e.what() + ")");
   }
@@ -423,6 +541,9 @@ std::string format_results(const std::vector<EvalResult>& results, const std::ve
   for (size_t i = 0; i < results.size(); ++i) {
     s << names[i] << ":";
     for (const auto& c : results[i].counts) s << " " << c.first << " " << c.second;
+    if (!results[i].test_drives_in_training.empty())
+      s << " -- trained on " << results[i].test_drives_in_training.size() << " of the "
+        << results[i].test_drives.size() << " test drives: " << join_list(results[i].test_drives_in_training, ", ");
     s << "\n";
   }
   return s.str();

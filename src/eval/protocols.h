@@ -1,7 +1,10 @@
 // The published evaluation protocols (Eigen depth, KITTI 2015 flow, SfMLearner's snippet ATE) over KITTI-format folders (real KITTI or a
 // geo_synth world), from a checkpoint or from precomputed predictions:
 //   eigen      depth on the Eigen test images, Velodyne ground truth, Garg crop, median scaling, 80 m
-//   kitti2015  flow EPE on flow_noc and flow_occ, Fl-all, over the image_2/%06d_10.png pairs
+//   kitti2015  flow EPE on flow_noc and flow_occ, Fl-all, over the image_2/%06d_10.png pairs; where
+//              obj_map/ exists, EPE and Fl of the background and the foreground (moving objects)
+//              as KITTI's devkit; for a model with a FlowNet, the same for its rigid flow alone
+//              (depth and pose, metrics prefixed rigid_): what the residual flow adds
 //   odometry   pose ATE over 5-frame snippets (SfMLearner formula), and the full trajectory's RMS
 //              error after a Sim(3) alignment; the predicted trajectory as a KITTI pose file
 #pragma once
@@ -32,6 +35,11 @@ struct EvalResult {
   std::string split, source, data_root;
   std::vector<std::pair<std::string, double>> metrics;
   std::vector<std::pair<std::string, int64_t>> counts;
+  // The KITTI raw drives the test set comes from ("2011_09_26_drive_0002"; none for a geo_synth
+  // world's kitti2015/ and odometry/, whose scenes are their own), and those of them the evaluated
+  // model trained or validated on (from its checkpoint's config): results on training drives.
+  std::vector<std::string> test_drives, test_drives_in_training;
+  std::string training_drives_unknown;  // why the model's training drives could not be told
   std::string json() const;
 };
 

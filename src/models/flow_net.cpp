@@ -22,6 +22,13 @@ FlowNetImpl::FlowNetImpl(const FlowNetOptions& o) : options(o) {
   const double scale = o.flow_scale;
   net = register_module("net", EncoderDecoder(encoder_decoder_options(o.backbone, 12, 2),
                                               [scale](const torch::Tensor& x) { return scale * x; }));
+  if (o.zero_init_residual) {
+    torch::NoGradGuard no_grad;
+    for (auto& p : net->pred) {
+      p->weight.zero_();
+      if (p->bias.defined()) p->bias.zero_();
+    }
+  }
 }
 
 FlowOutput FlowNetImpl::forward(const torch::Tensor& input) {

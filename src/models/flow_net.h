@@ -13,6 +13,9 @@ namespace geo {
 struct FlowNetOptions {
   DepthNetOptions backbone;   // same encoder-decoder settings as the DepthNet (paper)
   double flow_scale = 0.1;    // residual = 0.1 * conv, in units of the image size (GeoNet)
+  // The prediction convs start at zero (model.flow_zero_init), so the residual is 0 and the full
+  // flow the rigid flow when the FlowNet starts training; GeoNet: Xavier like every other layer.
+  bool zero_init_residual = false;
 };
 
 struct FlowOutput {

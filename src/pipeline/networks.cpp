@@ -29,6 +29,7 @@ DepthNetOptions depth_net_options(const ModelConfig& m) {
 FlowNetOptions flow_net_options(const ModelConfig& m) {
   FlowNetOptions o;
   o.backbone = depth_net_options(m);
+  o.zero_init_residual = m.flow_zero_init;
   return o;
 }
 

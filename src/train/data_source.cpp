@@ -3,6 +3,7 @@
 #include "core/logging.h"
 #include "data/packed.h"
 #include "data/splits.h"
+#include "data/training_lists.h"
 #include "data/synth_snippets.h"
 #ifdef GEO_WITH_OPENCV
 #include "data/sequence_dataset.h"
@@ -55,33 +56,13 @@ TrainingData open_at(const DataConfig& d, TrainingData out) {
     return out;
   }
   out.format = "kitti_raw";
-  // raw_minus_kitti2015 (GeoNet's flow data): the eigen_zhou lists without the KITTI 2015 scenes.
   const bool minus_2015 = d.split == "raw_minus_kitti2015";
-  const std::string list_split = minus_2015 ? "eigen_zhou" : d.split;
-  out.train_list = d.train_list.empty() ? find_split_file(d.root, list_split, "train_files.txt") : d.train_list;
-  out.val_list = d.val_list.empty() ? find_split_file(d.root, list_split, "val_files.txt") : d.val_list;
-  if (out.train_list.empty() || !fs::exists(out.train_list))
-    throw ConfigError("data.train_list: no training list found (" +
-                      (d.train_list.empty() ? "looked for " + d.root + "/splits/" + list_split +
-                                                  "/train_files.txt and the shipped configs/splits/" + list_split
-                                            : "'" + d.train_list + "' does not exist") + ")");
-  std::set<std::string> scenes, statics;
-  const std::string scenes_file = find_split_file(d.root, "eigen", "test_scenes.txt");
-  if (!scenes_file.empty()) {
-    scenes = read_scene_list(scenes_file);
-    out.exclusions.push_back(scenes_file);
-  }
-  if (minus_2015) {
-    const std::string stereo = find_split_file(d.root, "stereo", "test_scenes_stereo.txt");
-    if (stereo.empty()) throw ConfigError("data.split raw_minus_kitti2015: no stereo/test_scenes_stereo.txt found");
-    for (const auto& s : read_scene_list(stereo)) scenes.insert(s);
-    out.exclusions.push_back(stereo);
-  }
-  const std::string static_file = shipped_config_dir() + "/splits/static_frames.txt";
-  if (fs::exists(static_file)) {
-    statics = read_static_frames(static_file);
-    out.exclusions.push_back(static_file);
-  }
+  auto lists = raw_training_lists(d, d.root);
+  out.train_list = lists.train_list;
+  out.val_list = lists.val_list;
+  out.exclusions = lists.exclusions;
+  const auto& scenes = lists.test_scenes;
+  const auto& statics = lists.static_frames;
   SequenceDatasetOptions so;
   so.root = d.root;
   so.height = d.height;
@@ -110,7 +91,7 @@ TrainingData open_at(const DataConfig& d, TrainingData out) {
                       " frames on disk (first missing: " + missing + ")");
   }
   out.train = train;
-  if (!out.val_list.empty() && fs::exists(out.val_list)) {
+  if (!out.val_list.empty()) {
     auto val_entries = read_split(out.val_list);
     if (minus_2015) out.excluded += exclude_entries(val_entries, scenes, {});
     auto val = std::make_shared<SequenceDataset>(std::move(val_entries), so);

@@ -59,7 +59,12 @@ TEST(Api, SameDepthPoseAndFlowAsTheNetworksThemselves) {
   const auto a = image(64, 208), b = image(64, 208, 0.1);
   EXPECT_TRUE(torch::equal(m.depth(a), (1.0 / d.nets.depth->forward(a.unsqueeze(0)).disp[0])[0][0]));
   const auto K = torch::tensor({100.f, 0.f, 104.f, 0.f, 100.f, 32.f, 0.f, 0.f, 1.f}).view({3, 3});
-  EXPECT_TRUE(torch::equal(m.flow(a, b, K), predict_pair(d.nets, a.unsqueeze(0), b.unsqueeze(0), K.unsqueeze(0)).flow[0]));
+  const auto direct = predict_pair(d.nets, a.unsqueeze(0), b.unsqueeze(0), K.unsqueeze(0));
+  EXPECT_TRUE(torch::equal(m.flow(a, b, K), direct.flow[0]));
+  const auto parts = m.flow_parts(a, b, K);
+  EXPECT_TRUE(torch::equal(parts.full, direct.flow[0]));
+  EXPECT_TRUE(torch::equal(parts.rigid, direct.rigid_flow[0]));
+  EXPECT_FALSE(torch::equal(parts.full, parts.rigid));  // the FlowNet's residual is there
   const auto vec = d.nets.pose->forward(a.unsqueeze(0), {a.unsqueeze(0), b.unsqueeze(0)});  // (a, a, b)
   EXPECT_TRUE(torch::equal(m.relative_pose(a, b), pose_vec_to_matrix(vec[0])[1]));
   EXPECT_EQ(m.pose({b, a, b}).sizes(), (torch::IntArrayRef{2, 4, 4}));

@@ -1,10 +1,12 @@
 // Metrics against hand-computed values, and the protocols end to end on a synthetic world whose
 // ground truth, given back as "predictions", must score perfectly.
+#include "core/state_io.h"
 #include "data/image_io.h"
 #include "data/synth_writer.h"
 #include "data/text_io.h"
 #include "eval/metrics.h"
 #include "eval/protocols.h"
+#include "pipeline/checkpoint.h"
 
 #include <gtest/gtest.h>
 
@@ -42,6 +44,21 @@ TEST(DepthMetrics, EigenImageMedianScalingAndMask) {
   EXPECT_EQ(e.pixels, 40 * 80 - 1);
 }
 
+TEST(DepthMetrics, MedianScalingUsesNumpysMedian) {
+  // numpy.median averages the two middle values of an even count; torch::median takes the lower.
+  EXPECT_EQ(numpy_median(torch::tensor({4.0, 1.0, 3.0, 2.0})), 2.5);
+  EXPECT_EQ(numpy_median(torch::tensor({5.0, 1.0, 3.0})), 3.0);
+  // Four valid pixels (gt 1, 2, 3, 4; prediction 1 everywhere): scale 2.5, not 2.
+  auto gt = torch::zeros({1, 4});
+  gt[0][0] = 1.0, gt[0][1] = 2.0, gt[0][2] = 3.0, gt[0][3] = 4.0;
+  EigenOptions o;
+  o.garg_crop = false;
+  double scale = 0;
+  const auto e = eigen_image_errors(gt, torch::ones({1, 4}), o, &scale);
+  EXPECT_EQ(scale, 2.5);
+  EXPECT_NEAR(e.abs_rel, (1.5 / 1 + 0.5 / 2 + 0.5 / 3 + 1.5 / 4) / 4, 1e-12);
+}
+
 TEST(FlowMetrics, EpeAndFlOutliers) {
   auto gt = torch::zeros({2, 2, 2});
   gt[0].fill_(10.0);
@@ -57,6 +74,28 @@ TEST(FlowMetrics, EpeAndFlOutliers) {
   // A half-size prediction is upsampled with its vectors doubled.
   const auto half = torch::full({2, 1, 1}, 5.0);
   EXPECT_NEAR(flow_errors(torch::full({2, 2, 2}, 10.0), torch::ones({2, 2}), half).epe, 0.0, 1e-9);
+}
+
+TEST(FlowMetrics, SumsPoolOverMasksAndPairs) {
+  // The devkit's Fl-bg / Fl-fg: errors pooled over the pixels of every pair, not averaged per pair.
+  auto gt = torch::zeros({2, 2, 2});
+  gt[0].fill_(10.0);
+  auto pred = gt.clone();
+  pred[0][0][0] = 14.0;  // EPE 4, outlier
+  pred[1][0][1] = 1.0;   // EPE 1
+  const auto fg = torch::tensor({true, true, false, false}).view({2, 2});  // the top row
+  auto a = flow_error_sums(gt, fg, pred);
+  EXPECT_EQ(a.pixels, 2);
+  EXPECT_EQ(a.outliers, 1);
+  EXPECT_NEAR(a.epe(), 2.5, 1e-12);
+  const auto bg = flow_error_sums(gt, ~fg, pred);
+  EXPECT_EQ(bg.pixels, 2);
+  EXPECT_EQ(bg.epe(), 0.0);
+  a += flow_error_sums(gt, torch::tensor({true, false, false, false}).view({1, 2, 2}), pred);  // a second pair
+  EXPECT_EQ(a.pixels, 3);
+  EXPECT_NEAR(a.epe(), 9.0 / 3, 1e-12);  // (4 + 1 + 4) / 3, where per-pair means would give (2.5 + 4) / 2
+  EXPECT_NEAR(a.fl(), 2.0 / 3, 1e-12);
+  EXPECT_EQ(flow_error_sums(gt, torch::zeros({2, 2}), pred).epe(), 0.0);  // no pixel: 0, pixels 0
 }
 
 TEST(FlowMetrics, ResizeNearestAsGeoNetsFlowlibOrBilinear) {
@@ -86,6 +125,13 @@ int64_t count_of(const EvalResult& r, const std::string& name) {
   for (const auto& [key, value] : r.counts)
     if (key == name) return value;
   ADD_FAILURE() << "no count '" << name << "' in the result";
+  return -1;
+}
+
+double metric_of(const EvalResult& r, const std::string& name) {
+  for (const auto& [k, v] : r.metrics)
+    if (k == name) return v;
+  ADD_FAILURE() << "no metric '" << name << "' in the result";
   return -1;
 }
 
@@ -139,6 +185,17 @@ TEST(Protocols, GroundTruthPredictionsScorePerfectlyOnASyntheticWorld) {
   const auto flow = evaluate(f, nullptr);
   EXPECT_NEAR(flow.metrics[0].second, 0.0, 1e-9);
   EXPECT_EQ(flow.counts[0].second, 2);
+  // geo_synth's object maps: background and foreground scored apart, pixels counted (the flow_occ
+  // pixels split between them), no rigid_ rows without a model.
+  EXPECT_EQ(count_of(flow, "pairs_with_object_map"), 2);
+  EXPECT_EQ(count_of(flow, "pixels_bg") + count_of(flow, "pixels_fg"), count_of(flow, "pixels_all"));
+  EXPECT_NEAR(metric_of(flow, "epe_bg"), 0.0, 1e-9);
+  for (const auto& m : flow.metrics) EXPECT_NE(m.first.rfind("rigid_", 0), 0u) << m.first;
+  {  // an object map is the moving cars of its frame: a car's pixels in flow_occ, off the ground
+    const auto objects = read_object_map(root + "/world/kitti2015/training/obj_map/000000_10.png");
+    EXPECT_EQ(objects.sizes(), (torch::IntArrayRef{64, 208}));
+    EXPECT_EQ(objects.scalar_type(), torch::kUInt8);
+  }
   EXPECT_EQ(count_of(flow, "predictions_resized"), 0);
   {  // A prediction of another size than its ground truth is resized and counted, not silently.
     const std::string small = root + "/flow_small";
@@ -204,12 +261,16 @@ TEST(Protocols, GroundTruthPredictionsScorePerfectlyOnASyntheticWorld) {
   EXPECT_TRUE(std::isfinite(r5.metrics[0].second));
   Config c3 = parse_config("model: {encoder_depth: 18}\ndata: {height: 64, width: 208}\n");
   Predictor three(c3, "cpu");
-  std::filesystem::copy_file(root + "/world/kitti2015/training/image_2/000001_10.png",
-                             root + "/world/kitti2015/training/image_2/000001_09.png");
+  std::filesystem::remove(root + "/world/kitti2015/training/image_2/000000_09.png");  // geo_synth writes both
   f.split_file.clear();
   f.predictions.clear();
   const auto r3 = evaluate(f, &three);
   EXPECT_EQ(r3.counts.back(), (std::pair<std::string, int64_t>{"pairs_with_frame_09", 1}));
+  // A model with a FlowNet: its rigid flow is scored beside the full flow, on the background and the
+  // moving cars as well.
+  EXPECT_TRUE(std::isfinite(metric_of(r3, "rigid_epe_all")));
+  EXPECT_NE(metric_of(r3, "rigid_epe_all"), metric_of(r3, "epe_all"));
+  EXPECT_TRUE(std::isfinite(metric_of(r3, "rigid_epe_bg")));
 
   // Ground truth that cannot score: an all-invalid flow map is left out and counted (it used to
   // count as EPE 0), and a pose file shorter than the image sequence is an error.
@@ -224,6 +285,50 @@ TEST(Protocols, GroundTruthPredictionsScorePerfectlyOnASyntheticWorld) {
   std::filesystem::copy_file(images + "000007.png", images + "000008.png");
   p.predictions.clear();
   GEO_EXPECT_THROW_WITH(evaluate(p, &three), "09.txt holds 8 poses", "000008.png exists");
+}
+
+
+// GeoNet trains each table's model on data disjoint from its test set. geo_eval reads the training
+// data from the checkpoint's config: the shipped eigen_zhou lists hold the drive of odometry 09
+// (2011_09_30_drive_0033), odometry 00-08 do not.
+TEST(Protocols, AModelTrainedOnTestDrivesIsWarnedAndRecorded) {
+  const auto root = test::fresh_dir("overlap");
+  const auto world = test::write_small_world("overlap_world", 4, 1, 6);
+  // The world's odometry sequence outside the world (no geo_synth README): read as KITTI's 09.
+  std::filesystem::copy(world + "/odometry", root + "/odometry", std::filesystem::copy_options::recursive);
+  auto checkpoint_of = [&](const std::string& data, const std::string& name) {
+    const Config c = parse_config("model: {encoder_depth: 18}\ndata: {height: 64, width: 208, root: " + root +
+                                      "/none, " + data + "}\n", name + ".yaml");
+    torch::manual_seed(1);
+    Networks nets = Networks::create(NetworkSpec::of(c), false);
+    torch::serialize::OutputArchive a;
+    write_checkpoint(a, CheckpointContents{nets, nullptr, TrainState{}, c});
+    save_archive(a, root + "/" + name + ".pt");
+    return root + "/" + name + ".pt";
+  };
+  EvalOptions e;
+  e.split = "odometry";
+  e.data_root = root + "/odometry";
+  Predictor depth_model(checkpoint_of("split: eigen_zhou", "eigen_zhou"), "cpu");
+  const auto leaky = evaluate(e, &depth_model);
+  EXPECT_EQ(leaky.test_drives, std::vector<std::string>{"2011_09_30_drive_0033"});
+  EXPECT_EQ(leaky.test_drives_in_training, std::vector<std::string>{"2011_09_30_drive_0033"});
+  EXPECT_NE(leaky.json().find("\"test_drives_in_training\": [\"2011_09_30_drive_0033\"]"), std::string::npos)
+      << leaky.json();
+  test::write_text(root + "/leaky.json", leaky.json());
+  EXPECT_EQ(read_result(root + "/leaky.json").test_drives_in_training, leaky.test_drives_in_training);
+  EXPECT_NE(format_results({leaky}, {"leaky"}).find("trained on 1 of the 1 test drives: 2011_09_30_drive_0033"),
+            std::string::npos);
+  Predictor pose_model(checkpoint_of("split: odometry", "odometry"), "cpu");
+  const auto clean = evaluate(e, &pose_model);
+  EXPECT_TRUE(clean.test_drives_in_training.empty());
+  EXPECT_TRUE(clean.training_drives_unknown.empty());
+  // A geo_synth world's odometry/ and kitti2015/ scenes are no raw drive: nothing to compare.
+  e.data_root = world;
+  EXPECT_TRUE(evaluate(e, &depth_model).test_drives.empty());
+  // An untrained model (no training config) says it cannot tell.
+  Predictor untrained(parse_config("model: {encoder_depth: 18}\ndata: {height: 64, width: 208}\n"), "cpu");
+  EXPECT_FALSE(evaluate(e, &untrained).training_drives_unknown.empty());
 }
 
 }  // namespace

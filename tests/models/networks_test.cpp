@@ -134,6 +134,25 @@ torch::Tensor random_projection(const std::vector<torch::Tensor>& outputs) {
   return loss;
 }
 
+TEST(Networks, FlowZeroInitStartsFromTheRigidFlow) {
+  // model.flow_zero_init: every scale's residual is exactly 0 before training (GeoNet's Xavier
+  // init gives a random one), and the zeroed prediction convs still get a gradient.
+  torch::manual_seed(5);
+  geo::FlowNetOptions o;
+  o.backbone = small();
+  o.zero_init_residual = true;
+  geo::FlowNet zero(o);
+  o.zero_init_residual = false;
+  geo::FlowNet xavier(o);
+  const auto img = torch::rand({2, 3, 32, 64});
+  const auto in = geo::flow_net_input(img, img.flip(3), img, torch::ones({2, 2, 32, 64}), torch::ones({2, 1, 32, 64}));
+  const auto out = zero(in);
+  for (const auto& f : out.flow) EXPECT_EQ(f.abs().max().item<double>(), 0.0);
+  EXPECT_GT(xavier(in).flow[0].abs().max().item<double>(), 0.1);  // pixels
+  (out.flow[0] * torch::rand_like(out.flow[0])).sum().backward();
+  EXPECT_GT(zero->net->pred.back()->weight.grad().abs().sum().item<double>(), 0.0);
+}
+
 TEST(Networks, EveryParameterReceivesAGradient) {
   torch::manual_seed(26);  // 25 left one 8-wide FR MLP (refined7) all-inactive at init once every bottleneck projects
   geo::DepthNetOptions d50;  // ResNet-50 with FR, small input
