@@ -1,4 +1,4 @@
-# geo's layers (issue 18), checked when CMake configures, and written to <build>/layers.txt:
+# geo's layers, checked when CMake configures, and written to <build>/layers.txt:
 #
 #   core -> geometry -> losses, models -> pipeline -> { geo (the library), train_parts -> training }
 #                                  data -> data_io -> evaluation (on geo and pipeline, never training)

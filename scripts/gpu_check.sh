@@ -7,7 +7,7 @@
 #   3. trains the smoke config on the in-memory synthetic world on CUDA (both stages, validation,
 #      checkpoints, resume-ready run folder) and prints its speed from metrics.csv,
 #   4. runs scripts/bench.sh cuda (training steps, inference, peak memory) into build-gpu/bench/.
-# Record what it prints, with the GPU, driver, CUDA and PyTorch versions, in the issue's note.
+# Record what it prints, with the GPU, driver, CUDA and PyTorch versions, beside the figures.
 #   GEO_TORCH / GEO_BUILD_DIR / GEO_OPENCV as for scripts/setup.sh (defaults python, build-gpu, auto)
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -80,7 +80,7 @@ TEST(Warp, ZeroModeIsGeoNetsSamplerOutsideAndOnTheLastColumn) {
     EXPECT_NEAR(out.image[0][0][1][1].item<double>(), hand, 1e-12) << "x = " << x;
     EXPECT_EQ(out.valid[0][0][1][1].item<double>(), (x >= 0 && x < 4) ? 1.0 : 0.0) << "x = " << x;
   }
-  // x = W - 0.5 and x = W - 1 give 0 (the two cases); the border sampler keeps 10.
+  // x = W - 0.5 and x = W - 1 give 0 (GeoNet's sampler's two edge cases); the border sampler keeps 10.
   for (double x : {4.5, 4.0}) {
     auto flow = torch::zeros({1, 2, 3, 5}, kDouble);
     flow.select(1, 0).fill_(x - 1);

@@ -130,7 +130,7 @@ TEST(Checkpoint, CheckpointsWrittenBeforeTheTypedStateStillRead) {
   const std::string path = test::fresh_dir("pipeline_legacy") + "/old.pt";
   torch::serialize::OutputArchive a;
   write_checkpoint(a, CheckpointContents{t.nets, nullptr, TrainState{}, t.config});
-  torch::serialize::OutputArchive old;  // the format of sessions 1-7: float64 meta + int world_size
+  torch::serialize::OutputArchive old;  // the earlier format: float64 meta + int world_size
   for (const char* key : {"depth", "pose"}) {
     torch::serialize::OutputArchive sub;
     write_state(key == std::string("depth") ? static_cast<const torch::nn::Module&>(*t.nets.depth) : *t.nets.pose, sub);
