@@ -27,12 +27,8 @@ void sync_dir(const std::string& dir) {
   ::close(fd);
 }
 
-}  // namespace
-
-void write_file_durable(const std::string& path, const std::function<void(const ChunkWriter&)>& produce) {
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) throw std::runtime_error("cannot write " + path + ": " + os_error() + " (opening " + tmp + ")");
+// Streams `produce` into an open descriptor; returns the first OS error ("" when none).
+std::string stream_into(int fd, const std::function<void(const ChunkWriter&)>& produce) {
   std::string error;
   const ChunkWriter write = [&](const void* data, size_t n) {
     const char* p = static_cast<const char*>(data);
@@ -47,8 +43,86 @@ void write_file_durable(const std::string& path, const std::function<void(const 
       n -= static_cast<size_t>(w);
     }
   };
+  produce(write);
+  return error;
+}
+
+// The process's own descriptors: /dev/stdout, /dev/fd/N, /proc/self/fd/N (links to whatever the
+// descriptor holds, which the process keeps writing to after a rename).
+bool is_descriptor_path(const fs::path& p) {
+  const std::string s = p.string();
+  for (const char* prefix : {"/proc/", "/dev/fd/", "/dev/stdout", "/dev/stderr"})
+    if (s.rfind(prefix, 0) == 0) return true;
+  return false;
+}
+
+// A symbolic link's final target (relative links resolved against the link's folder), also when
+// that target does not exist yet; `path` itself when it is no link; "" when a descriptor path is on
+// the way.
+std::string link_target(const std::string& path) {
+  fs::path p = path;
+  for (int hops = 0; hops < 40; ++hops) {
+    if (is_descriptor_path(p)) return "";
+    std::error_code ec;
+    if (!fs::is_symlink(fs::symlink_status(p, ec))) return p.string();
+    const fs::path next = fs::read_symlink(p, ec);
+    if (ec) return p.string();
+    p = next.is_absolute() ? next : p.parent_path() / next;
+  }
+  throw std::runtime_error("cannot write " + path + ": too many levels of symbolic links");
+}
+
+// The descriptor number of /dev/stdout, /dev/stderr, /dev/fd/N, /proc/self/fd/N; -1 otherwise.
+int own_descriptor(const std::string& path) {
+  if (path == "/dev/stdout") return 1;
+  if (path == "/dev/stderr") return 2;
+  for (const std::string& prefix : {std::string("/dev/fd/"), std::string("/proc/self/fd/"),
+                                    "/proc/" + std::to_string(::getpid()) + "/fd/"}) {
+    if (path.rfind(prefix, 0) != 0) continue;
+    const std::string n = path.substr(prefix.size());
+    if (n.empty() || n.size() > 9 || n.find_first_not_of("0123456789") != std::string::npos) return -1;
+    return std::stoi(n);
+  }
+  return -1;
+}
+
+// Devices, FIFOs, sockets and the process's own descriptors (/dev/stdout, /proc/self/fd/N) are
+// written into as they are: replacing them by a regular file would destroy them. The process's own
+// descriptors are written to directly, so what preceded and what follows on them (through a shell's
+// `> file` too) stays in order; anything else is opened for appending.
+void write_through(const std::string& path, const std::function<void(const ChunkWriter&)>& produce) {
+  const int own = own_descriptor(path);
+  const int fd = own >= 0 ? own : ::open(path.c_str(), O_WRONLY | O_APPEND | O_CLOEXEC);
+  if (fd < 0) throw std::runtime_error("cannot write " + path + ": " + os_error());
+  std::string error;
   try {
-    produce(write);
+    error = stream_into(fd, produce);
+  } catch (...) {
+    if (own < 0) ::close(fd);
+    throw;
+  }
+  if (own < 0 && ::close(fd) != 0 && error.empty()) error = os_error();
+  if (!error.empty()) throw std::runtime_error("cannot write " + path + ": " + error);
+}
+
+}  // namespace
+
+void write_file_durable(const std::string& requested, const std::function<void(const ChunkWriter&)>& produce) {
+  struct stat st {};
+  if (::stat(requested.c_str(), &st) == 0) {
+    if (S_ISDIR(st.st_mode)) throw std::runtime_error("cannot write " + requested + ": it is a folder");
+    if (!S_ISREG(st.st_mode)) return write_through(requested, produce);
+  }
+  // A regular file, or none yet: a symbolic link is followed, so the file it names is replaced
+  // and the link stays a link.
+  const std::string path = link_target(requested);
+  if (path.empty()) return write_through(requested, produce);
+  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) throw std::runtime_error("cannot write " + path + ": " + os_error() + " (opening " + tmp + ")");
+  std::string error;
+  try {
+    error = stream_into(fd, produce);
   } catch (...) {
     ::close(fd);
     ::unlink(tmp.c_str());

@@ -14,7 +14,9 @@ using ChunkWriter = std::function<void(const void* data, size_t size)>;
 // fsync'ed, renamed into place and its folder fsync'ed, so neither a crash nor a power loss leaves
 // a half-written file where a good one stood. A failed write (disk full, read-only folder, quota)
 // removes the temporary file, leaves the old file untouched and throws std::runtime_error naming
-// the path and the OS error.
+// the path and the OS error. A symbolic link is followed (the file it names is replaced, the link
+// stays); devices, FIFOs, sockets and the process's descriptors (/dev/stdout) are written into, never
+// replaced; a folder is refused.
 void write_file_durable(const std::string& path, const std::function<void(const ChunkWriter&)>& produce);
 
 // write_file_durable of a string.

@@ -3,9 +3,12 @@
 #include "core/files.h"
 
 #include <gtest/gtest.h>
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <filesystem>
+#include <thread>
 
 #include "test_util.h"
 
@@ -26,6 +29,49 @@ TEST(Files, AtomicWriteReplacesAndAFullDiskLeavesTheOldFile) {
   EXPECT_EQ(test::read_file(path), "second");
   EXPECT_FALSE(std::filesystem::exists(std::filesystem::symlink_status(tmp)));  // cleaned up
   GEO_EXPECT_THROW_WITH(write_file_atomic(dir + "/missing/x.txt", "x"), dir + "/missing/x.txt", "No such file");
+}
+
+// What is not a regular file is never replaced by one: a symbolic link is followed (its target is
+// replaced, the link stays), a FIFO or a device is written into (and its errors reported), the
+// process's own descriptors (/dev/fd/N) are written into, a folder is refused.
+TEST(Files, AtomicWriteFollowsLinksAndWritesIntoDevicesAndFifos) {
+  namespace fs = std::filesystem;
+  const auto dir = test::fresh_dir("files_special");
+  write_file_atomic(dir + "/target.json", "old");
+  fs::create_symlink("target.json", dir + "/link.json");  // relative, as `ln -s` makes them
+  write_file_atomic(dir + "/link.json", "new");
+  EXPECT_TRUE(fs::is_symlink(fs::symlink_status(dir + "/link.json")));
+  EXPECT_EQ(test::read_file(dir + "/target.json"), "new");
+  fs::create_symlink(dir + "/not-yet.json", dir + "/dangling.json");  // a link to a file to be made
+  write_file_atomic(dir + "/dangling.json", "made");
+  EXPECT_TRUE(fs::is_symlink(fs::symlink_status(dir + "/dangling.json")));
+  EXPECT_EQ(test::read_file(dir + "/not-yet.json"), "made");
+
+  const std::string fifo = dir + "/pipe";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0);
+  std::string received;
+  std::thread reader([&] { received = test::read_file(fifo); });
+  write_file_atomic(fifo, "through the pipe");
+  reader.join();
+  EXPECT_EQ(received, "through the pipe");
+  EXPECT_TRUE(fs::is_fifo(fs::status(fifo)));
+
+  // A descriptor path: what a shell's `> file` opened keeps receiving what is written.
+  const std::string redirected = dir + "/redirected.txt";
+  const int fd = ::open(redirected.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  ASSERT_GE(fd, 0);
+  ASSERT_EQ(::write(fd, "log line\n", 9), 9);
+  write_file_atomic("/dev/fd/" + std::to_string(fd), "via the descriptor");
+  ASSERT_EQ(::write(fd, "\n", 1), 1);
+  ::close(fd);
+  EXPECT_EQ(test::read_file(redirected), "log line\nvia the descriptor\n");
+
+  if (fs::is_character_file("/dev/full")) {
+    GEO_EXPECT_THROW_WITH(write_file_atomic("/dev/full", "x"), "/dev/full", "No space left on device");
+    EXPECT_TRUE(fs::is_character_file("/dev/full"));  // still the device, also for root
+  }
+  GEO_EXPECT_THROW_WITH(write_file_atomic(dir, "x"), dir, "is a folder");
+  EXPECT_TRUE(fs::is_directory(dir));
 }
 
 TEST(Files, OneLockHolderPerFolderAndReleasedWithIt) {
