@@ -1,6 +1,7 @@
 #include "core/state_io.h"
 
 #include "core/files.h"
+#include "core/zip_check.h"
 
 #include <filesystem>
 #include <set>
@@ -87,6 +88,8 @@ void save_state(const torch::nn::Module& module, const std::string& path) {
 torch::serialize::InputArchive open_archive(const std::string& path) {
   if (!std::filesystem::is_regular_file(path))
     throw std::runtime_error(path + ": no such file");
+  // Bytes altered inside a tensor would load silently (LibTorch does not check the records' CRCs).
+  verify_zip_checksums(path);
   torch::serialize::InputArchive archive;
   try {
     archive.load_from(path);

@@ -1,9 +1,11 @@
 #include "core/state_io.h"
+#include "core/zip_check.h"
 
 #include <gtest/gtest.h>
 
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 
 namespace {
 
@@ -85,6 +87,49 @@ TEST(StateIo, MissingAndCorruptFilesAreNamed) {
   const auto path = temp_path("corrupt.pt");
   { std::ofstream(path) << "not a state file"; }
   EXPECT_THROW(geo::load_state(*a, path), std::runtime_error);
+  std::filesystem::remove(path);
+}
+
+// ZIP's CRC-32 against its published check values (the 8-byte loop and the byte tail both run on
+// the 43-byte sentence), and continued over pieces as over the whole.
+TEST(StateIo, Crc32HasZipsCheckValues) {
+  EXPECT_EQ(geo::crc32("123456789", 9), 0xCBF43926u);
+  const std::string fox = "The quick brown fox jumps over the lazy dog";
+  EXPECT_EQ(geo::crc32(fox.data(), fox.size()), 0x414FA339u);
+  EXPECT_EQ(geo::crc32(fox.data() + 10, fox.size() - 10, geo::crc32(fox.data(), 10)), 0x414FA339u);
+  EXPECT_EQ(geo::crc32("", 0), 0u);
+}
+
+// One byte altered inside a tensor: LibTorch would load it (its reader skips the CRCs); geo refuses
+// it, naming the file and the record. The intact file still loads and checks.
+TEST(StateIo, AFileAlteredInsideATensorIsRefused) {
+  Tiny a(4);
+  {
+    torch::NoGradGuard no_grad;
+    a->fc1->weight.fill_(1234.5f);
+  }
+  const auto path = temp_path("altered.pt");
+  geo::save_state(*a, path);
+  EXPECT_TRUE(geo::verify_zip_checksums(path));
+  std::string bytes;
+  {
+    std::ifstream in(path, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  const float value = 1234.5f;
+  const auto at = bytes.find(std::string(reinterpret_cast<const char*>(&value), sizeof value));
+  ASSERT_NE(at, std::string::npos);
+  bytes[at + 1] = static_cast<char>(bytes[at + 1] ^ 0x01);  // 1234.5 -> 1234.5 +- a few ulps
+  { std::ofstream(path, std::ios::binary) << bytes; }
+  Tiny b(4);
+  try {
+    geo::load_state(*b, path);
+    ADD_FAILURE() << "an altered file loaded";
+  } catch (const std::runtime_error& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find(path + ": damaged file"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("fails its CRC-32 check"), std::string::npos) << msg;
+  }
   std::filesystem::remove(path);
 }
 

@@ -1,0 +1,20 @@
+// Integrity of LibTorch archives (checkpoints, model files): they are ZIP files whose records carry
+// CRC-32s, which LibTorch's reader does not check (its miniz is built without the check), so a file
+// with bytes altered inside a tensor would load and give slightly different numbers.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+namespace geo {
+
+// The CRC-32 of ZIP (IEEE 802.3, reflected), continuing from `crc` (0 for a new one).
+uint32_t crc32(const void* data, size_t size, uint32_t crc = 0);
+
+// Checks every record of the ZIP archive `path` against the CRC-32 and sizes of its central
+// directory (ZIP64 included). Throws std::runtime_error naming the file and the damaged record;
+// a file that is no ZIP archive at all is left to the reader (returns false); true when checked.
+bool verify_zip_checksums(const std::string& path);
+
+}  // namespace geo
