@@ -403,6 +403,13 @@ class Checker {
 };
 
 namespace {
+
+// Every count of iterations is bounded where it is read, so that sums and products of counts (the
+// total of the stages, iteration x batch) stay far from int64's limit: 1e12 iterations is more than
+// any run can make.
+constexpr int64_t kMaxCount = 1000000000000;
+constexpr const char* kCountRange = "must be in 1..1000000000000";
+
 bool one_of(const std::string& v, std::initializer_list<const char*> options) {
   for (const char* o : options)
     if (v == o) return true;
@@ -413,7 +420,7 @@ bool one_of(const std::string& v, std::initializer_list<const char*> options) {
 void ModelConfig::validate(Checker& c) const {
   c.require(encoder_depth == 18 || encoder_depth == 34 || encoder_depth == 50, "encoder_depth",
             encoder_depth, "must be 18, 34 or 50");
-  c.require(fr_ratio >= 1, "fr_ratio", fr_ratio, "must be >= 1");
+  c.require(fr_ratio >= 1 && fr_ratio <= 4096, "fr_ratio", fr_ratio, "must be in 1..4096");
   c.require(num_scales >= 1 && num_scales <= 4, "num_scales", num_scales, "must be in 1..4");
   c.require(bn_eps > 0, "bn_eps", bn_eps, "must be > 0");
   c.require(bn_momentum > 0 && bn_momentum <= 1, "bn_momentum", bn_momentum, "must be in (0, 1]");
@@ -531,12 +538,13 @@ void StageConfig::validate(Checker& c) const {
                      name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_.-") ==
                          std::string::npos;
   c.require(plain, "name", name, "must be a plain name of letters, digits, '_', '-' and '.' (it names files)");
-  c.require(iterations > 0, "iterations", iterations, "must be > 0");
+  c.require(iterations > 0 && iterations <= kMaxCount, "iterations", iterations, kCountRange);
   c.require(!train.empty(), "train", train, "must name at least one of depth, pose, flow");
   c.require(learning_rate > 0, "learning_rate", learning_rate, "must be > 0");
-  c.require(batch_size >= 1, "batch_size", batch_size, "must be >= 1");
+  c.require(batch_size >= 1 && batch_size <= 65536, "batch_size", batch_size, "must be in 1..65536");
   c.require(lr_schedule != LrScheduleKind::kStep || lr_step > 0, "lr_step", lr_step,
             "must be > 0 when lr_schedule is step");
+  c.require(lr_step >= 0 && lr_step <= kMaxCount, "lr_step", lr_step, "must be in 0..1000000000000");
   c.require(lr_gamma > 0 && lr_gamma <= 1, "lr_gamma", lr_gamma, "must be in (0, 1]");
   if (uses_flow())
     c.require(weights.flow > 0 || weights.flow_smooth > 0 || weights.flow_consistency > 0,
@@ -557,12 +565,15 @@ void OptimizerConfig::validate(Checker& c) const {
 void LoggingConfig::validate(Checker& c) const {
   c.require(one_of(level, {"trace", "debug", "info", "warn", "error"}), "level", level,
             "must be trace, debug, info, warn or error");
-  c.require(interval > 0, "interval", interval, "must be > 0");
-  c.require(summary_interval >= 0, "summary_interval", summary_interval, "must be >= 0 (0 = off)");
-  c.require(checkpoint_interval > 0, "checkpoint_interval", checkpoint_interval, "must be > 0");
-  c.require(val_interval >= 0, "val_interval", val_interval, "must be >= 0 (0 = off)");
-  c.require(keep_last >= 1, "keep_last", keep_last, "must be >= 1");
-  c.require(max_bad_steps >= 1, "max_bad_steps", max_bad_steps, "must be >= 1");
+  c.require(interval > 0 && interval <= kMaxCount, "interval", interval, kCountRange);
+  c.require(summary_interval >= 0 && summary_interval <= kMaxCount, "summary_interval", summary_interval,
+            "must be in 0..1000000000000 (0 = off)");
+  c.require(checkpoint_interval > 0 && checkpoint_interval <= kMaxCount, "checkpoint_interval", checkpoint_interval,
+            kCountRange);
+  c.require(val_interval >= 0 && val_interval <= kMaxCount, "val_interval", val_interval,
+            "must be in 0..1000000000000 (0 = off)");
+  c.require(keep_last >= 1 && keep_last <= 1000000, "keep_last", keep_last, "must be in 1..1000000");
+  c.require(max_bad_steps >= 1 && max_bad_steps <= 1000000, "max_bad_steps", max_bad_steps, "must be in 1..1000000");
 }
 
 void RunConfig::validate(Checker& c) const {
@@ -580,7 +591,8 @@ void RunConfig::validate(Checker& c) const {
 void DistributedConfig::validate(Checker& c) const {
   c.require(one_of(backend, {"auto", "nccl", "gloo"}), "backend", backend, "must be auto, nccl or gloo");
   c.require(timeout_s >= 1 && timeout_s <= 86400, "timeout_s", timeout_s, "must be in 1..86400 seconds");
-  c.require(verify_interval >= 0, "verify_interval", verify_interval, "must be >= 0 (0 = never)");
+  c.require(verify_interval >= 0 && verify_interval <= kMaxCount, "verify_interval", verify_interval,
+            "must be in 0..1000000000000 (0 = never)");
 }
 
 void Config::validate() const {
@@ -632,14 +644,17 @@ Config parse_config(const std::string& yaml_text, const std::string& source,
                       ": malformed YAML: " + e.msg);
   }
   if (root.IsNull()) root = YAML::Node(YAML::NodeType::Map);
+  if (!root.IsMap())
+    throw ConfigError(source + " line " + std::to_string(root.Mark().line + 1) + ": a config is a map of sections " +
+                      "(model:, data:, loss:, stages:, ...), not a " + (root.IsSequence() ? "list" : "single value"));
   Config config;
   config.source = source;
   ParseContext ctx{source, &config.lines, {}};
-  for (const auto& o : overrides) {
-    if (o.rfind("stages", 0) == 0) materialise_default_stages(root);
-    apply_override(root, o, ctx);
-  }
   try {
+    for (const auto& o : overrides) {
+      if (o.rfind("stages", 0) == 0) materialise_default_stages(root);
+      apply_override(root, o, ctx);
+    }
     read_value(root, "", config, ctx);
   } catch (const YAML::Exception& e) {  // anything the checks above did not foresee, with the file
     throw ConfigError(source + (e.mark.is_null() ? "" : " line " + std::to_string(e.mark.line + 1)) + ": " + e.msg);
@@ -653,6 +668,16 @@ Config load_config(const std::string& path, const std::vector<std::string>& over
   if (!in) throw ConfigError(path + ": cannot open config file (does it exist?)");
   std::stringstream buffer;
   buffer << in.rdbuf();
+  // An empty file would silently mean every default: the paper's 350k-iteration schedule on ./data.
+  bool empty = true;
+  try {
+    empty = YAML::Load(buffer.str()).IsNull();
+  } catch (const YAML::Exception&) {
+    empty = false;  // malformed: parse_config says where
+  }
+  if (empty)
+    throw ConfigError(path + ": the config is empty (no keys); an empty config would run the paper's full schedule " +
+                      "with every default: start from a shipped one (configs/stage1.yaml, configs/demo.yaml)");
   return parse_config(buffer.str(), path, overrides);
 }
 

@@ -6,6 +6,8 @@
 #include <filesystem>
 #include <fstream>
 
+#include "test_util.h"
+
 namespace {
 
 using geo::Config;
@@ -155,6 +157,21 @@ TEST(Config, StageNamesArePlainAndThreadsBounded) {
             std::string::npos);
 }
 
+// Every count is bounded where it is read: int64's limit (or anything near it) is an error naming the
+// key, not an overflow in the sums and products of counts later.
+TEST(Config, CountsAreBoundedWhereTheyAreRead) {
+  for (const char* key : {"stages.0.iterations", "stages.0.lr_step", "logging.interval", "logging.summary_interval",
+                          "logging.checkpoint_interval", "logging.val_interval", "run.distributed.verify_interval"}) {
+    const std::string set = std::string(key) + "=9223372036854775807";
+    const std::string msg = error_of([&] { geo::parse_config("", "x.yaml", {set}); });
+    EXPECT_NE(msg.find("9223372036854775807"), std::string::npos) << key << ": " << msg;
+    EXPECT_NE(msg.find("1000000000000"), std::string::npos) << key << ": " << msg;
+    EXPECT_NO_THROW(geo::parse_config("", "x.yaml", {std::string(key) + "=1000000000000"})) << key;
+  }
+  for (const char* set : {"stages.0.batch_size=65537", "logging.keep_last=1000001", "model.fr_ratio=4097"})
+    EXPECT_NE(error_of([&] { geo::parse_config("", "x.yaml", {set}); }).find("must be in 1.."), std::string::npos) << set;
+}
+
 TEST(Config, ReportsEveryInvalidValue) {
   const std::string msg = error_of([] {
     geo::parse_config("model: {encoder_depth: 101}\nrun: {device: tpu}\n", "x.yaml");
@@ -172,6 +189,25 @@ TEST(Config, MalformedYamlNamesLine) {
   const std::string msg = error_of([] { geo::parse_config("model:\n  a: [1, 2\n", "bad.yaml"); });
   EXPECT_NE(msg.find("bad.yaml line"), std::string::npos) << msg;
   EXPECT_NE(msg.find("malformed YAML"), std::string::npos) << msg;
+}
+
+// A config that is not a map, with or without --set, names the file; an empty config file is refused
+// (it would silently start the paper's 350k-iteration run with every default).
+TEST(Config, NonMapAndEmptyConfigsNameTheFile) {
+  for (const char* text : {"just a string\n", "- a\n- b\n", "42\n"}) {
+    for (const std::vector<std::string>& sets : {std::vector<std::string>{}, {"loss.ssim_alpha=0.5"}}) {
+      const std::string msg = error_of([&] { geo::parse_config(text, "odd.yaml", sets); });
+      EXPECT_NE(msg.find("odd.yaml line 1: a config is a map of sections"), std::string::npos) << text << msg;
+    }
+  }
+  const auto dir = geo::test::fresh_dir("config_empty");
+  for (const char* text : {"", "# only a comment\n", "---\n"}) {
+    geo::test::write_text(dir + "/empty.yaml", text);
+    const std::string msg = error_of([&] { geo::load_config(dir + "/empty.yaml"); });
+    EXPECT_NE(msg.find(dir + "/empty.yaml: the config is empty"), std::string::npos) << msg;
+  }
+  geo::test::write_text(dir + "/one.yaml", "run: {seed: 3}\n");
+  EXPECT_EQ(geo::load_config(dir + "/one.yaml").run.seed, 3);
 }
 
 TEST(Config, OverridesApplyAndAreValidated) {
