@@ -15,6 +15,7 @@
 #include "data/loader.h"
 #include "data/packed.h"
 #include "train/data_source.h"
+#include "app_options.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"geo_prepare: pack a KITTI/synthetic training split into a fast cache; measure loader throughput"};
@@ -26,8 +27,8 @@ int main(int argc, char** argv) {
   app.add_option("--set", overrides, "override a config key, e.g. --set data.root=/data/kitti_raw")->take_all();
   app.add_option("--out", out, "cache folder to write (train/ and val/ inside)");
   app.add_flag("--throughput", throughput, "measure samples/s of the configured data instead of packing");
-  app.add_option("--batches", batches, "batches to time with --throughput")->check(CLI::PositiveNumber);
-  app.add_option("--batch-size", batch_size, "batch size for --throughput (default: the first stage's)");
+  app.add_option("--batches", batches, "batches to time with --throughput")->check(geo::app::positive());
+  app.add_option("--batch-size", batch_size, "batch size for --throughput (default: the first stage's)")->check(geo::app::positive());
   CLI11_PARSE(app, argc, argv);
   geo::keep_freed_memory();
   try {

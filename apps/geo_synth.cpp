@@ -11,6 +11,7 @@
 #include "core/logging.h"
 #include "core/runtime.h"
 #include "data/synth_writer.h"
+#include "app_options.h"
 
 int main(int argc, char** argv) {
   CLI::App app{
@@ -26,12 +27,12 @@ int main(int argc, char** argv) {
   app.add_option("--seed", seed, "world seed (0 .. 2^63-1): the same seed writes the same files")
       ->check(CLI::Range(uint64_t{0}, uint64_t{1} << 63));
   app.add_option("--out", out, "output root (created); holds raw/, kitti2015/, odometry/")->required();
-  app.add_option("--drives", drives, "training drives (default: preset's)")->check(CLI::PositiveNumber);
-  app.add_option("--test-drives", test_drives, "held-out test drives (default: preset's)")->check(CLI::PositiveNumber);
+  app.add_option("--drives", drives, "training drives (default: preset's)")->check(geo::app::positive());
+  app.add_option("--test-drives", test_drives, "held-out test drives (default: preset's)")->check(geo::app::positive());
   app.add_option("--frames", frames, "frames per drive (default: preset's)")->check(CLI::Range(3, 100000));
-  app.add_option("--flow-pairs", flow_pairs, "KITTI-2015-style flow pairs (default: preset's)")->check(CLI::NonNegativeNumber);
+  app.add_option("--flow-pairs", flow_pairs, "KITTI-2015-style flow pairs (default: preset's)")->check(geo::app::non_negative());
   app.add_option("--odometry-frames", odometry_frames, "frames of odometry sequence 09 (default: preset's)")->check(CLI::Range(5, 100000));
-  app.add_option("--threads", threads, "render threads (0 = all cores)")->check(CLI::NonNegativeNumber);
+  app.add_option("--threads", threads, "render threads (0 = all cores)")->check(geo::app::non_negative());
   app.add_flag("--force", force, "write into a non-empty --out");
   CLI11_PARSE(app, argc, argv);
   geo::keep_freed_memory();

@@ -16,7 +16,12 @@ namespace {
 
 cv::Mat read_raw(const std::string& path, int flags) {
   if (!std::filesystem::exists(path)) throw std::runtime_error("image not found: '" + path + "'");
-  cv::Mat m = cv::imread(path, flags);
+  cv::Mat m;
+  try {
+    m = cv::imread(path, flags);
+  } catch (const cv::Exception& e) {  // e.g. a header claiming more pixels than OpenCV accepts
+    throw std::runtime_error("cannot decode image '" + path + "': " + e.err + " (corrupt, or larger than OpenCV reads)");
+  }
   if (m.empty())
     throw std::runtime_error("cannot decode image '" + path + "' (corrupt or not an image)");
   return m;

@@ -20,6 +20,22 @@ bool is_packed_cache(const std::string& dir) {
   return in && std::getline(in, first) && first.rfind("geo-packed", 0) == 0;
 }
 
+bool has_packed_cache_files(const std::string& dir) {
+  std::error_code ec;
+  for (const char* f : {"/index.txt", "/frames.bin", "/frames.bin.tmp"})
+    if (fs::exists(dir + f, ec)) return true;
+  return false;
+}
+
+void check_packed_cache_complete(const std::string& dir) {
+  std::error_code ec;
+  if (fs::exists(dir + "/index.txt", ec)) return;  // PackedSnippets checks what it holds
+  if (has_packed_cache_files(dir))
+    throw std::runtime_error("packed cache " + dir + " is incomplete: it has " +
+                             (fs::exists(dir + "/frames.bin", ec) ? "frames.bin" : "frames.bin.tmp") +
+                             " but no index.txt (geo_prepare did not finish): re-run geo_prepare, or remove the folder");
+}
+
 PackedWriter::PackedWriter(const std::string& dir, int64_t height, int64_t width, int64_t seq_length)
     : dir_(dir), height_(height), width_(width), seq_length_(seq_length) {
   fs::create_directories(dir);
@@ -56,6 +72,7 @@ void PackedWriter::finish() {
 }
 
 PackedSnippets::PackedSnippets(const std::string& dir) : dir_(dir) {
+  check_packed_cache_complete(dir);
   const std::string index = dir + "/index.txt";
   std::istringstream in(read_text_file(index));
   std::string line, key;

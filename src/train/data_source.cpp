@@ -20,7 +20,10 @@ namespace geo {
 namespace {
 
 TrainingData open_at(const DataConfig& d, TrainingData out) {
-  const bool packed = d.format == DataFormat::kPacked || (d.format == DataFormat::kAuto && is_packed_cache(d.root + "/train"));
+  // A folder with any cache file is a cache: a corrupt or partial one is an error naming it, never a
+  // silent fall-back to the raw KITTI lists.
+  const bool packed =
+      d.format == DataFormat::kPacked || (d.format == DataFormat::kAuto && has_packed_cache_files(d.root + "/train"));
   if (packed) {
     out.format = "packed";
     auto train = std::make_shared<PackedSnippets>(d.root + "/train");
@@ -31,7 +34,7 @@ TrainingData open_at(const DataConfig& d, TrainingData out) {
                         std::to_string(d.seq_length) + " frames at " + std::to_string(d.width) + "x" +
                         std::to_string(d.height) + " (re-run geo_prepare)");
     out.train = train;
-    if (is_packed_cache(d.root + "/val")) out.val = std::make_shared<PackedSnippets>(d.root + "/val");
+    if (has_packed_cache_files(d.root + "/val")) out.val = std::make_shared<PackedSnippets>(d.root + "/val");
     out.train_list = d.root + "/train";
     return out;
   }
@@ -142,7 +145,7 @@ TrainingData open_training_data(const DataConfig& d) {
   if (d.split == "odometry") {
     if (!fs::is_directory(d.root + "/sequences") && fs::is_directory(d.root + "/odometry/sequences"))
       out.root = d.root + "/odometry";
-  } else if (!is_packed_cache(d.root + "/train") && !fs::exists(d.root + "/splits") &&
+  } else if (!has_packed_cache_files(d.root + "/train") && !fs::exists(d.root + "/splits") &&
              fs::is_directory(d.root + "/raw") && fs::is_directory(d.root + "/raw/splits")) {
     out.root = d.root + "/raw";
   }

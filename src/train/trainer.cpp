@@ -103,11 +103,15 @@ class Run {
                                                                                    : "no validation list found");
     int64_t total = 0;
     for (const auto& s : cfg_.stages) total += s.iterations;
+    // The advice (0.1) only where it helps: a run too short even for 0.1 gets the count it needs.
     if (static_cast<double>(total) * cfg_.model.bn_momentum < 5.0)
       spdlog::warn("model.bn_momentum {} averages BatchNorm's running statistics over ~{:.0f} batches but this run "
-                   "has {} iterations: evaluation will see statistics close to their initial values (use "
-                   "model.bn_momentum: 0.1 for short runs)",
-                   cfg_.model.bn_momentum, 1.0 / cfg_.model.bn_momentum, total);
+                   "has {} iterations: evaluation will see statistics close to their initial values ({})",
+                   cfg_.model.bn_momentum, 1.0 / cfg_.model.bn_momentum, total,
+                   cfg_.model.bn_momentum < 0.1 && total * 0.1 >= 5.0
+                       ? "use model.bn_momentum: 0.1 for short runs"
+                       : "train for at least " + std::to_string(static_cast<int64_t>(std::ceil(5.0 / cfg_.model.bn_momentum))) +
+                             " iterations");
     if (group_)
       spdlog::info("distributed: {} processes ({}), this is rank {} on {}; batch_size is per process ({} in all); "
                    "{}", group_->size(), group_->backend(), group_->rank(), device_.str(),
@@ -389,6 +393,13 @@ int train(const Config& config, const TrainOptions& options, std::string* run_di
     if (dir.empty()) dir = make_run_dir(config.run.dir, config.run.name);
     else if (fs::exists(dir + "/checkpoints/latest"))
       throw std::runtime_error("run folder '" + dir + "' already holds a run; use --resume " + dir + " or another --run-dir");
+    else
+      // A run that stopped before its first checkpoint cannot be resumed, and a new one would append
+      // to its logs: refused, so that two runs never mix in one folder.
+      for (const char* f : {"config.yaml", "metrics.csv", "val.csv", "train.log", "checkpoints"})
+        if (fs::exists(dir + "/" + f))
+          throw std::runtime_error("run folder '" + dir + "' holds the files of an earlier run (" + f +
+                                   ") that stopped before its first checkpoint: remove the folder or use another --run-dir");
     fs::create_directories(dir);
     lock = std::make_unique<FolderLock>(dir);  // one writer per run folder
     write_file_atomic(dir + "/config.yaml", to_yaml(config));

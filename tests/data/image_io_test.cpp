@@ -1,5 +1,6 @@
 // Image, flow and depth PNGs: exact round trips at the formats' resolution and clear errors.
 #include "data/image_io.h"
+#include "core/zip_check.h"
 #include "geometry/warp.h"
 
 #include <gtest/gtest.h>
@@ -47,6 +48,17 @@ TEST(ImageIo, BadFilesAreNamed) {
   // A 16-bit grey PNG (a depth map) given as flow: the message says what it is.
   write_depth_png(dir + "/grey16.png", torch::ones({1, 4, 4}));
   GEO_EXPECT_THROW_WITH(read_flow_png(dir + "/grey16.png"), "grey16.png", "got 1 channel(s) of 16-bit");
+  // A header claiming 100000 x 100000 pixels (its CRC made valid): OpenCV's size assertion becomes
+  // an error naming the file.
+  std::string png = test::read_file(dir + "/rgb.png");
+  ASSERT_EQ(png.substr(12, 4), "IHDR");
+  for (int k : {16, 20}) {  // width, height: big-endian 100000 = 0x000186A0
+    png[k] = 0, png[k + 1] = 0x01, png[k + 2] = static_cast<char>(0x86), png[k + 3] = static_cast<char>(0xA0);
+  }
+  const uint32_t crc = crc32(png.data() + 12, 17);
+  for (int k = 0; k < 4; ++k) png[29 + k] = static_cast<char>((crc >> (24 - 8 * k)) & 0xFF);
+  test::write_text(dir + "/huge.png", png);
+  GEO_EXPECT_THROW_WITH(read_image(dir + "/huge.png"), "huge.png", "cannot decode");
 }
 
 TEST(KittiSamples, Flow2012GroundTruthWarpHalvesTheError) {

@@ -190,6 +190,18 @@ TEST(Trainer, TwoStageRunResolvesToTheLastStagesBest) {
   EXPECT_TRUE(std::filesystem::exists(o.run_dir + "/summaries/s2-2-visible.png"));
 }
 
+// A folder holding a run killed before its first checkpoint: a fresh start is refused (it would
+// append its rows to the earlier run's metrics.csv), and the earlier files stay as they were.
+TEST(Trainer, AFreshStartInAFolderWithAPartialRunIsRefused) {
+  TrainOptions o;
+  o.run_dir = test::fresh_dir("partial") + "/run";
+  test::write_text(o.run_dir + "/metrics.csv", "iteration,stage\n1,stage1\n");
+  GEO_EXPECT_THROW_WITH(train(tiny_config(), o), "run folder '" + o.run_dir + "'", "metrics.csv",
+                        "stopped before its first checkpoint");
+  EXPECT_EQ(test::read_file(o.run_dir + "/metrics.csv"), "iteration,stage\n1,stage1\n");
+  EXPECT_FALSE(std::filesystem::exists(o.run_dir + "/config.yaml"));
+}
+
 TEST(Trainer, BadConfigStopsBeforeTrainingNamingTheKey) {
   auto cfg = tiny_config();
   cfg.data.root = "/nonexistent/kitti";
@@ -206,6 +218,20 @@ TEST(TrainingData, AGeoSynthOutFolderReadsItsRawFolder) {
   const auto data = open_training_data(d);
   EXPECT_EQ(data.root, world());
   EXPECT_EQ(data.train->size(), 7u);
+}
+
+// A damaged or partial packed cache in data.root is an error naming it, never a silent fall-back to
+// the raw KITTI lists beside it (here a readable raw world).
+TEST(TrainingData, ADamagedPackedCacheIsNamedNotSkipped) {
+  DataConfig d = tiny_config().data;
+  ASSERT_EQ(open_training_data(d).format, "kitti_raw");
+  const std::string cache = world() + "/train";
+  test::write_text(cache + "/frames.bin.tmp", "interrupted");
+  GEO_EXPECT_THROW_WITH(open_training_data(d), "packed cache " + cache + " is incomplete", "re-run geo_prepare");
+  test::write_text(cache + "/index.txt", "garbage\n");
+  GEO_EXPECT_THROW_WITH(open_training_data(d), cache + "/index.txt", "not a geo packed cache");
+  std::filesystem::remove_all(cache);
+  EXPECT_EQ(open_training_data(d).format, "kitti_raw");
 }
 
 TEST(TrainingData, PerTaskSplits) {
