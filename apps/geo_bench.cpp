@@ -38,12 +38,14 @@
 #include "core/state_io.h"
 #include "data/loader.h"
 #include "data/packed.h"
+#include "geo/geo.h"
 #include "geometry/camera.h"
 #include "train/distributed.h"
 #include "pipeline/networks.h"
 #include "train/train_step.h"
 #ifdef GEO_BENCH_PNG
 #include "train/data_source.h"
+#include "app_options.h"
 #endif
 #ifdef GEO_BENCH_CUDA_STATS
 #include <c10/cuda/CUDACachingAllocator.h>
@@ -152,7 +154,7 @@ double gflops_of(const std::function<void()>& fn) {
 
 // KITTI-like intrinsics at the network's size (fx = 0.58 W, fy = 1.92 H, centre).
 torch::Tensor intrinsics(int64_t B, int64_t H, int64_t W, const torch::Device& device) {
-  auto K = torch::tensor({0.58 * W, 0.0, 0.5 * W, 0.0, 1.92 * H, 0.5 * H, 0.0, 0.0, 1.0}, torch::kFloat32);
+  auto K = geo::kitti_like_intrinsics(H, W).to(torch::kFloat32);
   return K.view({1, 3, 3}).expand({B, 3, 3}).contiguous().to(device);
 }
 
@@ -346,19 +348,19 @@ int main(int argc, char** argv) {
   app.add_option("--config", config_path,
                  "YAML config (model, data size, stages); default: the paper's settings and its two stages");
   app.add_option("--device", device_name, "cpu (default), cuda, cuda:N or auto; cuda without CUDA is an error");
-  app.add_option("--batch", batches, "inference batch sizes, e.g. 1,4")->delimiter(',')->check(CLI::PositiveNumber);
+  app.add_option("--batch", batches, "inference batch sizes, e.g. 1,4")->delimiter(',')->check(geo::app::positive());
   app.add_option("--precision", precision, "fp32, tf32 or bf16 (run.precision; default: the config's)")
       ->check(CLI::IsMember({"fp32", "tf32", "bf16"}));
   app.add_option("--train-batch", train_batch, "training batch size (default: each stage's batch_size)");
   app.add_option("--fr", fr_mode, "feature refinement: both, on or off")->check(CLI::IsMember({"both", "on", "off"}));
   app.add_option("--warmup", warmup, "untimed inference runs before timing (fresh memory is slow to touch)")
-      ->check(CLI::NonNegativeNumber);
-  app.add_option("--iters", iters, "timed inference runs (the median is reported)")->check(CLI::PositiveNumber);
-  app.add_option("--train-warmup", train_warmup, "untimed training steps")->check(CLI::NonNegativeNumber);
-  app.add_option("--train-iters", train_iters, "timed training steps (median)")->check(CLI::PositiveNumber);
-  app.add_option("--threads", threads, "intra-op threads (0 = all cores)")->check(CLI::NonNegativeNumber);
+      ->check(geo::app::non_negative());
+  app.add_option("--iters", iters, "timed inference runs (the median is reported)")->check(geo::app::positive());
+  app.add_option("--train-warmup", train_warmup, "untimed training steps")->check(geo::app::non_negative());
+  app.add_option("--train-iters", train_iters, "timed training steps (median)")->check(geo::app::positive());
+  app.add_option("--threads", threads, "intra-op threads (0 = all cores)")->check(geo::app::non_negative());
   app.add_option("--data-root", data_root, "also time the loader on this data (packed cache; PNG data in the OpenCV build)");
-  app.add_option("--loader-batches", loader_batches, "batches timed for the loader")->check(CLI::PositiveNumber);
+  app.add_option("--loader-batches", loader_batches, "batches timed for the loader")->check(geo::app::positive());
   app.add_flag("--no-infer", no_infer, "skip the inference timings");
   app.add_flag("--no-train", no_train, "skip the training-step timings");
   app.add_flag("--no-comm", no_comm, "skip the gradient all-reduce timings (data-parallel training's cost per step)");
@@ -369,7 +371,7 @@ int main(int argc, char** argv) {
                  "also write the table as markdown (machine, LibTorch version and command in its header)");
   app.add_option("--profile", profile_top,
                  "after timing, profile one more call of each inference/training row and print its N most costly "
-                 "operators (self time)")->check(CLI::NonNegativeNumber);
+                 "operators (self time)")->check(geo::app::non_negative());
   app.add_flag("--profile-shapes", profile_shapes, "--profile tells operators apart by input shapes too");
   app.add_flag("--summary", summary, "only parameter counts and FLOPs, no timings");
   CLI11_PARSE(app, argc, argv);

@@ -15,6 +15,7 @@
 #include "core/logging.h"
 #include "core/runtime.h"
 #include "eval/protocols.h"
+#include "app_options.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"geo_eval: depth (Eigen split), optical flow (KITTI 2015) and pose (KITTI odometry) metrics"};
@@ -34,16 +35,31 @@ int main(int argc, char** argv) {
   bool no_matlab = false;
   app.add_option("--split", o.split, "eigen, kitti2015 or odometry")->check(CLI::IsMember({"eigen", "kitti2015", "odometry"}));
   app.add_option("--data-root", o.data_root, "dataset root (default: $GEO_KITTI_ROOT, else ./data/kitti)");
-  app.add_option("--checkpoint", checkpoint, "checkpoint file or run folder (default: newest run in --runs)");
+  auto* checkpoint_opt = app.add_option("--checkpoint", checkpoint, "checkpoint file or run folder (default: newest run in --runs)");
   app.add_option("--runs", runs, "where to look for the newest run when --checkpoint is not given");
-  app.add_option("--predictions", o.predictions, "evaluate precomputed predictions instead of a model");
+  auto* predictions_opt = app.add_option("--predictions", o.predictions, "evaluate precomputed predictions instead of a model");
   std::string untrained;
-  app.add_option("--untrained", untrained, "evaluate an untrained model of this config (baseline)");
-  app.add_flag("--trivial", o.trivial, "evaluate the trivial baseline: constant depth, zero flow, zero motion");
+  auto* untrained_opt = app.add_option("--untrained", untrained, "evaluate an untrained model of this config (baseline)");
+  auto* trivial_opt = app.add_flag("--trivial", o.trivial, "evaluate the trivial baseline: constant depth, zero flow, zero motion");
+  // One source of predictions: a model, a predictions file, an untrained model or the trivial baseline.
+  trivial_opt->excludes(checkpoint_opt)->excludes(predictions_opt)->excludes(untrained_opt);
+  untrained_opt->excludes(checkpoint_opt)->excludes(predictions_opt);
+  predictions_opt->excludes(checkpoint_opt);
   app.add_option("--split-file", o.split_file, "subset or order: image paths, 'folder frame side' lines or flow pair paths");
   app.add_option("--sequence", o.sequence, "odometry sequence (default 09)");
   app.add_option("--output", output, "write the results as JSON here");
   app.add_option("--output-poses", o.output_poses, "odometry: write the predicted trajectory (KITTI pose file)");
+  std::string scaling = "median";
+  app.add_option("--scaling", scaling,
+                 "eigen: depth scale per image from median(gt)/median(pred) (the papers'), from the camera's height "
+                 "above the road fitted to the prediction (no ground truth), or none")
+      ->check(CLI::IsMember({"median", "camera-height", "none"}));
+  app.add_option("--camera-height", o.camera_height, "eigen: the camera's height above the road in metres (KITTI: 1.65)")
+      ->check(geo::app::above_zero());
+  app.add_option("--segment-lengths", o.segment_lengths,
+                 "odometry: segment lengths in metres of KITTI's t_err (%) and r_err (deg/100 m) (default 100 200 ... 800)")
+      ->expected(1, -1)
+      ->check(geo::app::above_zero());
   app.add_option("--export-gt", o.export_gt, "eigen: write the ground-truth depth maps (uint16 PNG, depth x 256)");
   app.add_option("--device", device, "auto (CUDA when available), cpu, cuda or cuda:N (an error without CUDA)");
   std::string flow_resize = "nearest";
@@ -67,6 +83,9 @@ int main(int argc, char** argv) {
     }
     if (o.split.empty()) throw std::runtime_error("--split is required (eigen, kitti2015 or odometry); see --help");
     o.matlab_offset = !no_matlab;
+    o.scaling = scaling == "camera-height" ? geo::DepthScaling::kCameraHeight
+                : scaling == "none"        ? geo::DepthScaling::kNone
+                                           : geo::DepthScaling::kMedian;
     o.flow_resize = flow_resize == "bilinear" ? geo::FlowResize::kBilinear : geo::FlowResize::kNearest;
     if (o.data_root.empty()) {
       const char* env = std::getenv("GEO_KITTI_ROOT");

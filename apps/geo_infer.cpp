@@ -3,7 +3,9 @@
 // Writes per frame <name>-disp.png (colour-mapped disparity) and <name>-depth.png (uint16, depth x
 // 256 in the network's scale, which monocular training leaves unknown); for consecutive frames also
 // <name>-flow.png (colour wheel, full flow to the next frame) and trajectory.txt (KITTI pose file,
-// camera-to-world, chained from the PoseNet's relative poses).
+// camera-to-world, chained from the PoseNet's relative poses). With --camera-height (metres above
+// the road, KITTI: 1.65) depth and trajectory are in metres: each frame's scale from the road plane
+// fitted to its depth, smoothed over 11 frames (frames without a road take their neighbours').
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
@@ -19,6 +21,8 @@
 #include "data/calib.h"
 #include "data/image_io.h"
 #include "data/text_io.h"
+#include "geometry/road_plane.h"
+#include "app_options.h"
 #include "geo/geo.h"
 
 namespace fs = std::filesystem;
@@ -40,6 +44,10 @@ int main(int argc, char** argv) {
                  "fx fy cx cy of the input images in pixels (default: KITTI-like 0.58 W, 1.92 H, W/2, H/2)")
       ->expected(4);
   app.add_option("--max-frames", max_frames, "stop after this many frames (0 = all)");
+  double camera_height = 0;
+  app.add_option("--camera-height", camera_height,
+                 "the camera's height above the road in metres (KITTI: 1.65): depth and trajectory in metres")
+      ->check(geo::app::above_zero());
   CLI11_PARSE(app, argc, argv);
   geo::keep_freed_memory();
   try {
@@ -52,8 +60,20 @@ int main(int argc, char** argv) {
     // Frames as (name, image [1,3,h,w]) in order; the original size is kept for the intrinsics.
     std::vector<std::pair<std::string, torch::Tensor>> frames;
     int64_t H0 = 0, W0 = 0;
+    std::string first_file;
+    // One sequence, one camera: a frame of another size is refused (flow and motion across it mean
+    // nothing, and the intrinsics are the first frame's).
     auto add_file = [&](const fs::path& p) {
-      frames.emplace_back(p.stem().string(), geo::read_image_resized(p.string(), h, w, &H0, &W0).unsqueeze(0));
+      int64_t fh = 0, fw = 0;
+      auto image = geo::read_image_resized(p.string(), h, w, &fh, &fw).unsqueeze(0);
+      if (first_file.empty()) {
+        first_file = p.string(), H0 = fh, W0 = fw;
+      } else if (fh != H0 || fw != W0) {
+        throw std::runtime_error(p.string() + " is " + std::to_string(fw) + "x" + std::to_string(fh) + " but " +
+                                 first_file + " is " + std::to_string(W0) + "x" + std::to_string(H0) +
+                                 ": the frames of one sequence must have one size");
+      }
+      frames.emplace_back(p.stem().string(), std::move(image));
     };
     if (fs::is_directory(input)) {
       std::vector<fs::path> files;
@@ -95,7 +115,10 @@ int main(int argc, char** argv) {
     }
     fs::create_directories(output);
     spdlog::info("{} frame(s) from {} at {}x{} -> {}", frames.size(), input, w, h, output);
-    auto K = torch::tensor({0.58 * w, 0.0, 0.5 * w, 0.0, 1.92 * h, 0.5 * h, 0.0, 0.0, 1.0}).view({1, 3, 3});
+    if (frames.size() > 1 && model.spec().seq_length != 3)
+      spdlog::warn("this model's PoseNet takes {}-frame snippets: geo_infer writes flow and trajectory.txt for "
+                   "3-frame models only; depth is written for every frame", model.spec().seq_length);
+    auto K = geo::kitti_like_intrinsics(h, w).unsqueeze(0);
     if (intrinsics.size() == 4) {
       geo::check_focal_lengths(intrinsics[0], intrinsics[1], "--intrinsics");
       if (!std::isfinite(intrinsics[2]) || !std::isfinite(intrinsics[3]))
@@ -106,17 +129,36 @@ int main(int argc, char** argv) {
                          0.0, 0.0, 1.0}).view({1, 3, 3});
     }
     K = K.to(torch::kFloat32)[0];
+    // Metric scale per frame from the road plane, smoothed over the sequence.
+    std::vector<double> scales(frames.size(), 1.0);
+    if (camera_height > 0) {
+      int64_t found = 0;
+      for (size_t i = 0; i < frames.size(); ++i) {
+        const auto plane = geo::fit_road_plane(model.depth(frames[i].second[0]).cpu(), K);
+        scales[i] = geo::camera_height_scale(plane, camera_height);
+        found += plane.found;
+        if (!plane.found) spdlog::warn("{}: no road plane ({}); its scale comes from its neighbours", frames[i].first, plane.why);
+      }
+      scales = geo::smooth_scales(scales, 5);
+      for (size_t i = 0; i < frames.size(); ++i)
+        if (!(scales[i] > 0))
+          throw std::runtime_error("--camera-height: no road plane in any frame near " + frames[i].first +
+                                   ": metric scale needs a flat road in front of the camera");
+      spdlog::info("metric scale from the camera height {} m: road plane found in {} of {} frames", camera_height, found,
+                   frames.size());
+    }
     std::vector<torch::Tensor> trajectory = {torch::eye(4, torch::kFloat64)};
     for (size_t i = 0; i < frames.size(); ++i) {
       const auto& [name, img] = frames[i];
-      const auto depth = model.depth(img[0]).cpu();
+      const auto depth = model.depth(img[0]).cpu() * scales[i];
       geo::write_image(output + "/" + name + "-disp.png", geo::colorize_disparity(1.0 / depth));
       geo::write_depth_png(output + "/" + name + "-depth.png", depth);
       if (i + 1 < frames.size()) {
         const auto& next = frames[i + 1].second;
         if (model.spec().seq_length == 3) {
           geo::write_image(output + "/" + name + "-flow.png", geo::colorize_flow(model.flow(img[0], next[0], K).cpu()));
-          const auto T = model.pose({i > 0 ? frames[i - 1].second[0] : img[0], img[0], next[0]})[1].cpu().to(torch::kFloat64);
+          auto T = model.pose({i > 0 ? frames[i - 1].second[0] : img[0], img[0], next[0]})[1].cpu().to(torch::kFloat64);
+          T.slice(0, 0, 3).select(1, 3).mul_(scales[i]);  // the motion at this frame's depth scale
           trajectory.push_back(trajectory.back().matmul(torch::inverse(T)));
         }
       }

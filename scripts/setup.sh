@@ -6,6 +6,8 @@
 #   GEO_JOBS        parallel compile jobs (default: number of cores)
 #   GEO_WERROR=1    compiler warnings in geo's own code are errors (CI sets it)
 #   GEO_SETUP_PACKAGES_ONLY=1  install the packages, build nothing (scripts/fuzz.sh)
+#   GEO_TARGETS     build only these targets (space-separated, e.g. "geo_train geo_eval"; default: all,
+#                   the tests included)
 #   GEO_TORCH       which LibTorch to build against:
 #                     system (default)  Debian's libtorch-dev (1.13, CPU)
 #                     python            the one inside the PyTorch that `python3` imports (pip wheel,
@@ -89,6 +91,8 @@ fi
 if [ "${GEO_WERROR:-0}" = 1 ]; then
   cmake -S . -B "$BUILD_DIR" -DGEO_WERROR=ON >/dev/null
 fi
-echo "geo setup: building in $BUILD_DIR with $JOBS jobs (first build takes a while on 2 cores)"
-cmake --build "$BUILD_DIR" -j "$JOBS"
+TARGETS=()
+for t in ${GEO_TARGETS:-}; do TARGETS+=(--target "$t"); done
+echo "geo setup: building ${GEO_TARGETS:-everything} in $BUILD_DIR with $JOBS jobs (first build takes a while on 2 cores)"
+cmake --build "$BUILD_DIR" -j "$JOBS" "${TARGETS[@]}"
 echo "geo setup: done; tools are in $BUILD_DIR/apps"

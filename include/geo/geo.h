@@ -57,6 +57,10 @@ struct ModelSpec {
 // [3,H,W] uint8 tensor from interleaved RGB bytes (row stride in bytes; 0 = 3 * width). Copies.
 torch::Tensor rgb8_image(const uint8_t* rgb, int64_t height, int64_t width, int64_t stride = 0);
 
+// KITTI's proportions at height x width (fx = 0.58 W, fy = 1.92 H, principal point at the centre):
+// the intrinsics assumed when none are given. [3,3] float64.
+torch::Tensor kitti_like_intrinsics(int64_t height, int64_t width);
+
 class Model {
  public:
   // A file written by geo_export, or a training checkpoint / run folder of geo_train.
@@ -67,6 +71,11 @@ class Model {
 
   // Depth of each image, at the image's size: [H,W] for [3,H,W], [B,H,W] for [B,3,H,W].
   torch::Tensor depth(const torch::Tensor& image) const;
+  // Depth in metres without ground truth: depth() scaled by camera_height / the height of the road
+  // plane fitted to it (the lower part of the image must see a flat road; KITTI's camera: 1.65 m).
+  // `scale` receives the factor(s) applied. Throws geo::Error naming why when no road is found.
+  torch::Tensor metric_depth(const torch::Tensor& image, double camera_height, const torch::Tensor& intrinsics = {},
+                             std::vector<double>* scale = nullptr) const;
   // Camera motion from `from` to `to`: the [4,4] transform of points in `from`'s camera frame into
   // `to`'s (translation up to the depth's scale). [B,4,4] for batches.
   torch::Tensor relative_pose(const torch::Tensor& from, const torch::Tensor& to,

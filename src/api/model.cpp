@@ -7,12 +7,14 @@
 
 #include "core/runtime.h"
 #include "geometry/pose.h"
+#include "geometry/road_plane.h"
 #include "pipeline/checkpoint.h"
 #include "pipeline/networks.h"
 
 #include <ATen/CPUGeneratorImpl.h>
 #include <torch/torch.h>
 
+#include <cmath>
 #include <filesystem>
 #include <mutex>
 #include <sstream>
@@ -99,7 +101,7 @@ torch::Tensor network_K(const Model::Impl& m, const torch::Tensor& K, int64_t B,
   const double h = static_cast<double>(m.spec.height), w = static_cast<double>(m.spec.width);
   torch::Tensor k;
   if (!K.defined()) {
-    k = torch::tensor({0.58 * w, 0.0, 0.5 * w, 0.0, 1.92 * h, 0.5 * h, 0.0, 0.0, 1.0}, torch::kFloat64).view({3, 3});
+    k = kitti_like_intrinsics(m.spec.height, m.spec.width);
   } else {
     if (!((K.dim() == 2 && K.size(0) == 3 && K.size(1) == 3) || (K.dim() == 3 && K.size(1) == 3 && K.size(2) == 3)))
       throw Error("intrinsics must be [3,3] or [B,3,3], got " + c10::str(K.sizes()));
@@ -184,6 +186,39 @@ torch::Tensor Model::depth(const torch::Tensor& image) const {
     const auto disp = impl_->nets.depth->forward(x).disp[0];  // [B,1,h,w]
     auto depth = to_size(1.0 / disp, H, W).squeeze(1);
     return batched ? depth : depth[0];
+  });
+}
+
+torch::Tensor kitti_like_intrinsics(int64_t height, int64_t width) {
+  const double h = static_cast<double>(height), w = static_cast<double>(width);
+  return torch::tensor({0.58 * w, 0.0, 0.5 * w, 0.0, 1.92 * h, 0.5 * h, 0.0, 0.0, 1.0}, torch::kFloat64).view({3, 3});
+}
+
+torch::Tensor Model::metric_depth(const torch::Tensor& image, double camera_height, const torch::Tensor& intrinsics,
+                                  std::vector<double>* scale) const {
+  const auto depth = this->depth(image);
+  return guarded("geo::Model::metric_depth", [&] {
+    torch::InferenceMode guard;
+    if (!(camera_height > 0) || !std::isfinite(camera_height))
+      throw Error("camera_height must be a positive number of metres, got " + std::to_string(camera_height));
+    const bool batched = depth.dim() == 3;
+    const int64_t B = batched ? depth.size(0) : 1, H = depth.size(-2), W = depth.size(-1);
+    if (intrinsics.defined() && intrinsics.sizes() != torch::IntArrayRef{3, 3})
+      throw Error("intrinsics must be [3,3] (pixels of the given image), got " + c10::str(intrinsics.sizes()));
+    const auto K = intrinsics.defined() ? intrinsics.to(torch::kCPU, torch::kFloat64) : kitti_like_intrinsics(H, W);
+    auto out = depth.clone();
+    if (scale) scale->clear();
+    for (int64_t b = 0; b < B; ++b) {
+      auto d = batched ? out[b] : out;
+      const auto plane = fit_road_plane(d.cpu(), K);
+      if (!plane.found)
+        throw Error("no road plane in the lower image" + std::string(batched ? " of batch item " + std::to_string(b) : "") +
+                    ": " + plane.why + " (metric depth needs a flat road in front of the camera)");
+      const double s = camera_height_scale(plane, camera_height);
+      d.mul_(s);
+      if (scale) scale->push_back(s);
+    }
+    return out;
   });
 }
 

@@ -2,6 +2,10 @@
 
 #include "core/tensor_checks.h"
 
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
 namespace geo {
 
 std::map<std::string, double> DepthErrors::as_map() const {
@@ -35,7 +39,7 @@ double numpy_median(const torch::Tensor& values) {
 }
 
 DepthErrors eigen_image_errors(const torch::Tensor& gt_in, const torch::Tensor& pred_in,
-                               const EigenOptions& o, double* scale) {
+                               const EigenOptions& o, double* scale, double* median_ratio) {
   check_shape(gt_in, "ground-truth depth", {-1, -1});
   check_shape(pred_in, "predicted depth", {-1, -1});
   const int64_t H = gt_in.size(0), W = gt_in.size(1);
@@ -57,9 +61,10 @@ DepthErrors eigen_image_errors(const torch::Tensor& gt_in, const torch::Tensor& 
   }
   auto g = gt.masked_select(mask), p = pred.masked_select(mask);
   if (g.numel() == 0) return {};
-  double s = 1.0;
-  if (o.median_scaling) s = numpy_median(g) / numpy_median(p);
+  const double ratio = numpy_median(g) / numpy_median(p);
+  const double s = o.fixed_scale > 0 ? o.fixed_scale : o.median_scaling ? ratio : 1.0;
   if (scale) *scale = s;
+  if (median_ratio) *median_ratio = ratio;
   return depth_errors(g, (p * s).clamp(o.min_depth, o.max_depth));
 }
 
@@ -137,6 +142,58 @@ double aligned_trajectory_rmse(const torch::Tensor& gt_in, const torch::Tensor& 
   const auto t = mu_g - s * R.matmul(mu_p);
   const auto aligned = s * pred.matmul(R.t()) + t;
   return (aligned - gt).pow(2).sum(1).mean().sqrt().item<double>();
+}
+
+OdometryErrors kitti_odometry_errors(const torch::Tensor& gt_in, const torch::Tensor& pred_in,
+                                     const std::vector<double>& lengths, int64_t step) {
+  check_shape(gt_in, "gt poses", {-1, 4, 4});
+  check_shape(pred_in, "predicted poses", {gt_in.size(0), 4, 4});
+  if (step < 1) throw std::invalid_argument("kitti_odometry_errors: step must be >= 1");
+  const auto gt = gt_in.to(torch::kFloat64).contiguous(), pred = pred_in.to(torch::kFloat64).contiguous();
+  const int64_t n = gt.size(0);
+  // Path length along the ground truth up to each frame.
+  std::vector<double> dist(static_cast<size_t>(n), 0.0);
+  const auto steps = (gt.slice(0, 1).select(2, 3).slice(1, 0, 3) - gt.slice(0, 0, n - 1).select(2, 3).slice(1, 0, 3))
+                         .norm(2, 1).contiguous();
+  for (int64_t i = 1; i < n; ++i) dist[i] = dist[i - 1] + steps[i - 1].item<double>();
+  OdometryErrors out;
+  double t_sum = 0, r_sum = 0;
+  for (int64_t first = 0; first < n; first += step) {
+    for (const double len : lengths) {
+      int64_t last = -1;
+      for (int64_t i = first; i < n; ++i)
+        if (dist[i] > dist[first] + len) {
+          last = i;
+          break;
+        }
+      if (last < 0) continue;
+      const auto delta_gt = torch::inverse(gt[first]).matmul(gt[last]);
+      const auto delta_pred = torch::inverse(pred[first]).matmul(pred[last]);
+      const auto e = torch::inverse(delta_pred).matmul(delta_gt);
+      const double d = 0.5 * (e[0][0].item<double>() + e[1][1].item<double>() + e[2][2].item<double>() - 1.0);
+      r_sum += std::acos(std::max(std::min(d, 1.0), -1.0)) / len;
+      t_sum += e.slice(0, 0, 3).select(1, 3).norm().item<double>() / len;
+      ++out.segments;
+    }
+  }
+  if (out.segments > 0) {
+    out.t_err = t_sum / static_cast<double>(out.segments);
+    out.r_err = r_sum / static_cast<double>(out.segments);
+  }
+  return out;
+}
+
+std::pair<torch::Tensor, torch::Tensor> align_trajectory_scale(const torch::Tensor& gt_in, const torch::Tensor& pred_in) {
+  check_shape(gt_in, "gt poses", {-1, 4, 4});
+  check_shape(pred_in, "predicted poses", {gt_in.size(0), 4, 4});
+  const auto gt0 = gt_in.to(torch::kFloat64), pred0 = pred_in.to(torch::kFloat64);
+  const auto gt = torch::inverse(gt0[0]).unsqueeze(0).matmul(gt0);
+  auto pred = torch::inverse(pred0[0]).unsqueeze(0).matmul(pred0);
+  const auto xg = gt.slice(1, 0, 3).select(2, 3), xp = pred.slice(1, 0, 3).select(2, 3);
+  const double denom = (xp * xp).sum().item<double>();
+  const double scale = denom > 0 ? (xg * xp).sum().item<double>() / denom : 1.0;
+  pred.slice(1, 0, 3).select(2, 3).mul_(scale);
+  return {gt, pred};
 }
 
 }  // namespace geo

@@ -5,6 +5,8 @@
 
 #include <map>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace geo {
 
@@ -25,13 +27,16 @@ struct EigenOptions {
   double min_depth = 1e-3, max_depth = 80;  // mask and clamp (Eigen et al. 2014 as in GeoNet's kitti_eval)
   bool garg_crop = true;                    // rows [0.408 H, 0.992 H), columns [0.036 W, 0.964 W)
   bool median_scaling = true;               // monocular: scale by median(gt)/median(pred), numpy's median
+  double fixed_scale = 0;                   // > 0: scale by this instead (e.g. from the camera height)
 };
 
 // One image of the Eigen protocol: pred depth [h,w] (any size; resized bilinearly to the ground
 // truth, as GeoNet does), gt [H,W] with 0 = no point. Returns the image's errors (pixels = 0 when
-// nothing is valid) and the median scale used through `scale` when given.
+// nothing is valid), the scale applied through `scale` and median(gt)/median(pred) through
+// `median_ratio` when given.
 DepthErrors eigen_image_errors(const torch::Tensor& gt, const torch::Tensor& pred,
-                               const EigenOptions& options = {}, double* scale = nullptr);
+                               const EigenOptions& options = {}, double* scale = nullptr,
+                               double* median_ratio = nullptr);
 
 struct FlowErrors {
   double epe = 0;      // mean end-point error over valid pixels
@@ -69,5 +74,24 @@ double snippet_ate(const torch::Tensor& gt, const torch::Tensor& pred);
 
 // Full-trajectory RMS position error after a similarity (Umeyama Sim(3)) alignment. [N,3] each.
 double aligned_trajectory_rmse(const torch::Tensor& gt, const torch::Tensor& pred);
+
+// KITTI odometry's own measures (the devkit's evaluate_odometry.cpp, as kitti-odom-eval computes
+// them): from every `step`-th frame, for each length L, the first frame farther than L metres along
+// the ground-truth path ends a segment; the relative motion's error E = (pred delta)^-1 (gt delta)
+// gives t = |E.t| / L and r = acos(clamp((trace(E.R) - 1) / 2)) / L; both averaged over all
+// segments. gt, pred: [N,4,4] camera-to-world poses at one scale (see align_trajectory_scale).
+struct OdometryErrors {
+  double t_err = 0;      // translational error, metres per metre (x 100: the devkit's %)
+  double r_err = 0;      // rotational error, radians per metre (x 180/pi x 100: deg/100 m)
+  int64_t segments = 0;  // 0 when the path is shorter than the shortest length (then t, r are 0)
+};
+inline const std::vector<double> kKittiSegmentLengths = {100, 200, 300, 400, 500, 600, 700, 800};
+OdometryErrors kitti_odometry_errors(const torch::Tensor& gt, const torch::Tensor& pred,
+                                     const std::vector<double>& lengths = kKittiSegmentLengths, int64_t step = 10);
+
+// kitti-odom-eval's `--align scale`: both trajectories expressed in their first frame, the
+// prediction's positions multiplied by s = sum(gt.pred) / sum(pred.pred) over all frames. Returns
+// {gt, pred} so aligned, [N,4,4] float64.
+std::pair<torch::Tensor, torch::Tensor> align_trajectory_scale(const torch::Tensor& gt, const torch::Tensor& pred);
 
 }  // namespace geo

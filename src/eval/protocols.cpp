@@ -10,6 +10,7 @@
 #include "data/velodyne_depth.h"
 #include "eval/metrics.h"
 #include "geometry/pose.h"
+#include "geometry/road_plane.h"
 
 #include <spdlog/spdlog.h>
 #include <yaml-cpp/yaml.h>
@@ -47,6 +48,14 @@ void require_finite(const torch::Tensor& t, const std::string& what) {
 }
 
 
+// Frames of one pair or snippet, and ground truth and its frame, must have one size: flow between
+// frames of different sizes, or ground truth of another size, means nothing.
+void require_same_size(const std::string& a, int64_t ha, int64_t wa, const std::string& b, int64_t hb, int64_t wb) {
+  if (ha != hb || wa != wb)
+    throw std::runtime_error(a + " is " + std::to_string(wa) + "x" + std::to_string(ha) + " but " + b + " is " +
+                             std::to_string(wb) + "x" + std::to_string(hb) + ": they must have one size; nothing was scored");
+}
+
 torch::Tensor net_input(const std::string& path, const Predictor& p, int64_t* H = nullptr, int64_t* W = nullptr) {
   return read_image_resized(path, p.height(), p.width(), H, W).unsqueeze(0);
 }
@@ -58,6 +67,9 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
   torch::Tensor npy;
   if (!o.predictions.empty() && o.predictions.size() > 4 && o.predictions.substr(o.predictions.size() - 4) == ".npy") {
     npy = read_npy(o.predictions);
+    if (npy.numel() == 0)
+      throw std::runtime_error(o.predictions + ": the array has a zero dimension " + c10::str(npy.sizes()) +
+                               ": no depth to score");
     if (npy.dim() != 3 || npy.size(0) != static_cast<int64_t>(entries.size()))
       throw std::runtime_error(o.predictions + ": expected [" + std::to_string(entries.size()) +
                                ",H,W] depths (one per line of " + list + "), got " + c10::str(npy.sizes()));
@@ -70,6 +82,10 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
   int64_t images = 0, pixels = 0;
   std::vector<std::string> without_gt;  // scans that give no valid pixel (empty, NaN, all out of range)
   int64_t non_finite_points = 0, scans_with_non_finite = 0;  // NaN/Inf points are left out, counted
+  int64_t images_nonpositive = 0, pixels_nonpositive = 0;    // predicted depths <= 0, clamped, counted
+  std::vector<double> median_ratios, agreements;  // median(gt)/median(pred); camera-height scale / that
+  std::vector<std::string> without_plane;         // camera-height scaling: images whose road was not found
+  std::string first_nonpositive;
   std::string first_non_finite;
   // --export-gt without a model or predictions: write the ground truth only, no metrics.
   const bool gt_only = !pred && o.predictions.empty() && !o.trivial && !o.export_gt.empty();
@@ -108,6 +124,17 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
       }
     }
     require_finite(depth, "the depth prediction for line " + std::to_string(i + 1) + " (" + image + ")");
+    if (!o.trivial) {
+      // Depths are positive: all <= 0 is no depth map (a disparity's sign, a log depth); some <= 0 are
+      // clamped to 1e-3 as every protocol does, counted and reported.
+      const int64_t nonpositive = (depth <= 0).sum().item<int64_t>();
+      if (nonpositive == depth.numel())
+        throw std::runtime_error("the depth prediction for line " + std::to_string(i + 1) + " (" + image +
+                                 ") is <= 0 everywhere: depths must be positive (a log depth or a negated "
+                                 "disparity?); nothing was scored");
+      if (nonpositive > 0 && images_nonpositive++ == 0) first_nonpositive = std::to_string(i + 1);
+      pixels_nonpositive += nonpositive;
+    }
     const auto points = read_velodyne(velo);
     if (const int64_t bad = count_non_finite_points(points); bad > 0) {
       non_finite_points += bad;
@@ -115,8 +142,26 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
     }
     const auto gt = velodyne_depth(points, calib.img_from_velo(), H, W, vo);
     if (!o.export_gt.empty()) write_depth_png(o.export_gt + "/" + numbered("%06lld", static_cast<long long>(i)) + ".png", gt);
-    const auto err = eigen_image_errors(gt, depth.clamp_min(1e-3), eo);
+    EigenOptions image_eo = eo;
+    image_eo.median_scaling = o.scaling == DepthScaling::kMedian;
+    if (o.scaling == DepthScaling::kCameraHeight) {
+      // The intrinsics of the prediction's size; the road plane fitted to the prediction alone.
+      auto K = calib.K().to(torch::kFloat64).clone();
+      K[0] *= static_cast<double>(depth.size(1)) / static_cast<double>(W);
+      K[1] *= static_cast<double>(depth.size(0)) / static_cast<double>(H);
+      const auto plane = fit_road_plane(depth.clamp_min(1e-3), K);
+      if (!plane.found) {
+        without_plane.push_back(image + " (" + plane.why + ")");
+        progress.update(static_cast<int64_t>(i + 1));
+        continue;
+      }
+      image_eo.fixed_scale = camera_height_scale(plane, o.camera_height);
+    }
+    double applied = 1, ratio = 1;
+    const auto err = eigen_image_errors(gt, depth.clamp_min(1e-3), image_eo, &applied, &ratio);
     if (err.pixels > 0) {
+      median_ratios.push_back(ratio);
+      if (o.scaling == DepthScaling::kCameraHeight) agreements.push_back(applied / ratio);
       const double v[7] = {err.abs_rel, err.sq_rel, err.rmse, err.rmse_log, err.a1, err.a2, err.a3};
       for (int k = 0; k < 7; ++k) sums[k] += v[k];
       ++images;
@@ -130,6 +175,12 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
     spdlog::warn("{} of {} test images have no usable ground truth (no finite Velodyne point in the evaluated "
                  "region) and are left out of the means; first: {}",
                  without_gt.size(), entries.size(), without_gt.front());
+  if (!without_plane.empty())
+    spdlog::warn("camera-height scaling: no road plane in {} of {} test images, left out of the means; first: {}",
+                 without_plane.size(), entries.size(), without_plane.front());
+  if (images_nonpositive > 0)
+    spdlog::warn("{} of {} depth predictions hold {} depths <= 0 (first: line {}), clamped to 1e-3 before scoring: "
+                 "is the prediction a depth map?", images_nonpositive, entries.size(), pixels_nonpositive, first_nonpositive);
   if (non_finite_points > 0)
     spdlog::warn("{} Velodyne points in {} of {} scans have a NaN or infinite coordinate and are left out of the "
                  "ground truth; first: {}", non_finite_points, scans_with_non_finite, entries.size(), first_non_finite);
@@ -138,15 +189,30 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
     r.counts = {{"exported", images}, {"listed", static_cast<int64_t>(entries.size())}};
     return r;
   }
-  if (images == 0) throw std::runtime_error("no test image had valid ground-truth pixels");
+  if (images == 0)
+    throw std::runtime_error(without_plane.empty() ? "no test image had valid ground-truth pixels"
+                                                   : "no test image had a road plane for camera-height scaling; first: " +
+                                                         without_plane.front());
   std::set<std::string> drives;
   for (const auto& e : entries) drives.insert(e.scene());
   r.test_drives.assign(drives.begin(), drives.end());
   const char* names[7] = {"abs_rel", "sq_rel", "rmse", "rmse_log", "a1", "a2", "a3"};
   for (int k = 0; k < 7; ++k) r.metrics.emplace_back(names[k], sums[k] / static_cast<double>(images));
+  // The spread of the scale (monodepth2's "scaling ratios"): median(gt)/median(pred) per image, and
+  // with camera-height scaling how far its scale is from that ground-truth one (1 = the same).
+  auto spread = [&](const std::string& name, const std::vector<double>& v) {
+    if (v.empty()) return;
+    const auto t = torch::tensor(v, torch::kFloat64);
+    r.metrics.emplace_back(name + "_median", numpy_median(t));
+    r.metrics.emplace_back(name + "_std", v.size() > 1 ? t.std(false).item<double>() : 0.0);
+  };
+  spread("scale_ratio", median_ratios);
+  spread("scale_agreement", agreements);
   r.counts = {{"images", images}, {"pixels", pixels}, {"listed", static_cast<int64_t>(entries.size())},
               {"images_without_ground_truth", static_cast<int64_t>(without_gt.size())},
-              {"velodyne_points_non_finite", non_finite_points}};
+              {"velodyne_points_non_finite", non_finite_points},
+              {"predictions_with_nonpositive_depth", images_nonpositive},
+              {"images_without_road_plane", static_cast<int64_t>(without_plane.size())}};
   return r;
 }
 
@@ -227,9 +293,12 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
     const std::string objects = root + "/training/obj_map/" + names[i] + "_10.png";
     for (const auto* p : {&t, &s, &gocc, &gnoc}) require_file(*p, "pair " + names[i]);
     torch::Tensor flow, rigid_flow;
+    int64_t frame_h = 0, frame_w = 0;  // the pair's frame size, where the frames are read
     if (pred) {
-      int64_t H = 0, W = 0;
-      const auto a = net_input(t, *pred, &H, &W), b = net_input(s, *pred);
+      int64_t H = 0, W = 0, H2 = 0, W2 = 0;
+      const auto a = net_input(t, *pred, &H, &W), b = net_input(s, *pred, &H2, &W2);
+      require_same_size(s, H2, W2, t, H, W);
+      frame_h = H, frame_w = W;
       auto K = flow_calib_K(root, names[i]).clone();
       K[0] *= static_cast<double>(pred->width()) / W;
       K[1] *= static_cast<double>(pred->height()) / H;
@@ -238,7 +307,9 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
       const std::string prev_path = root + "/training/image_2/" + names[i] + "_09.png";
       torch::Tensor prev;
       if (fs::exists(prev_path)) {
-        prev = net_input(prev_path, *pred);
+        int64_t H0 = 0, W0 = 0;
+        prev = net_input(prev_path, *pred, &H0, &W0);
+        require_same_size(prev_path, H0, W0, t, H, W);
         ++with_previous;
       }
       const auto parts = pred->flow(a, b, K.to(torch::kFloat32).unsqueeze(0), prev);
@@ -253,6 +324,8 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
     }
     require_finite(flow, "the flow prediction for pair " + names[i]);
     const auto occ = read_flow_png(gocc), noc = read_flow_png(gnoc);
+    require_same_size(gnoc, noc.flow.size(1), noc.flow.size(2), gocc, occ.flow.size(1), occ.flow.size(2));
+    if (frame_h > 0) require_same_size(gocc, occ.flow.size(1), occ.flow.size(2), t, frame_h, frame_w);
     // A file-based prediction is meant at the ground truth's size (KITTI's devkit rejects others):
     // geo rescales it like a model's output, loudly.
     if (!pred && !o.trivial && (flow.size(1) != occ.flow.size(1) || flow.size(2) != occ.flow.size(2))) {
@@ -324,6 +397,11 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
   require_file(gt_path, "ground-truth poses of sequence " + o.sequence);
   const auto gt = read_poses(gt_path);
   const int64_t n = gt.size(0);
+  // Ground truth without motion: the whole sequence is refused; a static snippet (a stopped car)
+  // scores ATE 0 whatever the prediction (the scale alignment scales it to nothing): counted, warned.
+  if (positions(gt).sub(positions(gt)[0]).norm(2, 1).max().item<double>() < 1e-9)
+    throw std::runtime_error(gt_path + ": the ground truth has no motion (every position is the first): a trajectory "
+                             "error means nothing; nothing was scored");
   torch::Tensor traj;
   // 5-frame PoseNets (GeoNet's odometry model): snippet c-2..c+2 predicted at once, cam_to_world of
   // its frames in the target's frame (the target's pose is the identity).
@@ -376,6 +454,7 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
   } else {
     for (int64_t i = 0; i < n; ++i) centres.push_back(i);
   }
+  int64_t static_snippets = 0;
   std::vector<double> ates;
   for (int64_t c : centres) {
     if (c < 2 || c + 2 >= n) continue;  // snippets need two neighbours on each side
@@ -385,6 +464,7 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
     // A 5-frame PoseNet is scored on its own snippet predictions (GeoNet's protocol); a 3-frame one
     // on the chained trajectory.
     const auto& own = snippet_poses[static_cast<size_t>(c)];
+    if (rel(gt, c - 2).norm(2, 1).max().item<double>() < 1e-9) ++static_snippets;
     ates.push_back(snippet_ate(rel(gt, c - 2), own.defined() ? rel(own, 0) : rel(traj, c - 2)));
   }
   if (ates.empty()) throw std::runtime_error("sequence " + o.sequence + " has no 5-frame snippet");
@@ -393,7 +473,23 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
   r.metrics = {{"ate_mean", t.mean().item<double>()},
                {"ate_std", ates.size() > 1 ? t.std(false).item<double>() : 0.0},
                {"trajectory_rmse_sim3", aligned_trajectory_rmse(positions(gt), positions(traj))}};
-  r.counts = {{"snippets", static_cast<int64_t>(ates.size())}, {"frames", n}};
+  if (static_snippets > 0)
+    spdlog::warn("{} of {} snippets have no ground-truth motion: they score ATE 0 whatever the prediction", static_snippets,
+                 ates.size());
+  // KITTI's own measures on the whole trajectory at the ground truth's scale (kitti-odom-eval's
+  // --align scale: one least-squares factor, what a monocular trajectory needs).
+  const auto [gt_aligned, traj_aligned] = align_trajectory_scale(gt, traj);
+  const auto kitti = kitti_odometry_errors(gt_aligned, traj_aligned, o.segment_lengths);
+  if (kitti.segments > 0) {
+    r.metrics.emplace_back("t_err", kitti.t_err * 100);                  // %
+    r.metrics.emplace_back("r_err", kitti.r_err * 180 / M_PI * 100);     // deg / 100 m
+  } else {
+    spdlog::warn("sequence {} is shorter than the shortest segment length ({} m): KITTI's t_err / r_err are not "
+                 "computed (geo_eval --segment-lengths)", o.sequence,
+                 o.segment_lengths.empty() ? 0.0 : *std::min_element(o.segment_lengths.begin(), o.segment_lengths.end()));
+  }
+  r.counts = {{"snippets", static_cast<int64_t>(ates.size())}, {"frames", n}, {"static_snippets", static_snippets},
+              {"segments", kitti.segments}};
   return r;
 }
 
@@ -450,6 +546,10 @@ EvalResult evaluate(const EvalOptions& o, Predictor* pred) {
   else if (o.split == "odometry") r = eval_odometry(o, root, pred);
   else throw std::runtime_error("unknown split '" + o.split + "' (eigen, kitti2015, odometry)");
   r.split = o.split;
+  if (o.split == "eigen" && !gt_only)
+    r.scaling = o.scaling == DepthScaling::kMedian ? "median"
+                : o.scaling == DepthScaling::kNone ? "none"
+                                                   : "camera-height " + std::to_string(o.camera_height) + " m";
   r.source = pred ? pred->path() : o.trivial ? "trivial baseline" : !o.predictions.empty() ? o.predictions : "ground truth export";
   r.data_root = root;
   if (!is_synth_world(o.data_root, root)) {
@@ -475,8 +575,9 @@ std::string EvalResult::json() const {
     for (char c : x) out += (c == '"' || c == '\\') ? std::string("\\") + c : std::string(1, c);
     return out + "\"";
   };
-  s << "{\n  \"split\": " << q(split) << ",\n  \"source\": " << q(source) << ",\n  \"data_root\": " << q(data_root)
-    << ",\n  \"metrics\": {";
+  s << "{\n  \"split\": " << q(split) << ",\n  \"source\": " << q(source) << ",\n  \"data_root\": " << q(data_root);
+  if (!scaling.empty()) s << ",\n  \"scaling\": " << q(scaling);
+  s << ",\n  \"metrics\": {";
   for (size_t i = 0; i < metrics.size(); ++i) {  // JSON has no NaN/Inf: a non-finite metric is null
     s << (i ? ", " : "") << q(metrics[i].first) << ": ";
     if (std::isfinite(metrics[i].second)) s << metrics[i].second;
@@ -507,6 +608,7 @@ EvalResult read_result(const std::string& path) {
   EvalResult r;
   r.split = n["split"].as<std::string>("");
   r.source = n["source"].as<std::string>("");
+  r.scaling = n["scaling"].as<std::string>("");
   try {
     for (const auto& kv : n["metrics"])
       r.metrics.emplace_back(kv.first.as<std::string>(),

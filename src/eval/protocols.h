@@ -18,6 +18,10 @@
 
 namespace geo {
 
+// How monocular depth gets its scale: per-image median(gt)/median(pred) (the papers' protocol), the
+// camera's known height above the fitted road plane (no ground truth used), or none.
+enum class DepthScaling { kMedian, kCameraHeight, kNone };
+
 struct EvalOptions {
   std::string split;            // eigen | kitti2015 | odometry
   std::string data_root;        // KITTI raw / KITTI 2015 / odometry root, or a geo_synth world root
@@ -29,10 +33,14 @@ struct EvalOptions {
   bool matlab_offset = true;    // eigen: pixel = round(x/z) - 1 as in the reference code
   bool trivial = false;         // evaluate the trivial baseline: constant depth, zero flow, no motion
   FlowResize flow_resize = FlowResize::kNearest;  // kitti2015: prediction -> ground-truth size (GeoNet: nearest)
+  DepthScaling scaling = DepthScaling::kMedian;  // eigen
+  double camera_height = 1.65;  // metres above the road (KITTI's; geo_synth's): --scaling camera-height
+  std::vector<double> segment_lengths = kKittiSegmentLengths;  // odometry: KITTI's t_err / r_err segments (m)
 };
 
 struct EvalResult {
   std::string split, source, data_root;
+  std::string scaling;  // eigen: median, camera-height (at camera_height m) or none
   std::vector<std::pair<std::string, double>> metrics;
   std::vector<std::pair<std::string, int64_t>> counts;
   // The KITTI raw drives the test set comes from ("2011_09_26_drive_0002"; none for a geo_synth

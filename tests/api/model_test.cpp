@@ -7,6 +7,8 @@
 #include "core/config.h"
 #include "core/runtime.h"
 #include "core/state_io.h"
+#include "data/image_io.h"
+#include "data/text_io.h"
 #include "eval/predictor.h"
 #include "geometry/pose.h"
 #include "pipeline/checkpoint.h"
@@ -187,6 +189,28 @@ TEST(Api, Bf16PrecisionStaysCloseToFp32) {
   EXPECT_EQ(Model::load(checkpoint(), o).spec().precision, cpu_has_fast_bf16() ? "bf16" : "fp32");
   o.precision = "fp16";
   GEO_EXPECT_THROW_WITH(Model::load(checkpoint(), o), "precision 'fp16'", "fp32, bf16, auto");
+}
+
+// geo_infer on a folder of frames: per frame depth and disparity, per consecutive pair the flow, and
+// the chained trajectory (one pose per frame); a frame of another size in the folder is refused.
+TEST(GeoInfer, WritesDepthFlowAndTrajectoryAndRefusesMixedFrameSizes) {
+  const auto dir = test::fresh_dir("geo_infer");
+  for (int i = 0; i < 3; ++i) write_image(dir + "/frames/00000" + std::to_string(i) + ".png", image(64, 208, 0.1 * i));
+  const std::string tool = test::apps_dir() + "/geo_infer --checkpoint " + checkpoint() + " --device cpu --input ";
+  ASSERT_EQ(std::system((tool + dir + "/frames --output " + dir + "/out > " + dir + "/log 2>&1").c_str()), 0)
+      << test::read_file(dir + "/log");
+  for (const char* f : {"000000-depth.png", "000002-disp.png", "000000-flow.png", "000001-flow.png"})
+    EXPECT_TRUE(std::filesystem::exists(dir + "/out/" + f)) << f;
+  EXPECT_FALSE(std::filesystem::exists(dir + "/out/000002-flow.png"));  // the last frame has no next
+  const auto trajectory = read_poses(dir + "/out/trajectory.txt");
+  EXPECT_EQ(trajectory.size(0), 3);
+  EXPECT_TRUE(torch::allclose(trajectory[0], torch::eye(4, torch::kFloat64)));
+
+  write_image(dir + "/frames/000003.png", image(32, 104));
+  EXPECT_NE(std::system((tool + dir + "/frames --output " + dir + "/out2 > " + dir + "/log 2>&1").c_str()), 0);
+  const std::string log = test::read_file(dir + "/log");
+  EXPECT_NE(log.find(dir + "/frames/000003.png is 104x32 but " + dir + "/frames/000000.png is 208x64"), std::string::npos)
+      << log;
 }
 
 }  // namespace

@@ -135,6 +135,41 @@ double metric_of(const EvalResult& r, const std::string& name) {
   return -1;
 }
 
+// KITTI odometry's t_err / r_err (devkit, kitti-odom-eval) on a hand-made pair: 21 frames 1 m apart
+// along z, segment lengths 5 and 10 m, every 10th frame: segments (0 -> 6), (0 -> 11), (10 -> 16)
+// (the first frame farther than L along the path; 10 + 10 has no frame 21).
+TEST(PoseMetrics, KittiOdometryErrorsAsTheDevkitOnAHandMadePair) {
+  auto pose = [](double z, double yaw) {
+    auto T = torch::eye(4, torch::kFloat64);
+    T[0][0] = std::cos(yaw), T[0][2] = std::sin(yaw), T[2][0] = -std::sin(yaw), T[2][2] = std::cos(yaw);
+    T[2][3] = z;
+    return T;
+  };
+  std::vector<torch::Tensor> gt, longer, turning;
+  for (int i = 0; i < 21; ++i) {
+    gt.push_back(pose(i, 0));
+    longer.push_back(pose(1.1 * i, 0));      // 10% too fast: the error is 0.1 x the segment's frames
+    turning.push_back(pose(i, 0.01 * i));    // right positions, heading off by 0.01 rad per frame
+  }
+  const std::vector<double> lengths = {5, 10};
+  const auto a = kitti_odometry_errors(torch::stack(gt), torch::stack(longer), lengths);
+  EXPECT_EQ(a.segments, 3);
+  EXPECT_NEAR(a.t_err, (0.6 / 5 + 1.1 / 10 + 0.6 / 5) / 3, 1e-12);
+  EXPECT_NEAR(a.r_err, 0.0, 1e-12);
+  // Rotation: E = (R_f^T R_l, R_f^T (t_l - t_f))^-1 (I, t_l - t_f): angle 0.01 (l - f); translation
+  // |t - R_y(-0.01 f) t| = 2 |t| sin(0.005 f), nonzero only for the segment from frame 10.
+  const auto b = kitti_odometry_errors(torch::stack(gt), torch::stack(turning), lengths);
+  EXPECT_EQ(b.segments, 3);
+  EXPECT_NEAR(b.r_err, (0.06 / 5 + 0.11 / 10 + 0.06 / 5) / 3, 1e-12);
+  EXPECT_NEAR(b.t_err, (0.0 + 0.0 + 2 * 6 * std::sin(0.05) / 5) / 3, 1e-12);
+  EXPECT_EQ(kitti_odometry_errors(torch::stack(gt), torch::stack(gt), lengths).t_err, 0.0);
+  EXPECT_EQ(kitti_odometry_errors(torch::stack(gt), torch::stack(gt)).segments, 0);  // 20 m < 100 m
+  // kitti-odom-eval's --align scale: the 10% too long trajectory scaled back is the truth.
+  const auto [g, p] = align_trajectory_scale(torch::stack(gt), torch::stack(longer));
+  EXPECT_TRUE(torch::allclose(p, g, 0, 1e-12));
+  EXPECT_NEAR(kitti_odometry_errors(g, p, lengths).t_err, 0.0, 1e-12);
+}
+
 TEST(Protocols, GroundTruthPredictionsScorePerfectlyOnASyntheticWorld) {
   const auto root = test::fresh_dir("protocols");
   std::filesystem::rename(test::write_small_world("protocols_world", 6, 2, 8), root + "/world");
@@ -287,6 +322,108 @@ TEST(Protocols, GroundTruthPredictionsScorePerfectlyOnASyntheticWorld) {
   GEO_EXPECT_THROW_WITH(evaluate(p, &three), "09.txt holds 8 poses", "000008.png exists");
 }
 
+
+// Predictions and ground truth that cannot be right are refused (naming the file) or, where a
+// protocol has an answer, scored and counted in the results: depths <= 0, ground truth without
+// motion, frames or flow maps of another size than their pair.
+TEST(Protocols, PredictionsAndGroundTruthThatCannotBeRightAreRefusedOrCounted) {
+  const auto root = test::fresh_dir("protocols_bad");
+  std::filesystem::rename(test::write_small_world("protocols_bad_world", 8, 1, 9), root + "/world");
+  const auto tests = read_lines(root + "/world/raw/splits/eigen/test_files.txt");
+  ASSERT_GE(tests.size(), 2u);
+  EvalOptions e;
+  e.split = "eigen";
+  e.data_root = root + "/world";
+  e.predictions = root + "/depth";
+  auto depth_file = [&](size_t i) { return root + "/depth/" + std::string(5, '0') + std::to_string(i) + ".png"; };
+  std::filesystem::create_directories(root + "/depth");
+  for (size_t i = 0; i < tests.size(); ++i) write_depth_png(depth_file(i), torch::full({1, 64, 208}, 10.0));
+  EXPECT_EQ(count_of(evaluate(e, nullptr), "predictions_with_nonpositive_depth"), 0);
+  auto half = torch::full({1, 64, 208}, 10.0);
+  half.slice(2, 0, 104).zero_();  // 0 in a depth PNG: no depth
+  write_depth_png(depth_file(1), half);
+  EXPECT_EQ(count_of(evaluate(e, nullptr), "predictions_with_nonpositive_depth"), 1);
+  write_depth_png(depth_file(1), torch::zeros({1, 64, 208}));
+  GEO_EXPECT_THROW_WITH(evaluate(e, nullptr), "line 2", "is <= 0 everywhere", "nothing was scored");
+
+  // Odometry: no motion at all is refused; a stopped car's snippet scores 0 whatever the prediction,
+  // so it is counted.
+  EvalOptions p;
+  p.split = "odometry";
+  p.data_root = root + "/world";
+  const std::string gt_path = root + "/world/odometry/poses/09.txt";
+  p.predictions = gt_path;
+  const auto moving = read_poses(gt_path);
+  ASSERT_EQ(moving.size(0), 9);
+  EXPECT_EQ(count_of(evaluate(p, nullptr), "static_snippets"), 0);
+  auto stopped = moving.clone();
+  for (int64_t i = 1; i < 5; ++i) stopped[i] = moving[0];  // frames 0-4 at one place: snippet 2
+  write_poses(gt_path, stopped);
+  EXPECT_EQ(count_of(evaluate(p, nullptr), "static_snippets"), 1);
+  write_poses(gt_path, moving[0].unsqueeze(0).repeat({9, 1, 1}));
+  GEO_EXPECT_THROW_WITH(evaluate(p, nullptr), gt_path, "has no motion");
+  write_poses(gt_path, moving);
+  // KITTI's t_err / r_err: none on a path shorter than 100 m, 0 for the truth itself on short segments.
+  EXPECT_EQ(count_of(evaluate(p, nullptr), "segments"), 0);
+  p.segment_lengths = {0.1};
+  const auto short_segments = evaluate(p, nullptr);
+  EXPECT_GT(count_of(short_segments, "segments"), 0);
+  EXPECT_NEAR(metric_of(short_segments, "t_err"), 0.0, 1e-6);
+  EXPECT_NEAR(metric_of(short_segments, "r_err"), 0.0, 1e-2);  // acos near 1: ~1e-8 rad of rounding
+
+  // Flow: flow_noc of another size than flow_occ; a pair's second frame of another size (a model
+  // reads the frames).
+  EvalOptions f;
+  f.split = "kitti2015";
+  f.data_root = root + "/world";
+  f.predictions = root + "/world/kitti2015/training/flow_occ";
+  const std::string noc = root + "/world/kitti2015/training/flow_noc/000000_10.png";
+  const auto noc_gt = read_flow_png(noc);
+  write_flow_png(noc, torch::zeros({2, 32, 104}), torch::ones({1, 32, 104}));
+  GEO_EXPECT_THROW_WITH(evaluate(f, nullptr), noc, "is 104x32", "flow_occ/000000_10.png is 208x64");
+  write_flow_png(noc, noc_gt.flow, noc_gt.valid);
+  const std::string second = root + "/world/kitti2015/training/image_2/000000_11.png";
+  write_image(second, torch::zeros({3, 32, 104}));
+  Predictor untrained(parse_config("model: {encoder_depth: 18}\ndata: {height: 64, width: 208}\n"), "cpu");
+  f.predictions.clear();
+  GEO_EXPECT_THROW_WITH(evaluate(f, &untrained), second, "must have one size");
+}
+
+// Depth at an unknown scale (the dense truth x 0.3) gets its metres back from the camera's height
+// above the road (geo_synth's 1.65 m), without ground truth: the same scale as median scaling to
+// within 2%, and errors at most 10% above median scaling's; --scaling none keeps the 0.3.
+TEST(Protocols, CameraHeightScalingRecoversTheScaleWithoutGroundTruth) {
+  const auto root = test::fresh_dir("protocols_height");
+  std::filesystem::rename(test::write_small_world("protocols_height_world", 6, 1, 6), root + "/world");
+  const auto tests = read_lines(root + "/world/raw/splits/eigen/test_files.txt");
+  std::filesystem::create_directories(root + "/depth");
+  for (size_t i = 0; i < tests.size(); ++i) {
+    const auto d = tests[i].substr(0, tests[i].find("/image_02"));
+    const auto f = tests[i].substr(tests[i].rfind('/') + 1);
+    const auto truth = read_depth_png(root + "/world/raw/" + d + "/proj_depth/groundtruth/image_02/" + f);
+    write_depth_png(root + "/depth/" + std::string(5, '0') + std::to_string(i) + ".png", truth * 0.3);
+  }
+  EvalOptions e;
+  e.split = "eigen";
+  e.data_root = root + "/world";
+  e.predictions = root + "/depth";
+  const auto median = evaluate(e, nullptr);
+  EXPECT_EQ(median.scaling, "median");
+  EXPECT_NEAR(metric_of(median, "scale_ratio_median"), 1 / 0.3, 0.05);
+  e.scaling = DepthScaling::kCameraHeight;
+  const auto height = evaluate(e, nullptr);
+  EXPECT_EQ(count_of(height, "images_without_road_plane"), 0);
+  EXPECT_NEAR(metric_of(height, "scale_agreement_median"), 1.0, 0.02);
+  // Not worse than median scaling by more than 10% (here better: the height gives the exact 1/0.3,
+  // while the median against Velodyne points is off by the scanner's 27 cm).
+  EXPECT_LT(metric_of(height, "abs_rel"), 1.1 * metric_of(median, "abs_rel"));
+  EXPECT_NE(height.json().find("\"scaling\": \"camera-height 1.650000 m\""), std::string::npos) << height.json();
+  std::printf("camera-height scaling: abs_rel %.4f (median scaling %.4f), scale agreement %.4f +- %.4f\n",
+              metric_of(height, "abs_rel"), metric_of(median, "abs_rel"), metric_of(height, "scale_agreement_median"),
+              metric_of(height, "scale_agreement_std"));
+  e.scaling = DepthScaling::kNone;
+  EXPECT_GT(metric_of(evaluate(e, nullptr), "abs_rel"), 0.6);  // 1 - 0.3, before the clamp
+}
 
 // GeoNet trains each table's model on data disjoint from its test set. geo_eval reads the training
 // data from the checkpoint's config: the shipped eigen_zhou lists hold the drive of odometry 09
