@@ -90,6 +90,35 @@ RoadPlane fit_road_plane(const torch::Tensor& depth_in, const torch::Tensor& K_i
   std::uniform_int_distribution<size_t> pick(0, pts.size() - 1);
   Plane best;
   size_t best_count = 0;
+  if (o.level_camera) {
+    for (int it = 0; it < o.iterations; ++it) {
+      const Plane p{{0, 1, 0}, pts[pick(rng)][1]};
+      if (!(p.h > 0)) continue;  // a point above the camera: not the road
+      const size_t count = inliers_of(p, pts, o.inlier_band).size();
+      if (count > best_count) best = p, best_count = count;
+    }
+    if (best_count == 0) {
+      out.why = "no point of the lower image lies below the camera";
+      return out;
+    }
+    for (int round = 0; round < 2; ++round) {
+      const auto in = inliers_of(best, pts, o.inlier_band);
+      double sum = 0;
+      for (size_t i : in) sum += pts[i][1];
+      if (!in.empty()) best.h = sum / static_cast<double>(in.size());
+    }
+    const auto in = inliers_of(best, pts, o.inlier_band);
+    out.inliers = static_cast<int64_t>(in.size());
+    if (static_cast<double>(in.size()) < o.min_inlier_fraction * static_cast<double>(pts.size())) {
+      out.why = "only " + std::to_string(in.size()) + " of " + std::to_string(pts.size()) +
+                " points of the lower image lie on one level road plane";
+      return out;
+    }
+    out.found = true;
+    out.height = best.h;
+    out.normal[1] = 1;
+    return out;
+  }
   for (int it = 0; it < o.iterations; ++it) {
     const Vec3 &a = pts[pick(rng)], &b = pts[pick(rng)], &c = pts[pick(rng)];
     Vec3 n = cross(sub(b, a), sub(c, a));

@@ -17,6 +17,10 @@
 namespace geo {
 
 struct RoadPlaneOptions {
+  // A level camera (KITTI's are mounted within about a degree of level, as geo_synth's): the road's
+  // normal is the camera's y axis and only the height is fitted. Off: the normal is fitted too
+  // (a pitched camera), which a predicted depth map's bent near field can tilt.
+  bool level_camera = true;
   double bottom_fraction = 0.4;    // rows used: the lowest 40% of the image (the road ahead)
   double max_tilt_deg = 20.0;      // the plane's normal within this angle of the camera's down axis
   double inlier_band = 0.05;       // inliers lie within this fraction of the plane's height of it
@@ -34,11 +38,13 @@ struct RoadPlane {
   std::string why;             // when !found: what was missing
 };
 
-// RANSAC over triples of back-projected points of the image's lower part (planes tilted more than
-// max_tilt_deg from horizontal are skipped), then a least-squares refit (the smallest principal
-// axis of the inliers) repeated once with the refit's inliers: the "RANSAC + least squares"
-// ground-plane estimate of monocular visual odometry (e.g. Song & Chandraker, CVPR 2014; Zhou et
-// al., "Reliable scale estimation and correction for monocular visual odometry", IV 2016).
+// The points of the image's lower part, back-projected. Level camera: RANSAC over single points for
+// the height h (the points within inlier_band x h of y = h count), refined by the inliers' mean,
+// twice. Otherwise RANSAC over triples (planes tilted more than max_tilt_deg from horizontal are
+// skipped), refined by least squares (the smallest principal axis of the inliers), twice. The
+// "RANSAC + least squares" ground-plane estimate of monocular visual odometry (Kitt et al., IV 2011,
+// with a known camera pitch; Song & Chandraker, CVPR 2014; Zhou et al., "Reliable scale estimation
+// and correction for monocular visual odometry", IV 2016).
 // depth: [H,W] (or [1,H,W]); pixels <= 0 or non-finite are ignored. K: [3,3] for that size.
 RoadPlane fit_road_plane(const torch::Tensor& depth, const torch::Tensor& K, const RoadPlaneOptions& options = {});
 

@@ -51,18 +51,34 @@ TEST(RoadPlane, KnownPlaneGivesItsExactHeightDespiteObstaclesAndHoles) {
 TEST(RoadPlane, APitchedCameraSeesTheSameHeight) {
   const double pitch = 4.0 * M_PI / 180;  // the road's normal 4 degrees off the camera's y axis
   const double n[3] = {0, std::cos(pitch), std::sin(pitch)};
-  const auto plane = fit_road_plane(plane_depth(n, 1.73), K());
+  RoadPlaneOptions free;
+  free.level_camera = false;  // the normal fitted as well
+  const auto plane = fit_road_plane(plane_depth(n, 1.73), K(), free);
   ASSERT_TRUE(plane.found) << plane.why;
   EXPECT_NEAR(plane.height, 1.73, 1e-9);
   EXPECT_NEAR(plane.normal[2], std::sin(pitch), 1e-9);
+  // The same obstacles and holes as above with the normal fitted: still the exact height.
+  const double down[3] = {0, 1, 0};
+  auto depth = plane_depth(down, 1.65);
+  depth.slice(0, 34, 44).slice(1, 20, 60).mul_(0.5);
+  depth.slice(0, 40, 48).slice(1, 100, 110).zero_();
+  const auto level = fit_road_plane(depth, K(), free);
+  ASSERT_TRUE(level.found) << level.why;
+  EXPECT_NEAR(level.height, 1.65, 1e-9);
 }
 
 TEST(RoadPlane, NoRoadIsReportedNotGuessed) {
-  // A wall filling the image (constant depth: a fronto-parallel plane, 90 degrees from a road).
+  // A wall filling the image (constant depth: a fronto-parallel plane, 90 degrees from a road): no
+  // level plane holds 20% of its points, and no plane within 20 degrees of horizontal fits it.
   const auto wall = fit_road_plane(torch::full({kH, kW}, 5.0, torch::kFloat64), K());
   EXPECT_FALSE(wall.found);
-  EXPECT_NE(wall.why.find("degrees"), std::string::npos) << wall.why;
+  EXPECT_NE(wall.why.find("lie on one level road plane"), std::string::npos) << wall.why;
   EXPECT_EQ(camera_height_scale(wall, 1.65), 0.0);
+  RoadPlaneOptions free;
+  free.level_camera = false;
+  const auto tilted = fit_road_plane(torch::full({kH, kW}, 5.0, torch::kFloat64), K(), free);
+  EXPECT_FALSE(tilted.found);
+  EXPECT_NE(tilted.why.find("degrees"), std::string::npos) << tilted.why;
   const auto empty = fit_road_plane(torch::zeros({kH, kW}), K());
   EXPECT_FALSE(empty.found);
   EXPECT_NE(empty.why.find("fewer than 3 valid depths"), std::string::npos) << empty.why;
