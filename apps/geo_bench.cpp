@@ -43,9 +43,9 @@
 #include "train/distributed.h"
 #include "pipeline/networks.h"
 #include "train/train_step.h"
+#include "app_options.h"
 #ifdef GEO_BENCH_PNG
 #include "train/data_source.h"
-#include "app_options.h"
 #endif
 #ifdef GEO_BENCH_CUDA_STATS
 #include <c10/cuda/CUDACachingAllocator.h>
