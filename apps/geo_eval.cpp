@@ -52,9 +52,12 @@ int main(int argc, char** argv) {
   std::string scaling = "median";
   app.add_option("--scaling", scaling,
                  "eigen: depth scale per image from median(gt)/median(pred) (the papers'), from the camera's height "
-                 "above the road fitted to the prediction (no ground truth), or none")
+                 "above the road fitted to the prediction (no ground truth), or none; odometry: camera-height also "
+                 "scores the trajectory in metres (metric_t_err, metric_r_err, metric_scale_error)")
       ->check(CLI::IsMember({"median", "camera-height", "none"}));
-  app.add_option("--camera-height", o.camera_height, "eigen: the camera's height above the road in metres (KITTI: 1.65)")
+  app.add_option("--camera-height", o.camera_height,
+                 "eigen, odometry: the camera's height above the road in metres (default: the data root's camera_height.txt, "
+                 "which geo_synth writes, else KITTI's 1.65)")
       ->check(geo::app::above_zero());
   app.add_option("--segment-lengths", o.segment_lengths,
                  "odometry: segment lengths in metres of KITTI's t_err (%) and r_err (deg/100 m) (default 100 200 ... 800)")

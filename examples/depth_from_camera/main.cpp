@@ -1,6 +1,8 @@
 // depth_from_camera: depth statistics and the camera path of a folder of frames, with geo as a
 // library. The frames are read by this program (OpenCV here; any RGB buffer works).
-//   depth_from_camera MODEL FRAMES_DIR [OUT_DIR]   (OUT_DIR: <frame>-depth.png as geo_infer writes them)
+//   depth_from_camera MODEL FRAMES_DIR [OUT_DIR [CAMERA_HEIGHT]]
+// OUT_DIR: <frame>-depth.png as geo_infer writes them. CAMERA_HEIGHT (metres above the road, KITTI:
+// 1.65): also the depth in metres, scaled by the camera's height above the road fitted to it.
 #include <geo/geo.h>
 
 #include <opencv2/imgcodecs.hpp>
@@ -14,7 +16,7 @@
 
 int main(int argc, char** argv) {
   if (argc < 3) {
-    std::fprintf(stderr, "usage: %s MODEL FRAMES_DIR [OUT_DIR]\n", argv[0]);
+    std::fprintf(stderr, "usage: %s MODEL FRAMES_DIR [OUT_DIR [CAMERA_HEIGHT]]\n", argv[0]);
     return 2;
   }
   try {
@@ -37,6 +39,15 @@ int main(int argc, char** argv) {
       std::printf("%s depth min %.3f median %.3f max %.3f camera at (%.3f, %.3f, %.3f)\n", f.filename().c_str(),
                   depth.min().item<float>(), median, depth.max().item<float>(), camera_to_world[0][3].item<float>(),
                   camera_to_world[1][3].item<float>(), camera_to_world[2][3].item<float>());
+      if (argc > 4) {  // metres, from the camera's height above the road (no ground truth)
+        try {
+          std::vector<double> scale;
+          const torch::Tensor metres = model.metric_depth(image, std::stod(argv[4]), {}, &scale).cpu();
+          std::printf("  in metres: median %.2f m (x %.3f)\n", metres.flatten().median().item<float>(), scale.at(0));
+        } catch (const geo::Error& e) {  // no road in front of the camera: said, not guessed
+          std::printf("  in metres: %s\n", e.what());
+        }
+      }
       if (argc > 3) {  // 16-bit PNG, depth x 256, as geo_infer's <frame>-depth.png
         const auto q = (depth.clamp(0, 65535.0 / 256.0) * 256).round().to(torch::kInt32).contiguous();
         cv::Mat m(static_cast<int>(q.size(0)), static_cast<int>(q.size(1)), CV_32S, q.data_ptr<int32_t>()), m16;

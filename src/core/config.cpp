@@ -538,6 +538,10 @@ void StageConfig::validate(Checker& c) const {
                      name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_.-") ==
                          std::string::npos;
   c.require(plain, "name", name, "must be a plain name of letters, digits, '_', '-' and '.' (it names files)");
+  // best-<name>.pt must not read as a checkpoint <stage>-NNNNNNNN.pt.
+  const bool numbered = name.size() >= 9 && name[name.size() - 9] == '-' &&
+                        name.find_first_not_of("0123456789", name.size() - 8) == std::string::npos;
+  c.require(!numbered, "name", name, "must not end in '-' and eight digits (the checkpoints' numbering)");
   c.require(iterations > 0 && iterations <= kMaxCount, "iterations", iterations, kCountRange);
   c.require(!train.empty(), "train", train, "must name at least one of depth, pose, flow");
   c.require(learning_rate > 0, "learning_rate", learning_rate, "must be > 0");

@@ -32,7 +32,22 @@ torch::Tensor KeyValues::projection(const std::string& key) const {
   const auto P = matrix(key, 3, 4);
   const double fx = P[0][0].item<double>(), fy = P[1][1].item<double>();
   check_focal_lengths(fx, fy, source + ": calibration entry '" + key + "'");
+  // The principal point lies near the image: within 1e5 pixels of its corner (KITTI: ~600, ~180).
+  const double cx = P[0][2].item<double>(), cy = P[1][2].item<double>();
+  if (!(std::abs(cx) < 1e5) || !(std::abs(cy) < 1e5))
+    throw std::runtime_error(source + ": calibration entry '" + key + "': principal point cx = " + std::to_string(cx) +
+                             ", cy = " + std::to_string(cy) + " is not plausible (must be within 1e5 pixels)");
   return P;
+}
+
+torch::Tensor KeyValues::rotation(const std::string& key) const {
+  const auto R = matrix(key, 3, 3);
+  const double off = (R.matmul(R.t()) - torch::eye(3, torch::kFloat64)).abs().max().item<double>();
+  const double det = torch::det(R).item<double>();
+  if (!(off < 1e-2) || !(det > 0))
+    throw std::runtime_error(source + ": calibration entry '" + key + "' is not a rotation (R R^T differs from I by " +
+                             std::to_string(off) + ", det " + std::to_string(det) + ")");
+  return R;
 }
 
 void check_focal_lengths(double fx, double fy, const std::string& what) {
@@ -90,7 +105,7 @@ RawCalib read_raw_calib(const std::string& date_dir, int camera, bool need_velo)
   calib.P_rect = cam.projection("P_rect_" + c);
   calib.R_rect = torch::eye(4, torch::kFloat64);
   calib.R_rect.index_put_({torch::indexing::Slice(0, 3), torch::indexing::Slice(0, 3)},
-                          cam.matrix("R_rect_00", 3, 3));
+                          cam.rotation("R_rect_00"));
   if (cam.has("S_rect_" + c)) {
     const auto& s = cam.get("S_rect_" + c, 2);
     calib.width = static_cast<int64_t>(s[0]);
@@ -100,7 +115,7 @@ RawCalib read_raw_calib(const std::string& date_dir, int camera, bool need_velo)
   if (need_velo) {
     const auto velo = read_key_values(date_dir + "/calib_velo_to_cam.txt");
     calib.cam_from_velo.index_put_({torch::indexing::Slice(0, 3), torch::indexing::Slice(0, 3)},
-                                   velo.matrix("R", 3, 3));
+                                   velo.rotation("R"));
     calib.cam_from_velo.index_put_({torch::indexing::Slice(0, 3), 3},
                                    velo.matrix("T", 3, 1).squeeze(1));
   }

@@ -23,6 +23,8 @@ struct KeyValues {
   torch::Tensor matrix(const std::string& key, int64_t rows, int64_t cols) const;
   // A 3x4 projection matrix whose focal lengths are plausible (check_focal_lengths).
   torch::Tensor projection(const std::string& key) const;
+  // A 3x3 rotation: orthonormal within 1e-2 and of determinant +1 (a zero or scaled matrix is not).
+  torch::Tensor rotation(const std::string& key) const;
 };
 
 // Throws std::runtime_error naming `what` unless fx and fy are finite, > 0 and < 1e5 pixels.

@@ -62,6 +62,9 @@ struct SynthBox {
 };
 
 // One drive: static layout, movers and the camera path. Deterministic from (seed, length).
+// The synthetic camera's height above the road in metres (KITTI's), written into each world.
+inline constexpr double kSynthCameraHeight = 1.65;
+
 class SynthScene {
  public:
   SynthScene(uint64_t seed, int64_t frames);
@@ -86,7 +89,7 @@ class SynthScene {
   uint64_t seed_;
   double speed_, sway_amp_, sway_period_, sway_phase_;
   std::vector<SynthBox> boxes_;
-  static constexpr double kCameraHeight = 1.65;  // ground plane y (camera y points down)
+  static constexpr double kCameraHeight = kSynthCameraHeight;  // ground plane y (camera y points down)
 };
 
 struct SynthFrame {

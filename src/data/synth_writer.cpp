@@ -159,7 +159,11 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
                         std::to_string(o.height) + ").\nraw/ = KITTI raw layout with Eigen-style "
                         "splits in raw/splits; kitti2015/ = KITTI 2015 flow layout (obj_map: the moving cars); odometry/ = "
                         "KITTI odometry layout.\nDense ground-truth depth: raw/<drive>/proj_depth/"
-                        "groundtruth/image_02 and kitti2015/training/depth (uint16, depth x 256).\n");
+                        "groundtruth/image_02 and kitti2015/training/depth (uint16, depth x 256).\ncamera_height.txt = "
+                        "the camera's height above the road in metres (geo_eval --scaling camera-height).\n");
+  std::ostringstream height;
+  height << kSynthCameraHeight << "\n";
+  write_file_atomic(root + "/camera_height.txt", height.str());
 }
 
 }  // namespace geo

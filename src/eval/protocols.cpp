@@ -60,6 +60,22 @@ torch::Tensor net_input(const std::string& path, const Predictor& p, int64_t* H 
   return read_image_resized(path, p.height(), p.width(), H, W).unsqueeze(0);
 }
 
+// The camera height to scale by: the one asked for, else the data root's record (a geo_synth world's
+// camera_height.txt, at the world's root or above the split's), else KITTI's 1.65 m.
+double camera_height_of(const EvalOptions& o, const std::string& root) {
+  if (o.camera_height > 0) return o.camera_height;
+  for (const auto& dir : {o.data_root, root + "/.."}) {
+    const std::string file = dir + "/camera_height.txt";
+    if (!fs::exists(file)) continue;
+    std::istringstream in(read_text_file(file));
+    double h = 0;
+    if (!(in >> h) || !(h > 0) || !std::isfinite(h))
+      throw std::runtime_error(file + ": expected the camera's height above the road in metres (a number > 0)");
+    return h;
+  }
+  return 1.65;
+}
+
 EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* pred) {
   const std::string list = o.split_file.empty() ? find_split_file(root, "eigen", "test_files.txt") : o.split_file;
   if (list.empty()) throw std::runtime_error("no Eigen test list: give --split-file");
@@ -85,6 +101,7 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
   int64_t images_nonpositive = 0, pixels_nonpositive = 0;    // predicted depths <= 0, clamped, counted
   std::vector<double> median_ratios, agreements;  // median(gt)/median(pred); camera-height scale / that
   std::vector<std::string> without_plane;         // camera-height scaling: images whose road was not found
+  const double camera_height = o.scaling == DepthScaling::kCameraHeight ? camera_height_of(o, root) : 0.0;
   std::string first_nonpositive;
   std::string first_non_finite;
   // --export-gt without a model or predictions: write the ground truth only, no metrics.
@@ -155,7 +172,7 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
         progress.update(static_cast<int64_t>(i + 1));
         continue;
       }
-      image_eo.fixed_scale = camera_height_scale(plane, o.camera_height);
+      image_eo.fixed_scale = camera_height_scale(plane, camera_height);
     }
     double applied = 1, ratio = 1;
     const auto err = eigen_image_errors(gt, depth.clamp_min(1e-3), image_eo, &applied, &ratio);
@@ -406,12 +423,15 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
   // 5-frame PoseNets (GeoNet's odometry model): snippet c-2..c+2 predicted at once, cam_to_world of
   // its frames in the target's frame (the target's pose is the identity).
   std::vector<torch::Tensor> snippet_poses(static_cast<size_t>(n));
+  torch::Tensor metric_traj;  // --scaling camera-height: the trajectory in metres, no ground truth used
+  int64_t frames_with_road = 0;
   if (pred) {
     const int64_t L = pred->seq_length(), k = (L - 1) / 2;
+    int64_t image_h = 0, image_w = 0;
     auto image = [&](int64_t f) {
       const std::string p = seq + "/image_2/" + numbered("%06lld", static_cast<long long>(f)) + ".png";
       require_file(p, "odometry image");
-      return net_input(p, *pred);
+      return net_input(p, *pred, &image_h, &image_w);
     };
     std::vector<torch::Tensor> frames;
     for (int64_t f = 0; f < n; ++f) frames.push_back(image(f));
@@ -419,7 +439,7 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
     if (fs::exists(extra))
       throw std::runtime_error(gt_path + " holds " + std::to_string(n) + " poses but " + seq +
                                "/image_2 has more images (" + extra + " exists): the ground truth does not match");
-    std::vector<torch::Tensor> cam_to_world = {torch::eye(4, torch::kFloat64)};
+    std::vector<torch::Tensor> cam_to_world = {torch::eye(4, torch::kFloat64)}, steps;
     Progress progress("odometry " + o.sequence, n, 0, "frames");
     for (int64_t j = 0; j < n; ++j) {
       // The snippet around j (frames clamped at the sequence ends): k before, k after.
@@ -427,8 +447,10 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
       for (int64_t m = k; m >= 1; --m) srcs.push_back(frames[std::max<int64_t>(j - m, 0)]);
       for (int64_t m = 1; m <= k; ++m) srcs.push_back(frames[std::min<int64_t>(j + m, n - 1)]);
       const auto src_from_tgt = pred->pose(frames[j], srcs)[0].cpu().to(torch::kFloat64);  // [L-1,4,4]
-      if (j + 1 < n)  // T_{j+1 <- j}: the first source after the target, chained into the trajectory
-        cam_to_world.push_back(cam_to_world.back().matmul(torch::inverse(src_from_tgt[k])));
+      if (j + 1 < n) {  // T_{j+1 <- j}: the first source after the target, chained into the trajectory
+        steps.push_back(torch::inverse(src_from_tgt[k]));
+        cam_to_world.push_back(cam_to_world.back().matmul(steps.back()));
+      }
       if (L == 5 && j >= 2 && j + 2 < n) {
         std::vector<torch::Tensor> in_target;
         for (int64_t m = 0; m < 4; ++m) in_target.push_back(torch::inverse(src_from_tgt[m]));
@@ -438,6 +460,31 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
       progress.update(j + 1);
     }
     traj = torch::stack(cam_to_world);
+    if (o.scaling == DepthScaling::kCameraHeight) {
+      // Each step at its frame's metric scale: the road plane of the frame's predicted depth,
+      // smoothed over 11 frames (as geo_infer --camera-height).
+      const double height = camera_height_of(o, root);
+      auto K = read_odometry_calib(seq + "/calib.txt").P[2].slice(1, 0, 3).clone();
+      K[0] *= static_cast<double>(pred->width()) / static_cast<double>(image_w);
+      K[1] *= static_cast<double>(pred->height()) / static_cast<double>(image_h);
+      std::vector<double> scales(static_cast<size_t>(n));
+      for (int64_t f = 0; f < n; ++f) {
+        const auto plane = fit_road_plane(pred->depth(frames[f])[0][0].cpu(), K);
+        scales[static_cast<size_t>(f)] = camera_height_scale(plane, height);
+        frames_with_road += plane.found;
+      }
+      scales = smooth_scales(scales, 5);
+      std::vector<torch::Tensor> metric = {torch::eye(4, torch::kFloat64)};
+      for (size_t j = 0; j < steps.size(); ++j) {
+        if (!(scales[j] > 0))
+          throw std::runtime_error("--scaling camera-height: no road plane in any frame near frame " + std::to_string(j) +
+                                   " of sequence " + o.sequence + ": a metric trajectory needs a road in front of the camera");
+        auto step = steps[j].clone();
+        step.slice(0, 0, 3).select(1, 3).mul_(scales[j]);
+        metric.push_back(metric.back().matmul(step));
+      }
+      metric_traj = torch::stack(metric);
+    }
   } else if (o.trivial) {
     traj = torch::eye(4, torch::kFloat64).repeat({n, 1, 1});
   } else {
@@ -490,6 +537,21 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
   }
   r.counts = {{"snippets", static_cast<int64_t>(ates.size())}, {"frames", n}, {"static_snippets", static_snippets},
               {"segments", kitti.segments}};
+  if (metric_traj.defined()) {
+    // Metres without ground truth: KITTI's measures on the trajectory as predicted (first frames
+    // aligned, no scale fitted), and the factor the least-squares alignment would still apply.
+    const auto g0 = torch::inverse(gt[0]).unsqueeze(0).matmul(gt.to(torch::kFloat64));
+    const auto m0 = torch::inverse(metric_traj[0]).unsqueeze(0).matmul(metric_traj);
+    const auto metric_kitti = kitti_odometry_errors(g0, m0, o.segment_lengths);
+    if (metric_kitti.segments > 0) {
+      r.metrics.emplace_back("metric_t_err", metric_kitti.t_err * 100);
+      r.metrics.emplace_back("metric_r_err", metric_kitti.r_err * 180 / M_PI * 100);
+    }
+    const auto xg = g0.slice(1, 0, 3).select(2, 3), xm = m0.slice(1, 0, 3).select(2, 3);
+    const double denom = (xm * xm).sum().item<double>();
+    r.metrics.emplace_back("metric_scale_error", denom > 0 ? (xg * xm).sum().item<double>() / denom : 0.0);
+    r.counts.emplace_back("frames_with_road_plane", frames_with_road);
+  }
   return r;
 }
 
@@ -546,10 +608,10 @@ EvalResult evaluate(const EvalOptions& o, Predictor* pred) {
   else if (o.split == "odometry") r = eval_odometry(o, root, pred);
   else throw std::runtime_error("unknown split '" + o.split + "' (eigen, kitti2015, odometry)");
   r.split = o.split;
-  if (o.split == "eigen" && !gt_only)
+  if ((o.split == "eigen" && !gt_only) || (o.split == "odometry" && pred && o.scaling == DepthScaling::kCameraHeight))
     r.scaling = o.scaling == DepthScaling::kMedian ? "median"
                 : o.scaling == DepthScaling::kNone ? "none"
-                                                   : "camera-height " + std::to_string(o.camera_height) + " m";
+                                                   : "camera-height " + std::to_string(camera_height_of(o, root)) + " m";
   r.source = pred ? pred->path() : o.trivial ? "trivial baseline" : !o.predictions.empty() ? o.predictions : "ground truth export";
   r.data_root = root;
   if (!is_synth_world(o.data_root, root)) {

@@ -34,7 +34,9 @@ struct EvalOptions {
   bool trivial = false;         // evaluate the trivial baseline: constant depth, zero flow, no motion
   FlowResize flow_resize = FlowResize::kNearest;  // kitti2015: prediction -> ground-truth size (GeoNet: nearest)
   DepthScaling scaling = DepthScaling::kMedian;  // eigen
-  double camera_height = 1.65;  // metres above the road (KITTI's; geo_synth's): --scaling camera-height
+  // Metres above the road for --scaling camera-height; 0: the height the data root records
+  // (<root>/camera_height.txt, which geo_synth writes), else KITTI's 1.65.
+  double camera_height = 0;
   std::vector<double> segment_lengths = kKittiSegmentLengths;  // odometry: KITTI's t_err / r_err segments (m)
 };
 

@@ -37,7 +37,29 @@ std::string latest_checkpoint_name(const std::string& checkpoints_dir) {
   return line;
 }
 
-bool is_best_checkpoint_name(const std::string& name) { return name.rfind("best", 0) == 0; }
+bool is_rotation_checkpoint_name(const std::string& name) {
+  // <stage>-NNNNNNNN.pt: a non-empty stage name, '-', eight digits, ".pt".
+  const size_t n = name.size();
+  if (n < 13 || name.compare(n - 3, 3, ".pt") != 0 || name[n - 12] != '-') return false;
+  for (size_t i = n - 11; i < n - 3; ++i)
+    if (name[i] < '0' || name[i] > '9') return false;
+  return true;
+}
+
+bool is_best_checkpoint_name(const std::string& name) {
+  // best-<stage>.pt; a stage named "best..." has rotation checkpoints "best...-NNNNNNNN.pt", not best.
+  return name.size() > 8 && name.rfind("best-", 0) == 0 && name.compare(name.size() - 3, 3, ".pt") == 0 &&
+         !is_rotation_checkpoint_name(name);
+}
+
+bool is_temporary_file_name(const std::string& name) {
+  // <file>.tmp (best-<stage>.pt.tmp) or <file>.tmp.<pid> (write_file_durable's).
+  const size_t at = name.rfind(".tmp");
+  if (at == std::string::npos || at == 0) return false;
+  if (at + 4 == name.size()) return true;
+  if (name[at + 4] != '.' || at + 5 == name.size()) return false;
+  return name.find_first_not_of("0123456789", at + 5) == std::string::npos;
+}
 
 void write_checkpoint(torch::serialize::OutputArchive& a, const CheckpointContents& c) {
   write_networks(a, c.networks, std::nullopt);
@@ -56,6 +78,7 @@ void write_train_state(torch::serialize::OutputArchive& a, const TrainState& s) 
   state.write("iteration", c10::IValue(s.iteration));
   state.write("best_score", c10::IValue(s.best_score));
   state.write("world_size", c10::IValue(s.world_size));
+  state.write("validation_pending", c10::IValue(s.validation_pending));
   a.write("train_state", state);
 }
 
@@ -113,6 +136,11 @@ TrainState CheckpointFile::train_state() {
     s.iteration = iteration.toInt();
     s.best_score = best.toDouble();
     s.world_size = world.toInt();
+    c10::IValue pending;  // absent in checkpoints written before it existed: nothing pending
+    if (typed.try_read("validation_pending", pending)) {
+      if (!pending.isBool()) throw std::runtime_error(path_ + ": train_state holds values of the wrong types");
+      s.validation_pending = pending.toBool();
+    }
   } else {  // before the typed state: float64 [stage, iteration, best] and an int "world_size"
     torch::Tensor meta;
     if (!archive_.try_read("meta", meta) || meta.numel() != 3)

@@ -33,6 +33,8 @@ struct TrainState {
   int64_t iteration = 0;   // iterations done in that stage
   double best_score = std::numeric_limits<double>::infinity();  // the stage's best validation score
   int64_t world_size = 1;  // processes of the run that wrote it (train/distributed.h)
+  // The validation due at this iteration was interrupted (a signal): a resumed run does it first.
+  bool validation_pending = false;
 };
 
 // A training checkpoint's contents, written by write_checkpoint. The optimizer is optional (tests,
@@ -87,6 +89,10 @@ class CheckpointFile {
 std::string latest_checkpoint_name(const std::string& checkpoints_dir);
 // best-<stage>.pt files are links to a stage's best checkpoint, not checkpoints of their own.
 bool is_best_checkpoint_name(const std::string& name);
+// <stage>-NNNNNNNN.pt, the checkpoints that rotate.
+bool is_rotation_checkpoint_name(const std::string& name);
+// The temporary file of an interrupted write: <file>.tmp or <file>.tmp.<pid>; nothing else.
+bool is_temporary_file_name(const std::string& name);
 
 // "<stage>-<iteration, 8 digits>.pt"
 std::string checkpoint_name(const std::string& stage, int64_t iteration);

@@ -20,11 +20,11 @@ CheckpointManager::CheckpointManager(std::string dir, int keep_last, bool read_o
   // Temporary files of an interrupted write (the run folder's lock is held, so none is in use).
   for (const auto& folder : {dir_, this->dir()})
     for (const auto& e : fs::directory_iterator(folder))
-      if (e.is_regular_file() && e.path().filename().string().find(".tmp") != std::string::npos) fs::remove(e.path());
+      if (e.is_regular_file() && is_temporary_file_name(e.path().filename().string())) fs::remove(e.path());
   std::vector<std::pair<fs::file_time_type, std::string>> found;
   for (const auto& e : fs::directory_iterator(this->dir())) {
     const std::string name = e.path().filename().string();
-    if (e.path().extension() == ".pt" && !is_best_checkpoint_name(name)) found.emplace_back(e.last_write_time(), name);
+    if (is_rotation_checkpoint_name(name)) found.emplace_back(e.last_write_time(), name);
   }
   std::sort(found.begin(), found.end());
   for (const auto& f : found) kept_.push_back(f.second);
@@ -76,7 +76,7 @@ void CheckpointManager::check_resumable(const std::string& path) const {
   if (readable(path, &why)) return;
   std::vector<std::pair<fs::file_time_type, std::string>> others;
   for (const auto& e : fs::directory_iterator(dir()))
-    if (e.path().extension() == ".pt" && !is_best_checkpoint_name(e.path().filename().string()) && e.path().string() != path)
+    if (is_rotation_checkpoint_name(e.path().filename().string()) && e.path().string() != path)
       others.emplace_back(e.last_write_time(), e.path().filename().string());
   std::sort(others.rbegin(), others.rend());
   std::string offer = " No other checkpoint in " + dir() + " is readable.";

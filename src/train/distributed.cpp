@@ -169,8 +169,30 @@ class C10dGroup : public ProcessGroup {
       ::gethostname(host, sizeof host - 1);
       const std::string me = std::string(host) + " " + std::to_string(::getpid());
       store_->set("geo/proc/" + std::to_string(rank_), std::vector<uint8_t>(me.begin(), me.end()));
+      const std::string size = std::to_string(size_);
+      store_->set("geo/world_size/" + std::to_string(rank_), std::vector<uint8_t>(size.begin(), size.end()));
     } catch (const std::exception& e) {
       throw std::runtime_error("rank " + std::to_string(rank_) + ": the rendezvous at " + where + " failed: " + message_of(e));
+    }
+    // Every process launched with the same WORLD_SIZE, said at once (else Gloo's own enforce message,
+    // or a wait for processes that never come): each compares with rank 0, rank 0 with each.
+    const auto world_of = [&](int r) {
+      const auto v = store_->get("geo/world_size/" + std::to_string(r));
+      return std::string(v.begin(), v.end());
+    };
+    for (int r = rank_ == 0 ? 1 : 0; r < (rank_ == 0 ? size_ : 1); ++r) {
+      std::string other;
+      try {
+        other = world_of(r);
+      } catch (const std::exception& e) {
+        throw std::runtime_error("rank " + std::to_string(rank_) + ": rank " + std::to_string(r) + " did not register at " +
+                                 where + " within run.distributed.timeout_s (" + std::to_string(timeout_s_) +
+                                 " s): " + message_of(e));
+      }
+      if (other != std::to_string(size_))
+        throw std::runtime_error("WORLD_SIZE differs between the processes: rank " + std::to_string(rank_) + " has " +
+                                 std::to_string(size_) + ", rank " + std::to_string(r) + " has " + other +
+                                 " (launch every process of a run with the same WORLD_SIZE)");
     }
     std::string backend = config.backend;
     if (backend == "auto") backend = device.is_cuda() && nccl_available() ? "nccl" : "gloo";

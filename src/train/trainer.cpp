@@ -208,6 +208,18 @@ class Run {
                  s.batch_size, s.learning_rate);
     const auto& log = cfg_.logging;
     int bad_in_row = 0;
+    // A validation interrupted by a signal before the checkpoint being resumed: done now, on the
+    // very weights it was due for, so val.csv and best-<stage>.pt are those of an uninterrupted run.
+    if (state_.validation_pending) {
+      spdlog::info("validation at {} {} was interrupted: done now", s.name, state_.iteration);
+      const bool best = writer_ && data_.val && validate(signals);
+      if (writer_ && best) save(step, true);
+      if (state_.validation_pending && !group_) {  // interrupted again: stop where it stands
+        save(step, false);
+        return 130;
+      }
+      state_.validation_pending = false;
+    }
     while (state_.iteration < s.iterations) {
       const Batch batch = loader.next();
       const bool async = device_.is_cuda();  // the batch stays alive until the step has read it
@@ -221,7 +233,9 @@ class Run {
           throw std::runtime_error("stopping: " + std::to_string(bad_in_row) +
                                    " NaN/Inf steps in a row (logging.max_bad_steps) at stage " + s.name +
                                    " iteration " + std::to_string(state_.iteration + 1) +
-                                   "; the last good checkpoint is untouched: " + checkpoints_.latest() +
+                                   (checkpoints_.latest().empty()
+                                        ? "; no checkpoint was written before it"
+                                        : "; the last good checkpoint is untouched: " + checkpoints_.latest()) +
                                    " (try a lower learning rate or optimizer.grad_clip)");
         continue;  // the same iteration again with the next batch
       }
@@ -276,10 +290,12 @@ class Run {
   bool validate(const SignalScope& signals) {
     const Validation v = geo::validate(nets_, data_.val, stage(), cfg_, device_, [&] { return signals.received() != 0; });
     if (v.interrupted) {
-      spdlog::warn("validation at {} {} interrupted by signal {}: not recorded", stage().name, state_.iteration,
-                   signals.received());
+      spdlog::warn("validation at {} {} interrupted by signal {}: not recorded; a resumed run validates first",
+                   stage().name, state_.iteration, signals.received());
+      state_.validation_pending = true;  // written by the checkpoint that follows
       return false;
     }
+    state_.validation_pending = false;
     ValidationRecord rec;
     rec.stage_index = state_.stage;
     rec.stage = stage().name;

@@ -153,6 +153,7 @@ TEST(Config, StageNamesArePlainAndThreadsBounded) {
     EXPECT_NE(msg.find("'stages[0].name'"), std::string::npos) << bad << ": " << msg;
   }
   EXPECT_NO_THROW(geo::parse_config("stages: [{name: stage-2.b_1}]\n"));
+  EXPECT_NE(error_of([] { geo::parse_config("stages: [{name: s-00000001}]\n"); }).find("eight digits"), std::string::npos);
   EXPECT_NE(error_of([] { geo::parse_config("run: {threads: 100000}\n"); }).find("'run.threads' = 100000"),
             std::string::npos);
 }

@@ -65,6 +65,14 @@ TEST(Calib, NonFiniteOrImplausibleFocalLengthsAreRejectedNamingFileAndKey) {
                    "R_rect_00: 1 0 0 0 1 0 0 0 inf\nP_rect_02: 100 0 50 0 0 100 20 0 0 0 1 0\n");
   GEO_EXPECT_THROW_WITH(read_raw_calib(dir, 2), "'R_rect_00'", "non-finite");
   GEO_EXPECT_THROW_WITH(check_focal_lengths(0, 700, "--intrinsics"), "--intrinsics", "fx = 0");
+  // Finite but absurd: a principal point at 1e30, a zero or a mirroring "rotation".
+  test::write_text(dir + "/calib_cam_to_cam.txt", rect + "P_rect_02: 100 0 1e30 0 0 100 20 0 0 0 1 0\n");
+  GEO_EXPECT_THROW_WITH(read_raw_calib(dir, 2), "calib_cam_to_cam.txt", "'P_rect_02'", "principal point", "not plausible");
+  test::write_text(dir + "/calib_cam_to_cam.txt", "R_rect_00: 0 0 0 0 0 0 0 0 0\nP_rect_02: 100 0 50 0 0 100 20 0 0 0 1 0\n");
+  GEO_EXPECT_THROW_WITH(read_raw_calib(dir, 2), "calib_cam_to_cam.txt", "'R_rect_00' is not a rotation");
+  test::write_text(dir + "/calib_cam_to_cam.txt", rect + "P_rect_02: 100 0 50 0 0 100 20 0 0 0 1 0\n");
+  test::write_text(dir + "/calib_velo_to_cam.txt", "R: -1 0 0 0 1 0 0 0 1\nT: 0 0 0\n");
+  GEO_EXPECT_THROW_WITH(read_raw_calib(dir, 2), "calib_velo_to_cam.txt", "'R' is not a rotation", "det -1");
 }
 
 TEST(Splits, ReadsBothFormatsAndRejectsOthers) {

@@ -421,6 +421,14 @@ TEST(Protocols, CameraHeightScalingRecoversTheScaleWithoutGroundTruth) {
   std::printf("camera-height scaling: abs_rel %.4f (median scaling %.4f), scale agreement %.4f +- %.4f\n",
               metric_of(height, "abs_rel"), metric_of(median, "abs_rel"), metric_of(height, "scale_agreement_median"),
               metric_of(height, "scale_agreement_std"));
+  // The height comes from the world's record (geo_synth's camera_height.txt) unless given.
+  EXPECT_EQ(test::read_file(root + "/world/camera_height.txt"), "1.65\n");
+  test::write_text(root + "/world/camera_height.txt", "3.3\n");
+  EXPECT_NEAR(metric_of(evaluate(e, nullptr), "scale_agreement_median"), 2 * metric_of(height, "scale_agreement_median"),
+              1e-9);
+  e.camera_height = 1.65;
+  EXPECT_NEAR(metric_of(evaluate(e, nullptr), "scale_agreement_median"), metric_of(height, "scale_agreement_median"),
+              1e-12);
   e.scaling = DepthScaling::kNone;
   EXPECT_GT(metric_of(evaluate(e, nullptr), "abs_rel"), 0.6);  // 1 - 0.3, before the clamp
 }

@@ -463,6 +463,17 @@ TEST_F(Distributed, LaunchErrorsAreMessagesNotHangs) {
       << test::read_file(dir + "/busy.log");
   ::close(s);
   EXPECT_FALSE(fs::exists(dir + "/c"));  // nothing was created
+  // Ranks launched with different WORLD_SIZEs: said as such by both, not Gloo's enforce message.
+  const std::string port = std::to_string(free_local_port());
+  Proc r0 = spawn({"--config", cfg, "--set", "run.distributed.timeout_s=20", "--run-dir", dir + "/d"},
+                  {{"RANK", "0"}, {"WORLD_SIZE", "2"}, {"MASTER_ADDR", "127.0.0.1"}, {"MASTER_PORT", port}}, dir + "/r0.log");
+  Proc r1 = spawn({"--config", cfg, "--set", "run.distributed.timeout_s=20", "--run-dir", dir + "/d"},
+                  {{"RANK", "1"}, {"WORLD_SIZE", "3"}, {"MASTER_ADDR", "127.0.0.1"}, {"MASTER_PORT", port}}, dir + "/r1.log");
+  EXPECT_EQ(wait_for(r1, 60), 1);
+  EXPECT_EQ(wait_for(r0, 60), 1);
+  for (const char* log : {"/r0.log", "/r1.log"})
+    EXPECT_NE(test::read_file(dir + log).find("WORLD_SIZE differs between the processes"), std::string::npos)
+        << test::read_file(dir + log);
 }
 
 }  // namespace

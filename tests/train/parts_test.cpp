@@ -196,6 +196,37 @@ TEST(CheckpointManager, RotationKeepsBestFilesAndLatest) {
   EXPECT_TRUE(fs::exists(dir + "/checkpoints/s2-00000002.pt"));
 }
 
+// Names decide what rotates and what is cleaned up: a stage named "best_fit" keeps its checkpoints
+// in the rotation (they are not best files), and only real temporary files are removed.
+TEST(CheckpointManager, NamesDecideWhatRotatesAndWhatIsATemporaryFile) {
+  EXPECT_TRUE(is_best_checkpoint_name("best-stage1.pt"));
+  EXPECT_TRUE(is_best_checkpoint_name("best-best_fit.pt"));
+  EXPECT_FALSE(is_best_checkpoint_name("best_fit-00000010.pt"));
+  EXPECT_FALSE(is_best_checkpoint_name("best-x-00000010.pt"));  // stage "best-x"'s checkpoint
+  EXPECT_FALSE(is_best_checkpoint_name("bestiary.pt"));
+  EXPECT_TRUE(is_rotation_checkpoint_name("best_fit-00000010.pt"));
+  EXPECT_FALSE(is_rotation_checkpoint_name("s1-0000010.pt"));
+  EXPECT_TRUE(is_temporary_file_name("s1-00000002.pt.tmp.1234"));
+  EXPECT_TRUE(is_temporary_file_name("best-s1.pt.tmp"));
+  EXPECT_FALSE(is_temporary_file_name("notes.tmp.txt"));
+  EXPECT_FALSE(is_temporary_file_name("my.tmp.backup.pt"));
+
+  const auto dir = test::fresh_dir("ckpt_names");
+  fs::create_directories(dir + "/checkpoints");
+  for (const char* f : {"notes.tmp.txt", "s1-00000002.pt.tmp.1234", "best-s1.pt.tmp"})
+    test::write_text(dir + "/checkpoints/" + f, "x");
+  {
+    CheckpointManager m(dir, 2);
+    for (int64_t it = 1; it <= 3; ++it)
+      m.save("best_fit", it, it == 1, [it](auto& a) { fill_state(a, 0, it); });
+  }
+  std::set<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir + "/checkpoints")) names.insert(e.path().filename().string());
+  EXPECT_EQ(names, (std::set<std::string>{"best-best_fit.pt", "best_fit-00000002.pt", "best_fit-00000003.pt",
+                                          "latest", "notes.tmp.txt"}));
+  EXPECT_EQ(state_of(dir + "/checkpoints/best-best_fit.pt").iteration, 1);
+}
+
 TEST(CheckpointManager, AFailedWriteKeepsTheLastCheckpointAndLatest) {
   const auto dir = test::fresh_dir("ckpt_full");
   CheckpointManager m(dir, 3);

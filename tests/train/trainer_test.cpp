@@ -361,7 +361,7 @@ struct TermAtStep : MetricsSink {
   int64_t left;
 };
 
-TEST(Trainer, ASigtermDuringValidationEndsItAndCheckpointsAtOnce) {
+TEST(Trainer, ASigtermDuringValidationEndsItCheckpointsAndTheResumeValidatesFirst) {
   auto cfg = tiny_config();
   cfg.stages.resize(1);
   cfg.stages[0].iterations = 5;
@@ -379,6 +379,16 @@ TEST(Trainer, ASigtermDuringValidationEndsItAndCheckpointsAtOnce) {
   const std::string ck = o.run_dir + "/checkpoints";
   EXPECT_EQ(state_of(ck + "/" + latest_checkpoint_name(ck)).iteration, 2);
   EXPECT_EQ(state_of(resolve_checkpoint(o.run_dir)).iteration, 1);
+  EXPECT_TRUE(state_of(ck + "/" + latest_checkpoint_name(ck)).validation_pending);
+  // Resumed, the run validates iteration 2 first: val.csv and the best checkpoint are exactly those
+  // of the uninterrupted run.
+  ASSERT_EQ(resume(o.run_dir, {}), 0);
+  TrainOptions whole;
+  whole.run_dir = test::fresh_dir("termval_whole") + "/run";
+  ASSERT_EQ(train(cfg, whole), 0);
+  EXPECT_EQ(val_scores(o.run_dir, "s1"), val_scores(whole.run_dir, "s1"));
+  EXPECT_EQ(val_scores(o.run_dir, "s1").size(), 5u);
+  EXPECT_EQ(state_of(resolve_checkpoint(o.run_dir)).iteration, state_of(resolve_checkpoint(whole.run_dir)).iteration);
 }
 
 TEST(Trainer, ASecondWriterOnARunFolderIsRefused) {
@@ -407,7 +417,15 @@ TEST(Trainer, NonFiniteStepsAreSkippedAndStopTheRun) {
   cfg.logging.max_bad_steps = 2;
   TrainOptions o;
   o.run_dir = test::fresh_dir("nan") + "/run";
-  GEO_EXPECT_THROW_WITH(train(cfg, o), "NaN/Inf steps in a row", "logging.max_bad_steps");
+  GEO_EXPECT_THROW_WITH(train(cfg, o), "NaN/Inf steps in a row", "logging.max_bad_steps",
+                        "the last good checkpoint is untouched: " + o.run_dir + "/checkpoints/s1-");
+  {  // Before any checkpoint: said so, not an empty path.
+    auto early = cfg;
+    early.logging.checkpoint_interval = 1000;
+    TrainOptions e;
+    e.run_dir = test::fresh_dir("nan_early") + "/run";
+    GEO_EXPECT_THROW_WITH(train(early, e), "NaN/Inf steps in a row", "no checkpoint was written before it");
+  }
   // Every checkpoint written holds finite weights.
   for (const auto& e : std::filesystem::directory_iterator(o.run_dir + "/checkpoints")) {
     if (e.path().extension() != ".pt") continue;
