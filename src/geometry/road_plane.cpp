@@ -85,6 +85,20 @@ RoadPlane fit_road_plane(const torch::Tensor& depth_in, const torch::Tensor& K_i
               "% of the image";
     return out;
   }
+  // The final plane: found when enough of the points lie on it (both fits end here).
+  const auto accept = [&](const Plane& p, const char* kind) {
+    const auto in = inliers_of(p, pts, o.inlier_band);
+    out.inliers = static_cast<int64_t>(in.size());
+    if (static_cast<double>(in.size()) < o.min_inlier_fraction * static_cast<double>(pts.size())) {
+      out.why = "only " + std::to_string(in.size()) + " of " + std::to_string(pts.size()) +
+                " points of the lower image lie on one " + kind;
+      return out;
+    }
+    out.found = true;
+    out.height = p.h;
+    for (int k = 0; k < 3; ++k) out.normal[k] = p.n[k];
+    return out;
+  };
   const double min_cos = std::cos(o.max_tilt_deg * M_PI / 180.0);
   std::mt19937_64 rng(o.seed);
   std::uniform_int_distribution<size_t> pick(0, pts.size() - 1);
@@ -107,17 +121,7 @@ RoadPlane fit_road_plane(const torch::Tensor& depth_in, const torch::Tensor& K_i
       for (size_t i : in) sum += pts[i][1];
       if (!in.empty()) best.h = sum / static_cast<double>(in.size());
     }
-    const auto in = inliers_of(best, pts, o.inlier_band);
-    out.inliers = static_cast<int64_t>(in.size());
-    if (static_cast<double>(in.size()) < o.min_inlier_fraction * static_cast<double>(pts.size())) {
-      out.why = "only " + std::to_string(in.size()) + " of " + std::to_string(pts.size()) +
-                " points of the lower image lie on one level road plane";
-      return out;
-    }
-    out.found = true;
-    out.height = best.h;
-    out.normal[1] = 1;
-    return out;
+    return accept(best, "level road plane");
   }
   for (int it = 0; it < o.iterations; ++it) {
     const Vec3 &a = pts[pick(rng)], &b = pts[pick(rng)], &c = pts[pick(rng)];
@@ -142,21 +146,12 @@ RoadPlane fit_road_plane(const torch::Tensor& depth_in, const torch::Tensor& K_i
     if (!refit(pts, inliers_of(fitted, pts, o.inlier_band), &next)) break;
     fitted = next;
   }
-  const auto in = inliers_of(fitted, pts, o.inlier_band);
-  out.inliers = static_cast<int64_t>(in.size());
   if (fitted.n[1] < min_cos) {
+    out.inliers = static_cast<int64_t>(inliers_of(fitted, pts, o.inlier_band).size());
     out.why = "the fitted plane is tilted more than " + std::to_string(static_cast<int>(o.max_tilt_deg)) + " degrees";
     return out;
   }
-  if (static_cast<double>(in.size()) < o.min_inlier_fraction * static_cast<double>(pts.size())) {
-    out.why = "only " + std::to_string(in.size()) + " of " + std::to_string(pts.size()) +
-              " points of the lower image lie on one road plane";
-    return out;
-  }
-  out.found = true;
-  out.height = fitted.h;
-  for (int k = 0; k < 3; ++k) out.normal[k] = fitted.n[k];
-  return out;
+  return accept(fitted, "road plane");
 }
 
 double camera_height_scale(const RoadPlane& plane, double known_height) {
