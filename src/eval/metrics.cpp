@@ -114,14 +114,18 @@ FlowErrors flow_errors(const torch::Tensor& gt, const torch::Tensor& valid, cons
   return e;
 }
 
+double least_squares_scale(const torch::Tensor& gt, const torch::Tensor& pred, double fallback) {
+  const double denom = (pred * pred).sum().item<double>();
+  return denom > 0 ? (gt * pred).sum().item<double>() / denom : fallback;
+}
+
 double snippet_ate(const torch::Tensor& gt_in, const torch::Tensor& pred_in) {
   check_shape(gt_in, "gt positions", {-1, 3});
   check_shape(pred_in, "predicted positions", {gt_in.size(0), 3});
   const auto gt = gt_in.to(torch::kFloat64);
   auto pred = pred_in.to(torch::kFloat64);
   pred = pred + (gt[0] - pred[0]);  // align the first frame
-  const double denom = pred.pow(2).sum().item<double>();
-  const double s = denom > 0 ? (gt * pred).sum().item<double>() / denom : 1.0;
+  const double s = least_squares_scale(gt, pred);
   return (s * pred - gt).pow(2).sum().sqrt().item<double>() / static_cast<double>(gt.size(0));
 }
 
@@ -189,9 +193,7 @@ std::pair<torch::Tensor, torch::Tensor> align_trajectory_scale(const torch::Tens
   const auto gt0 = gt_in.to(torch::kFloat64), pred0 = pred_in.to(torch::kFloat64);
   const auto gt = torch::inverse(gt0[0]).unsqueeze(0).matmul(gt0);
   auto pred = torch::inverse(pred0[0]).unsqueeze(0).matmul(pred0);
-  const auto xg = gt.slice(1, 0, 3).select(2, 3), xp = pred.slice(1, 0, 3).select(2, 3);
-  const double denom = (xp * xp).sum().item<double>();
-  const double scale = denom > 0 ? (xg * xp).sum().item<double>() / denom : 1.0;
+  const double scale = least_squares_scale(gt.slice(1, 0, 3).select(2, 3), pred.slice(1, 0, 3).select(2, 3));
   pred.slice(1, 0, 3).select(2, 3).mul_(scale);
   return {gt, pred};
 }

@@ -68,6 +68,9 @@ FlowErrors flow_errors(const torch::Tensor& gt, const torch::Tensor& valid, cons
 torch::Tensor resize_flow(const torch::Tensor& flow, int64_t height, int64_t width,
                           FlowResize resize = FlowResize::kNearest);
 
+// The factor s minimising ||s pred - gt||^2: sum(gt.pred) / sum(pred.pred); `fallback` when pred is 0.
+double least_squares_scale(const torch::Tensor& gt, const torch::Tensor& pred, double fallback = 1.0);
+
 // SfMLearner's snippet ATE: the first positions aligned, one least-squares scale
 // s = sum(gt.pred)/sum(pred.pred), ATE = sqrt(sum ||s pred - gt||^2) / N. gt, pred: [N,3].
 double snippet_ate(const torch::Tensor& gt, const torch::Tensor& pred);

@@ -547,9 +547,8 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
       r.metrics.emplace_back("metric_t_err", metric_kitti.t_err * 100);
       r.metrics.emplace_back("metric_r_err", metric_kitti.r_err * 180 / M_PI * 100);
     }
-    const auto xg = g0.slice(1, 0, 3).select(2, 3), xm = m0.slice(1, 0, 3).select(2, 3);
-    const double denom = (xm * xm).sum().item<double>();
-    r.metrics.emplace_back("metric_scale_error", denom > 0 ? (xg * xm).sum().item<double>() / denom : 0.0);
+    r.metrics.emplace_back("metric_scale_error",
+                           least_squares_scale(g0.slice(1, 0, 3).select(2, 3), m0.slice(1, 0, 3).select(2, 3), 0.0));
     r.counts.emplace_back("frames_with_road_plane", frames_with_road);
   }
   return r;
