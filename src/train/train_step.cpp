@@ -39,6 +39,13 @@ Key state_key(const torch::Tensor& p) {
 
 }  // namespace
 
+const torch::optim::AdamParamState* adam_state_of(const torch::optim::Adam& adam, const torch::Tensor& p) {
+  using Key = typename std::decay_t<decltype(adam.state())>::key_type;
+  const auto it = adam.state().find(state_key<Key>(p));
+  if (it == adam.state().end()) return nullptr;
+  return &static_cast<const torch::optim::AdamParamState&>(*it->second);
+}
+
 torch::Tensor MultiTensorAdam::step(LossClosure closure) {
   for (const auto& group : param_groups())
     if (static_cast<const torch::optim::AdamOptions&>(group.options()).amsgrad()) return Adam::step(closure);

@@ -32,6 +32,10 @@ class MultiTensorAdam : public torch::optim::Adam {
   torch::Tensor step(LossClosure closure = nullptr) override;
 };
 
+// The state Adam (torch::optim::Adam or MultiTensorAdam) keeps for parameter `p`; nullptr before
+// its first update.
+const torch::optim::AdamParamState* adam_state_of(const torch::optim::Adam& adam, const torch::Tensor& p);
+
 // Adam (MultiTensorAdam) with the config's betas, eps and weight decay over `parameters`.
 std::unique_ptr<torch::optim::Adam> make_adam(const std::vector<torch::Tensor>& parameters, double lr,
                                               const OptimizerConfig& optimizer);
