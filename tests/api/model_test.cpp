@@ -60,15 +60,26 @@ TEST(Api, SameDepthPoseAndFlowAsTheNetworksThemselves) {
   torch::NoGradGuard no_grad;
   const auto a = image(64, 208), b = image(64, 208, 0.1);
   EXPECT_TRUE(torch::equal(m.depth(a), (1.0 / d.nets.depth->forward(a.unsqueeze(0)).disp[0])[0][0]));
-  const auto K = torch::tensor({100.f, 0.f, 104.f, 0.f, 100.f, 32.f, 0.f, 0.f, 1.f}).view({3, 3});
-  const auto direct = predict_pair(d.nets, a.unsqueeze(0), b.unsqueeze(0), K.unsqueeze(0));
-  EXPECT_TRUE(torch::equal(m.flow(a, b, K), direct.flow[0]));
-  const auto parts = m.flow_parts(a, b, K);
-  EXPECT_TRUE(torch::equal(parts.full, direct.flow[0]));
-  EXPECT_TRUE(torch::equal(parts.rigid, direct.rigid_flow[0]));
-  EXPECT_FALSE(torch::equal(parts.full, parts.rigid));  // the FlowNet's residual is there
   const auto vec = d.nets.pose->forward(a.unsqueeze(0), {a.unsqueeze(0), b.unsqueeze(0)});  // (a, a, b)
   EXPECT_TRUE(torch::equal(m.relative_pose(a, b), pose_vec_to_matrix(vec[0])[1]));
+  // The rigid flow is the projection of a's depth moved by the camera motion, computed here in
+  // float64 from depth() and relative_pose(): p' = K (R z K^-1 p + t), flow = p'/z' - p.
+  const auto K = torch::tensor({100.f, 0.f, 104.f, 0.f, 100.f, 32.f, 0.f, 0.f, 1.f}).view({3, 3});
+  const auto parts = m.flow_parts(a, b, K);
+  EXPECT_TRUE(torch::equal(m.flow(a, b, K), parts.full));
+  const auto Kd = K.to(torch::kFloat64);
+  const auto T = m.relative_pose(a, b).to(torch::kFloat64);
+  const auto xs = torch::arange(208, torch::kFloat64).view({1, 208}).expand({64, 208});
+  const auto ys = torch::arange(64, torch::kFloat64).view({64, 1}).expand({64, 208});
+  const auto pix = torch::stack({xs, ys, torch::ones_like(xs)}).reshape({3, -1});
+  const auto cam = torch::inverse(Kd).matmul(pix) * m.depth(a).to(torch::kFloat64).reshape({1, -1});
+  const auto proj = Kd.matmul(T.slice(0, 0, 3).slice(1, 0, 3).matmul(cam) + T.slice(0, 0, 3).slice(1, 3, 4));
+  const auto rigid = (proj.slice(0, 0, 2) / proj.slice(0, 2, 3) - pix.slice(0, 0, 2)).reshape({2, 64, 208});
+  const double rigid_error = (parts.rigid.to(torch::kFloat64) - rigid).abs().max().item<double>();
+  std::printf("rigid flow against the hand projection: max %.3g px (flow up to %.3g px)\n", rigid_error,
+              rigid.abs().max().item<double>());
+  EXPECT_LT(rigid_error, 1e-3);
+  EXPECT_FALSE(torch::equal(parts.full, parts.rigid));  // the FlowNet's residual is there
   EXPECT_EQ(m.pose({b, a, b}).sizes(), (torch::IntArrayRef{2, 4, 4}));
   // The evaluation's Predictor is this API in the protocols' shapes.
   Predictor p(checkpoint(), "cpu");
@@ -83,19 +94,27 @@ TEST(Api, AnyInputSizeAndBatches) {
   const Model m = Model::load(checkpoint());
   EXPECT_EQ(m.depth(image(100, 300)).sizes(), (torch::IntArrayRef{100, 300}));
   EXPECT_EQ(m.depth(torch::stack({image(64, 208), image(64, 208, 0.2)})).sizes(), (torch::IntArrayRef{2, 64, 208}));
-  // Flow at twice the model's size is in pixels of that size: the model's flow resized and doubled.
+  // Flow of images twice as wide is in pixels of that width: x doubled, y unchanged. Each column
+  // repeated twice halves back (bilinear) to exactly the model's input, so the wide flow is exactly
+  // the model's flow resized to 64x416 with its x component doubled (swapped factors would fail).
   const auto a = image(64, 208), b = image(64, 208, 0.1);
   const auto small = m.flow(a, b);
-  namespace F = torch::nn::functional;
-  auto up = [](const torch::Tensor& x) {
-    return F::interpolate(x.unsqueeze(0), F::InterpolateFuncOptions().size(std::vector<int64_t>{128, 416})
-                                              .mode(torch::kBilinear).align_corners(false))[0];
-  };
-  const auto big = m.flow(up(a), up(b));
-  EXPECT_EQ(big.sizes(), (torch::IntArrayRef{2, 128, 416}));
-  // The resized inputs come back to exactly the small ones (bilinear halving of a bilinear doubling
-  // is not exact in general, so compare the flow's scale only on the mean).
-  EXPECT_NEAR(big.abs().mean().item<double>() / small.abs().mean().item<double>(), 2.0, 0.1);
+  const auto wide = [](const torch::Tensor& x) { return x.repeat_interleave(2, 2); };
+  ASSERT_TRUE(torch::equal(torch::nn::functional::interpolate(
+                               wide(a).unsqueeze(0), torch::nn::functional::InterpolateFuncOptions()
+                                                         .size(std::vector<int64_t>{64, 208})
+                                                         .mode(torch::kBilinear)
+                                                         .align_corners(false))[0],
+                           a));
+  const auto big = m.flow(wide(a), wide(b));
+  EXPECT_EQ(big.sizes(), (torch::IntArrayRef{2, 64, 416}));
+  const auto expected = torch::nn::functional::interpolate(
+      small.unsqueeze(0), torch::nn::functional::InterpolateFuncOptions()
+                              .size(std::vector<int64_t>{64, 416})
+                              .mode(torch::kBilinear)
+                              .align_corners(false))[0] * torch::tensor({2.f, 1.f}).view({2, 1, 1});
+  EXPECT_LT((big - expected).abs().max().item<double>(), 1e-4);
+  EXPECT_GT(big[0].abs().mean().item<double>(), 0.1);  // a flow whose x component matters
 }
 
 TEST(Api, ExportedFilesGiveTheCheckpointsOutputs) {

@@ -111,6 +111,47 @@ TEST(Loader, ScaleCropKeepsIntrinsicsConsistent) {
   }
 }
 
+// GeoNet's colour augmentation, one draw per batch for every frame: out = clamp(in^gamma x
+// brightness x colour_c, 0, 1). Ranges of one value make it hand-computable: 0.25^2 x 1.5 x 1.2 =
+// 0.1125 and 0.9 -> clamped to 1, in the target and every source alike; K untouched (no scaling).
+TEST(Loader, PhotometricAugmentationIsGammaBrightnessColourOnEveryFrame) {
+  Batch b;
+  b.tgt = torch::full({1, 3, 2, 2}, 0.25f);
+  b.srcs = torch::full({1, 2, 3, 2, 2}, 0.25f);
+  b.srcs[0][1][2][1][1] = 0.9f;
+  b.K = torch::eye(3).unsqueeze(0);
+  AugmentConfig c;
+  c.scale_max = 1.0;
+  c.photometric_prob = 1.0;
+  c.gamma_min = c.gamma_max = 2.0;
+  c.brightness_min = c.brightness_max = 1.5;
+  c.color_min = c.color_max = 1.2;
+  const auto out = augment(b, c, 3);
+  EXPECT_TRUE(torch::allclose(out.tgt, torch::full({1, 3, 2, 2}, 0.1125f), 0, 1e-6));
+  auto want = torch::full({1, 2, 3, 2, 2}, 0.1125f);
+  want[0][1][2][1][1] = 1.0f;
+  EXPECT_TRUE(torch::allclose(out.srcs, want, 0, 1e-6));
+  EXPECT_TRUE(torch::equal(out.K, b.K));
+  // GeoNet's ranges: a draw differs per seed, but stays one transform for all frames (equal inputs
+  // give equal outputs across target and sources), per-channel colour included.
+  AugmentConfig g;
+  g.scale_max = 1.0;
+  g.photometric_prob = 1.0;
+  const auto x = torch::rand({1, 3, 4, 4});
+  Batch same;
+  same.tgt = x.clone();
+  same.srcs = torch::stack({x[0], x[0]}).unsqueeze(0);
+  same.K = b.K;
+  const auto a1 = augment(same, g, 11), a2 = augment(same, g, 12);
+  EXPECT_TRUE(torch::equal(a1.srcs[0][0], a1.tgt[0]));
+  EXPECT_TRUE(torch::equal(a1.srcs[0][1], a1.tgt[0]));
+  EXPECT_FALSE(torch::equal(a1.tgt, a2.tgt));
+  EXPECT_FALSE(torch::equal(a1.tgt, x));
+  // Probability 0: nothing changes.
+  g.photometric_prob = 0.0;
+  EXPECT_TRUE(torch::equal(augment(same, g, 11).tgt, x));
+}
+
 TEST(Loader, BadSampleStopsWithItsNameOrIsSkipped) {
   auto src = std::make_shared<FakeSource>(4, 2);
   auto o = options(0);

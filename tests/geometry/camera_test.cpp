@@ -6,10 +6,9 @@
 
 namespace {
 
-const auto kDouble = torch::TensorOptions().dtype(torch::kFloat64);
 
 torch::Tensor intrinsics(double fx, double fy, double cx, double cy, int64_t batch = 1) {
-  return torch::tensor({fx, 0., cx, 0., fy, cy, 0., 0., 1.}, kDouble).view({1, 3, 3}).repeat({batch, 1, 1});
+  return torch::tensor({fx, 0., cx, 0., fy, cy, 0., 0., 1.}, torch::kFloat64).view({1, 3, 3}).repeat({batch, 1, 1});
 }
 
 TEST(Camera, IntrinsicsPerScaleDivideByPowersOfTwo) {
@@ -25,9 +24,9 @@ TEST(Camera, IntrinsicsPerScaleDivideByPowersOfTwo) {
 TEST(Camera, ProjectOfBackProjectIsThePixelGrid) {
   torch::manual_seed(5);
   const auto K = intrinsics(50, 45, 15.5, 9.5, 2);
-  const auto depth = torch::rand({2, 1, 10, 16}, kDouble) * 50 + 1;
+  const auto depth = torch::rand({2, 1, 10, 16}, torch::kFloat64) * 50 + 1;
   const auto pix = geo::project(geo::back_project(depth, K), K);
-  const auto grid = geo::pixel_grid(10, 16, kDouble).narrow(1, 0, 2).expand({2, 2, 10, 16});
+  const auto grid = geo::pixel_grid(10, 16, torch::kFloat64).narrow(1, 0, 2).expand({2, 2, 10, 16});
   // Residual ~1e-9: the projection divides by z + 1e-10 (GeoNet) and K is inverted numerically.
   EXPECT_LT((pix - grid).abs().max().item<double>(), 1e-8);
   // back_project keeps the depth as z.
@@ -39,13 +38,13 @@ TEST(Camera, RigidFlowOfAFrontoParallelPlaneUnderTranslationIsTheClosedForm) {
   //   u = fx tx/(Z+tz) + (x - cx)(Z/(Z+tz) - 1),  v = fy ty/(Z+tz) + (y - cy)(Z/(Z+tz) - 1).
   const double fx = 100, fy = 90, cx = 20, cy = 8, Z = 10, tx = 0.5, ty = -0.2, tz = 1.0;
   const auto K = intrinsics(fx, fy, cx, cy);
-  const auto depth = torch::full({1, 1, 16, 40}, Z, kDouble);
-  auto pose = torch::zeros({1, 6}, kDouble);
+  const auto depth = torch::full({1, 1, 16, 40}, Z, torch::kFloat64);
+  auto pose = torch::zeros({1, 6}, torch::kFloat64);
   pose[0][0] = tx;
   pose[0][1] = ty;
   pose[0][2] = tz;
   const auto flow = geo::rigid_flow(depth, geo::pose_vec_to_matrix(pose), K);
-  const auto grid = geo::pixel_grid(16, 40, kDouble);
+  const auto grid = geo::pixel_grid(16, 40, torch::kFloat64);
   const double r = Z / (Z + tz) - 1;
   const auto u = fx * tx / (Z + tz) + (grid[0][0] - cx) * r;
   const auto v = fy * ty / (Z + tz) + (grid[0][1] - cy) * r;
@@ -56,12 +55,12 @@ TEST(Camera, RigidFlowOfAFrontoParallelPlaneUnderTranslationIsTheClosedForm) {
 TEST(Camera, ZeroMotionGivesZeroFlowAndBackwardInvertsForward) {
   torch::manual_seed(6);
   const auto K = intrinsics(30, 30, 8, 6, 2);
-  const auto depth = torch::rand({2, 1, 12, 16}, kDouble) * 20 + 2;
-  const auto eye = torch::eye(4, kDouble).expand({2, 4, 4});
+  const auto depth = torch::rand({2, 1, 12, 16}, torch::kFloat64) * 20 + 2;
+  const auto eye = torch::eye(4, torch::kFloat64).expand({2, 4, 4});
   EXPECT_LT(geo::rigid_flow(depth, eye, K).abs().max().item<double>(), 1e-8);
   // Fronto-parallel plane under lateral translation: the backward flow is the exact negation.
-  const auto plane = torch::full({2, 1, 12, 16}, 10.0, kDouble);
-  auto pose = torch::zeros({2, 6}, kDouble);
+  const auto plane = torch::full({2, 1, 12, 16}, 10.0, torch::kFloat64);
+  auto pose = torch::zeros({2, 6}, torch::kFloat64);
   pose.select(1, 0).fill_(0.3);
   const auto T = geo::pose_vec_to_matrix(pose);
   const auto fwd = geo::rigid_flow(plane, T, K);

@@ -7,20 +7,19 @@
 
 namespace {
 
-const auto kDouble = torch::TensorOptions().dtype(torch::kFloat64);
 
 TEST(Warp, ZeroFlowReturnsTheInput) {
   torch::manual_seed(7);
-  const auto img = torch::rand({2, 3, 9, 13}, kDouble);
-  const auto out = geo::warp(img, torch::zeros({2, 2, 9, 13}, kDouble), geo::OutOfView::kBorder);
+  const auto img = torch::rand({2, 3, 9, 13}, torch::kFloat64);
+  const auto out = geo::warp(img, torch::zeros({2, 2, 9, 13}, torch::kFloat64), geo::OutOfView::kBorder);
   EXPECT_LT((out.image - img).abs().max().item<double>(), 1e-12);
   EXPECT_EQ(out.valid.min().item<double>(), 1.0);
 }
 
 TEST(Warp, IntegerFlowShiftsTheInteriorExactly) {
   torch::manual_seed(8);
-  const auto img = torch::rand({1, 2, 10, 12}, kDouble);
-  auto flow = torch::zeros({1, 2, 10, 12}, kDouble);
+  const auto img = torch::rand({1, 2, 10, 12}, torch::kFloat64);
+  auto flow = torch::zeros({1, 2, 10, 12}, torch::kFloat64);
   flow.select(1, 0).fill_(2);   // u = +2: out(x, y) = img(x + 2, y - 1)
   flow.select(1, 1).fill_(-1);  // v = -1
   const auto out = geo::warp(img, flow, geo::OutOfView::kBorder);
@@ -36,8 +35,8 @@ TEST(Warp, IntegerFlowShiftsTheInteriorExactly) {
 }
 
 TEST(Warp, HalfPixelFlowInterpolatesBilinearly) {
-  const auto img = torch::arange(12, kDouble).view({1, 1, 3, 4});
-  auto flow = torch::zeros({1, 2, 3, 4}, kDouble);
+  const auto img = torch::arange(12, torch::kFloat64).view({1, 1, 3, 4});
+  auto flow = torch::zeros({1, 2, 3, 4}, torch::kFloat64);
   flow.select(1, 0).fill_(0.5);
   for (auto mode : {geo::OutOfView::kZero, geo::OutOfView::kBorder}) {
     const auto out = geo::warp(img, flow, mode);
@@ -46,8 +45,8 @@ TEST(Warp, HalfPixelFlowInterpolatesBilinearly) {
 }
 
 TEST(Warp, FlowLeavingTheImageIsInvalidAndClampedInBorderMode) {
-  const auto img = torch::ones({1, 1, 4, 4}, kDouble);
-  const auto flow = torch::full({1, 2, 4, 4}, 100.0, kDouble);
+  const auto img = torch::ones({1, 1, 4, 4}, torch::kFloat64);
+  const auto flow = torch::full({1, 2, 4, 4}, 100.0, torch::kFloat64);
   const auto out = geo::warp(img, flow, geo::OutOfView::kBorder);
   EXPECT_EQ(out.valid.max().item<double>(), 0.0);
   EXPECT_EQ(out.image.min().item<double>(), 1.0);  // border-clamped samples
@@ -67,9 +66,9 @@ double geonet_sample(const torch::Tensor& img, double x, double y) {
 
 TEST(Warp, ZeroModeIsGeoNetsSamplerOutsideAndOnTheLastColumn) {
   // 3x5 image, values 1..15. Target pixel (x=1, y=1) sampled at x = 1 + u.
-  const auto img = torch::arange(1, 16, kDouble).view({1, 1, 3, 5});
+  const auto img = torch::arange(1, 16, torch::kFloat64).view({1, 1, 3, 5});
   for (double u : {0.25, 2.5, 3.0, 3.5, 3.999, 4.0, -1.5, -0.5, -1.0, 10.0}) {
-    auto flow = torch::zeros({1, 2, 3, 5}, kDouble);
+    auto flow = torch::zeros({1, 2, 3, 5}, torch::kFloat64);
     flow.select(1, 0).fill_(u);
     const auto out = geo::warp(img, flow, geo::OutOfView::kZero);
     const double x = 1 + u;
@@ -82,20 +81,20 @@ TEST(Warp, ZeroModeIsGeoNetsSamplerOutsideAndOnTheLastColumn) {
   }
   // x = W - 0.5 and x = W - 1 give 0 (GeoNet's sampler's two edge cases); the border sampler keeps 10.
   for (double x : {4.5, 4.0}) {
-    auto flow = torch::zeros({1, 2, 3, 5}, kDouble);
+    auto flow = torch::zeros({1, 2, 3, 5}, torch::kFloat64);
     flow.select(1, 0).fill_(x - 1);
     EXPECT_EQ(geo::warp(img, flow, geo::OutOfView::kZero).image[0][0][1][1].item<double>(), 0.0);
     EXPECT_EQ(geo::warp(img, flow, geo::OutOfView::kBorder).image[0][0][1][1].item<double>(), 10.0);
   }
   // The last row y = H-1 = 2 is out of view too.
-  auto down = torch::zeros({1, 2, 3, 5}, kDouble);
+  auto down = torch::zeros({1, 2, 3, 5}, torch::kFloat64);
   down.select(1, 1).fill_(1.0);
   EXPECT_EQ(geo::warp(img, down, geo::OutOfView::kZero).image[0][0][1][1].item<double>(), 0.0);
 }
 
 TEST(Warp, ZeroModeHasNoGradientOutOfView) {
-  const auto img = torch::rand({1, 1, 3, 5}, kDouble).requires_grad_();
-  auto flow = torch::zeros({1, 2, 3, 5}, kDouble);
+  const auto img = torch::rand({1, 1, 3, 5}, torch::kFloat64).requires_grad_();
+  auto flow = torch::zeros({1, 2, 3, 5}, torch::kFloat64);
   flow.select(1, 0).fill_(7.3);  // every pixel leaves the image
   flow.requires_grad_();
   geo::warp(img, flow, geo::OutOfView::kZero).image.sum().backward();
@@ -105,8 +104,8 @@ TEST(Warp, ZeroModeHasNoGradientOutOfView) {
 
 TEST(Warp, GradientsReachImageAndFlow) {
   torch::manual_seed(9);
-  const auto img = torch::rand({1, 3, 6, 8}, kDouble).requires_grad_();
-  const auto flow = (torch::rand({1, 2, 6, 8}, kDouble) * 2 - 1).requires_grad_();
+  const auto img = torch::rand({1, 3, 6, 8}, torch::kFloat64).requires_grad_();
+  const auto flow = (torch::rand({1, 2, 6, 8}, torch::kFloat64) * 2 - 1).requires_grad_();
   geo::warp(img, flow, geo::OutOfView::kZero).image.sum().backward();
   EXPECT_GT(img.grad().abs().sum().item<double>(), 0);
   EXPECT_GT(flow.grad().abs().sum().item<double>(), 0);

@@ -4,11 +4,10 @@
 
 namespace {
 
-const auto kDouble = torch::TensorOptions().dtype(torch::kFloat64);
 
 TEST(Occlusion, ConsistentFlowsAreVisibleEverywhere) {
   // Constant translation (u, v) forward and (-u, -v) backward: W_f + W_b(p + W_f) = 0.
-  auto fw = torch::zeros({1, 2, 8, 10}, kDouble);
+  auto fw = torch::zeros({1, 2, 8, 10}, torch::kFloat64);
   fw.select(1, 0).fill_(1.5);
   fw.select(1, 1).fill_(-0.5);
   const auto bw = -fw;
@@ -20,7 +19,7 @@ TEST(Occlusion, ConsistentFlowsAreVisibleEverywhere) {
 }
 
 TEST(Occlusion, DisagreeingRegionIsOccluded) {
-  auto fw = torch::zeros({1, 2, 8, 8}, kDouble);
+  auto fw = torch::zeros({1, 2, 8, 8}, torch::kFloat64);
   fw.select(1, 0).fill_(1.0);
   auto bw = -fw.clone();
   // Backward flow of a 2x2 block says something else (e.g. a foreground object): +5 px in u.
@@ -52,7 +51,7 @@ TEST(Occlusion, FlowLeavingTheImageIsOccludedWithGeoNetsSampler) {
   // GeoNet's sampler: W_b(p + W_f) = 0 there, |W_f|^2 = 16 > 0.01 * 16 + 0.5 -> occluded. The
   // border sampler reads the edge's -4 and keeps them visible. The last row (y = H-1) is outside
   // GeoNet's sampler too: every pixel there is occluded.
-  auto fw = torch::zeros({1, 2, 8, 8}, kDouble);
+  auto fw = torch::zeros({1, 2, 8, 8}, torch::kFloat64);
   fw.select(1, 0).fill_(4.0);
   const auto bw = -fw;
   const auto zero = geo::visibility_mask(fw, geo::backward_at_forward(fw, bw, geo::OutOfView::kZero), 0.01, 0.5);
@@ -64,8 +63,8 @@ TEST(Occlusion, FlowLeavingTheImageIsOccludedWithGeoNetsSampler) {
 
 TEST(Consistency, GradientFlowsIntoTheFlowsButNotTheBound) {
   torch::manual_seed(12);
-  const auto fw = (torch::randn({1, 2, 6, 6}, kDouble)).requires_grad_();
-  const auto bw = (torch::randn({1, 2, 6, 6}, kDouble)).requires_grad_();
+  const auto fw = (torch::randn({1, 2, 6, 6}, torch::kFloat64)).requires_grad_();
+  const auto bw = (torch::randn({1, 2, 6, 6}, torch::kFloat64)).requires_grad_();
   const auto c = geo::geometric_consistency(fw, geo::backward_at_forward(fw, bw, geo::OutOfView::kBorder), 3.0, 0.05, 0, true);
   c.loss.backward();
   EXPECT_FALSE(c.mask.requires_grad());

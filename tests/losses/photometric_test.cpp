@@ -4,12 +4,11 @@
 
 namespace {
 
-const auto kDouble = torch::TensorOptions().dtype(torch::kFloat64);
 constexpr double C1 = 1e-4, C2 = 9e-4;
 
 TEST(Ssim, OfAnImageWithItselfIsOneAndErrorZero) {
   torch::manual_seed(10);
-  const auto x = torch::rand({2, 3, 8, 8}, kDouble);
+  const auto x = torch::rand({2, 3, 8, 8}, torch::kFloat64);
   EXPECT_LT((geo::ssim(x, x) - 1).abs().max().item<double>(), 1e-12);
   EXPECT_LT(geo::photometric_error(x, x, 0.85).abs().max().item<double>(), 1e-12);
 }
@@ -17,8 +16,8 @@ TEST(Ssim, OfAnImageWithItselfIsOneAndErrorZero) {
 TEST(Ssim, HandComputed4x4Case) {
   // x: constant 0.5; y: 4x4 checkerboard (0/1). Every 3x3 window inside the image holds 4 or 5
   // ones out of 9. sigma_x = sigma_xy = 0, so SSIM = (2 mx my + C1) C2 / ((mx^2 + my^2 + C1)(vy + C2)).
-  const auto x = torch::full({1, 1, 4, 4}, 0.5, kDouble);
-  auto y = torch::zeros({1, 1, 4, 4}, kDouble);
+  const auto x = torch::full({1, 1, 4, 4}, 0.5, torch::kFloat64);
+  auto y = torch::zeros({1, 1, 4, 4}, torch::kFloat64);
   for (int r = 0; r < 4; ++r)
     for (int c = 0; c < 4; ++c) y[0][0][r][c] = (r + c) % 2;
   const auto s = geo::ssim(x, y);
@@ -41,14 +40,14 @@ TEST(Ssim, HandComputed4x4Case) {
 }
 
 TEST(Ssim, ConstantImagesClosedForm) {
-  const auto x = torch::full({1, 1, 4, 4}, 0.5, kDouble);
-  const auto y = torch::full({1, 1, 4, 4}, 0.25, kDouble);
+  const auto x = torch::full({1, 1, 4, 4}, 0.5, torch::kFloat64);
+  const auto y = torch::full({1, 1, 4, 4}, 0.25, torch::kFloat64);
   const double want = (2 * 0.5 * 0.25 + C1) / (0.25 + 0.0625 + C1);
   EXPECT_LT((geo::ssim(x, y) - want).abs().max().item<double>(), 1e-12);
 }
 
 TEST(Photometric, PyramidIsAreaDownsampling) {
-  const auto img = torch::arange(16, kDouble).view({1, 1, 4, 4});
+  const auto img = torch::arange(16, torch::kFloat64).view({1, 1, 4, 4});
   const auto p = geo::image_pyramid(img, 3);
   ASSERT_EQ(p.size(), 3u);
   EXPECT_DOUBLE_EQ(p[1][0][0][0][0].item<double>(), (0 + 1 + 4 + 5) / 4.0);
@@ -57,8 +56,8 @@ TEST(Photometric, PyramidIsAreaDownsampling) {
 }
 
 TEST(Photometric, MaskedMeanAveragesOnlyMaskedPixels) {
-  const auto v = torch::tensor({1., 2., 3., 4.}, kDouble).view({1, 1, 2, 2});
-  const auto m = torch::tensor({1., 0., 0., 1.}, kDouble).view({1, 1, 2, 2});
+  const auto v = torch::tensor({1., 2., 3., 4.}, torch::kFloat64).view({1, 1, 2, 2});
+  const auto m = torch::tensor({1., 0., 0., 1.}, torch::kFloat64).view({1, 1, 2, 2});
   EXPECT_DOUBLE_EQ(geo::masked_mean(v, m).item<double>(), 2.5);
   EXPECT_DOUBLE_EQ(geo::masked_mean(v, torch::zeros_like(m)).item<double>(), 0.0);  // empty mask
   EXPECT_THROW(geo::masked_mean(v, torch::ones({1, 2, 2, 2})), c10::Error);
@@ -66,7 +65,7 @@ TEST(Photometric, MaskedMeanAveragesOnlyMaskedPixels) {
 
 TEST(Photometric, ChannelL2NormIsHandComputedAndCarriesNoGradient) {
   // Pixel 0: (3, 4, 0) -> 5; pixel 1: (0, 0, 0) -> 0 (no NaN at zero).
-  const auto x = torch::tensor({3., 0., 4., 0., 0., 0.}, kDouble).view({1, 3, 1, 2}).requires_grad_();
+  const auto x = torch::tensor({3., 0., 4., 0., 0., 0.}, torch::kFloat64).view({1, 3, 1, 2}).requires_grad_();
   const auto n = geo::channel_l2_norm(x);
   ASSERT_EQ(n.sizes(), (std::vector<int64_t>{1, 1, 1, 2}));
   EXPECT_DOUBLE_EQ(n[0][0][0][0].item<double>(), 5.0);
@@ -79,8 +78,8 @@ TEST(Photometric, ChannelL2NormIsHandComputedAndCarriesNoGradient) {
 TEST(Photometric, FusedKernelMatchesTheComposedOperationsInValueAndGradient) {
   torch::manual_seed(11);
   for (auto hw : std::vector<std::pair<int64_t, int64_t>>{{1, 1}, {1, 5}, {4, 1}, {3, 4}, {7, 9}}) {
-    auto x = torch::rand({2, 3, hw.first, hw.second}, kDouble);
-    auto y = torch::rand({2, 3, hw.first, hw.second}, kDouble);
+    auto x = torch::rand({2, 3, hw.first, hw.second}, torch::kFloat64);
+    auto y = torch::rand({2, 3, hw.first, hw.second}, torch::kFloat64);
     y[0][0] = x[0][0];        // equal plane: |x - y| = 0, SSIM = 1
     y[1][2] = 1 - x[1][2];    // anti-correlated plane: negative SSIM
     x.requires_grad_();
@@ -98,10 +97,10 @@ TEST(Photometric, FusedKernelMatchesTheComposedOperationsInValueAndGradient) {
     }
   }
   // float32 agrees with the float64 reference to float rounding; non-contiguous input is accepted.
-  const auto x = torch::rand({1, 3, 6, 8}, kDouble), y = torch::rand({1, 3, 6, 8}, kDouble);
+  const auto x = torch::rand({1, 3, 6, 8}, torch::kFloat64), y = torch::rand({1, 3, 6, 8}, torch::kFloat64);
   const auto xf = x.to(torch::kFloat32).transpose(2, 3).contiguous().transpose(2, 3);
   ASSERT_FALSE(xf.is_contiguous());
-  const auto got = geo::photometric_error_channels(xf, y.to(torch::kFloat32), 0.85).to(kDouble);
+  const auto got = geo::photometric_error_channels(xf, y.to(torch::kFloat32), 0.85).to(torch::kFloat64);
   EXPECT_LT((got - geo::photometric_error_channels_reference(x, y, 0.85)).abs().max().item<double>(), 1e-5);
   // Only the input that needs a gradient gets one (the target image does not).
   const auto w = x.clone().requires_grad_();

@@ -6,7 +6,6 @@
 
 namespace {
 
-const auto kDouble = torch::TensorOptions().dtype(torch::kFloat64);
 
 // A world where the truth is known: a textured plane at depth 10 seen by a camera that moves
 // 0.5 m sideways. With fx = 40 the rigid flow is exactly 2 px at scale 0 and 1 px at scale 1.
@@ -18,17 +17,17 @@ struct Scene {
 Scene shifted_plane(int scales, double pose_tx) {
   torch::manual_seed(13);
   const int64_t B = 1, H = 16, W = 24;
-  const auto wide = torch::rand({B, 3, H, W + 4}, kDouble);
+  const auto wide = torch::rand({B, 3, H, W + 4}, torch::kFloat64);
   Scene sc;
   sc.in.tgt = wide.narrow(3, 0, W).contiguous();
   sc.in.srcs = {wide.narrow(3, 2, W).contiguous()};  // src(x) = tgt(x + 2)... shifted view
-  sc.in.K = torch::tensor({40., 0., 12., 0., 40., 8., 0., 0., 1.}, kDouble).view({1, 3, 3});
+  sc.in.K = torch::tensor({40., 0., 12., 0., 40., 8., 0., 0., 1.}, torch::kFloat64).view({1, 3, 3});
   sc.in.src_disp.resize(1);
   for (int s = 0; s < scales; ++s) {
-    sc.in.tgt_disp.push_back(torch::full({B, 1, H >> s, W >> s}, 0.1, kDouble));
-    sc.in.src_disp[0].push_back(torch::full({B, 1, H >> s, W >> s}, 0.1, kDouble));
+    sc.in.tgt_disp.push_back(torch::full({B, 1, H >> s, W >> s}, 0.1, torch::kFloat64));
+    sc.in.src_disp[0].push_back(torch::full({B, 1, H >> s, W >> s}, 0.1, torch::kFloat64));
   }
-  sc.in.poses = torch::zeros({B, 1, 6}, kDouble);
+  sc.in.poses = torch::zeros({B, 1, 6}, torch::kFloat64);
   sc.in.poses[0][0][0] = pose_tx;
   return sc;
 }
@@ -49,6 +48,44 @@ TEST(TotalLoss, TruePoseReconstructsExactlyOnVisiblePixels) {
   EXPECT_EQ(right.disp_smooth.item<double>(), 0.0);  // constant disparity
 }
 
+// min_reprojection (monodepth2): each pixel is scored by the source that explains it best. Beside
+// the true shifted view (which cannot see two columns: border-sampled there, not masked here) a
+// still copy of the target explains every pixel: the loss is exactly 0. Averaged over the sources,
+// as GeoNet does, the two columns count. (Border sampling: GeoNet's zero sampler leaves the last
+// row and column out even without motion.)
+TEST(TotalLoss, MinReprojectionTakesTheBestSourcePerPixel) {
+  auto sc = shifted_plane(1, -0.5);
+  sc.in.srcs.push_back(sc.in.tgt.clone());
+  sc.in.src_disp.push_back(sc.in.src_disp[0]);
+  sc.in.poses = torch::zeros({1, 2, 6}, torch::kFloat64);
+  sc.in.poses[0][0][0] = -0.5;  // the true motion to the shifted view; none to the copy
+  geo::LossConfig cfg;
+  cfg.ssim_alpha = 0.0;
+  cfg.mask_out_of_view = false;
+  cfg.sampler = geo::Sampler::kBorder;
+  EXPECT_GT(geo::rigid_terms(sc.in, cfg).rigid.item<double>(), 1e-3);
+  cfg.min_reprojection = true;
+  EXPECT_LT(geo::rigid_terms(sc.in, cfg).rigid.item<double>(), 1e-8);
+}
+
+// automask (monodepth2): pixels that the unwarped source already matches better than the warped
+// one are left out. A still scene (source = target) seen with a wrong motion: every pixel is left
+// out, the loss is 0; without the mask the wrong motion costs.
+TEST(TotalLoss, AutomaskLeavesOutPixelsThatTheMotionDoesNotExplain) {
+  auto sc = shifted_plane(1, 0.5);
+  sc.in.srcs = {sc.in.tgt.clone()};
+  geo::LossConfig cfg;
+  cfg.ssim_alpha = 0.0;
+  cfg.mask_out_of_view = true;
+  EXPECT_GT(geo::rigid_terms(sc.in, cfg).rigid.item<double>(), 0.05);
+  cfg.automask = true;
+  EXPECT_EQ(geo::rigid_terms(sc.in, cfg).rigid.item<double>(), 0.0);
+  // The shifted view with its true motion: warping explains every visible pixel better than the
+  // still source does, nothing is left out and the loss stays that of the true motion (~0).
+  auto shifted = shifted_plane(1, -0.5);
+  EXPECT_LT(geo::rigid_terms(shifted.in, cfg).rigid.item<double>(), 1e-8);
+}
+
 TEST(TotalLoss, ImageRangeScalesL1AndTheEdgeWeights) {
   // Pure L1 on in-view pixels: GeoNet's [-1,1] range doubles every difference.
   auto sc = shifted_plane(1, 0.5);  // the wrong pose: a non-zero error
@@ -64,7 +101,7 @@ TEST(TotalLoss, ImageRangeScalesL1AndTheEdgeWeights) {
   EXPECT_NEAR(geo::rigid_terms(sc.in, geonet).rigid.item<double>(), 2 * l01, 1e-12);
   // Edge weights: a column ramp 0.04 x (|dx I| = 0.04 in [0,1] units) and disparity 0.1 + 0.001 x:
   // smoothness = 0.001 exp(-0.04) on [0,1], 0.001 exp(-0.08) on [-1,1] (GeoNet's exp(-2g)).
-  const auto ramp = torch::arange(24, kDouble).view({1, 1, 1, 24}).expand({1, 3, 16, 24});
+  const auto ramp = torch::arange(24, torch::kFloat64).view({1, 1, 1, 24}).expand({1, 3, 16, 24});
   sc.in.tgt = (0.04 * ramp).contiguous();
   sc.in.srcs = {sc.in.tgt.clone()};
   const auto disp = (0.1 + 0.001 * ramp.narrow(1, 0, 1)).contiguous();
@@ -107,10 +144,10 @@ TEST(TotalLoss, FlowReconstructionMaskIsEq13OrGeoNetsConsistencyMask) {
   // (4 / 64) per direction with the consistency mask.
   const int64_t H = 8, W = 8;
   geo::RigidTerms rigid;
-  const auto zeros = torch::zeros({1, 3, H, W}, kDouble);
+  const auto zeros = torch::zeros({1, 3, H, W}, torch::kFloat64);
   rigid.tgt_pyr = {zeros};
   rigid.src_pyr = {{zeros}};
-  auto ff = torch::zeros({1, 2, H, W}, kDouble);
+  auto ff = torch::zeros({1, 2, H, W}, torch::kFloat64);
   ff.select(1, 0).fill_(1.0);
   auto bf = -ff.clone();
   bf.select(1, 0).narrow(1, 2, 2).narrow(2, 4, 2).fill_(1.5);
@@ -155,9 +192,9 @@ TEST(TotalLoss, EveryTermBackPropagatesIntoDepthPoseAndFlow) {
   torch::manual_seed(14);
   const int64_t B = 2, H = 16, W = 24, N = 2, S = 3;
   geo::LossInputs in;
-  in.tgt = torch::rand({B, 3, H, W}, kDouble);
-  in.srcs = {torch::rand({B, 3, H, W}, kDouble), torch::rand({B, 3, H, W}, kDouble)};
-  in.K = torch::tensor({20., 0., 12., 0., 20., 8., 0., 0., 1.}, kDouble).view({1, 3, 3}).repeat({B, 1, 1});
+  in.tgt = torch::rand({B, 3, H, W}, torch::kFloat64);
+  in.srcs = {torch::rand({B, 3, H, W}, torch::kFloat64), torch::rand({B, 3, H, W}, torch::kFloat64)};
+  in.K = torch::tensor({20., 0., 12., 0., 20., 8., 0., 0., 1.}, torch::kFloat64).view({1, 3, 3}).repeat({B, 1, 1});
   std::vector<torch::Tensor> leaves;
   auto leaf = [&](torch::Tensor t) {
     t.requires_grad_();
@@ -166,11 +203,11 @@ TEST(TotalLoss, EveryTermBackPropagatesIntoDepthPoseAndFlow) {
   };
   in.src_disp.resize(N);
   for (int s = 0; s < S; ++s) {
-    in.tgt_disp.push_back(leaf(torch::rand({B, 1, H >> s, W >> s}, kDouble) + 0.1));
+    in.tgt_disp.push_back(leaf(torch::rand({B, 1, H >> s, W >> s}, torch::kFloat64) + 0.1));
     for (int i = 0; i < N; ++i)
-      in.src_disp[i].push_back(leaf(torch::rand({B, 1, H >> s, W >> s}, kDouble) + 0.1));
+      in.src_disp[i].push_back(leaf(torch::rand({B, 1, H >> s, W >> s}, torch::kFloat64) + 0.1));
   }
-  in.poses = leaf(torch::randn({B, N, 6}, kDouble) * 0.05);
+  in.poses = leaf(torch::randn({B, N, 6}, torch::kFloat64) * 0.05);
   geo::LossConfig cfg;
   cfg.automask = true;
   cfg.min_reprojection = true;
@@ -178,8 +215,8 @@ TEST(TotalLoss, EveryTermBackPropagatesIntoDepthPoseAndFlow) {
   geo::PerSourceScale<torch::Tensor> fwd(N), bwd(N);
   for (int i = 0; i < N; ++i)
     for (int s = 0; s < S; ++s) {
-      fwd[i].push_back(rigid.fwd_flow[i][s] + leaf(torch::randn({B, 2, H >> s, W >> s}, kDouble) * 0.1));
-      bwd[i].push_back(rigid.bwd_flow[i][s] + leaf(torch::randn({B, 2, H >> s, W >> s}, kDouble) * 0.1));
+      fwd[i].push_back(rigid.fwd_flow[i][s] + leaf(torch::randn({B, 2, H >> s, W >> s}, torch::kFloat64) * 0.1));
+      bwd[i].push_back(rigid.bwd_flow[i][s] + leaf(torch::randn({B, 2, H >> s, W >> s}, torch::kFloat64) * 0.1));
     }
   const auto flow = geo::flow_terms(rigid, fwd, bwd, cfg);
   const auto t = geo::total_loss(rigid, &flow, geo::LossWeights{});
@@ -206,7 +243,7 @@ TEST(TotalLoss, EveryTermBackPropagatesIntoDepthPoseAndFlow) {
 
 TEST(TotalLoss, MalformedInputsNameTheArgument) {
   auto sc = shifted_plane(2, 0.0);
-  sc.in.poses = torch::zeros({1, 2, 6}, kDouble);  // two poses for one source
+  sc.in.poses = torch::zeros({1, 2, 6}, torch::kFloat64);  // two poses for one source
   try {
     geo::rigid_terms(sc.in, geo::LossConfig{});
     FAIL();
@@ -216,7 +253,7 @@ TEST(TotalLoss, MalformedInputsNameTheArgument) {
         << e.what_without_backtrace();
   }
   sc = shifted_plane(2, 0.0);
-  sc.in.tgt_disp[1] = torch::zeros({1, 1, 5, 5}, kDouble);
+  sc.in.tgt_disp[1] = torch::zeros({1, 1, 5, 5}, torch::kFloat64);
   EXPECT_THROW(geo::rigid_terms(sc.in, geo::LossConfig{}), c10::Error);
 }
 

@@ -2,6 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
 #include "models/layers.h"
 
 namespace {
@@ -21,8 +25,63 @@ TEST(FeatureRefinement, KeepsTheShapeAndGatesLieInZeroOne) {
   EXPECT_EQ(as.sizes(), (std::vector<int64_t>{2, 1, 7, 9}));
   EXPECT_GT(as.min().item<float>(), 0.f);
   EXPECT_LT(as.max().item<float>(), 1.f);
-  // forward is exactly F * a_c * a_s.
-  EXPECT_TRUE(torch::allclose(y, f1 * as));
+}
+
+// CBAM (Woo et al. 2018) written out from its definition with the module's weights, element by
+// element in float64: a_c = sigmoid(W2 relu(W1 avg) + W2 relu(W1 max)) over each channel's pixels,
+// F1 = F a_c, a_s = sigmoid(7x7 conv, zero padding 3, of [max over channels, mean over channels] of
+// F1), output F1 a_s. Fails if the gates are swapped, a pooling is dropped or the order changes.
+TEST(FeatureRefinement, ForwardIsCbamWrittenOut) {
+  torch::manual_seed(21);
+  const int64_t B = 2, C = 20, H = 5, W = 6, K = 7;
+  geo::FeatureRefinement fr{geo::FeatureRefinementOptions(C)};  // hidden width 20 / 16 -> 1
+  fr->to(torch::kFloat64);
+  const auto x = torch::randn({B, C, H, W}, torch::kFloat64);
+  const auto y = fr(x);
+  const auto w1 = fr->mlp_in->weight.view({-1, C}), w2 = fr->mlp_out->weight.view({C, -1});
+  const auto ws = fr->spatial->weight;  // [1,2,7,7]
+  ASSERT_EQ(w1.size(0), 1);
+  auto sigmoid = [](double v) { return 1 / (1 + std::exp(-v)); };
+  for (int64_t b = 0; b < B; ++b) {
+    std::vector<double> avg(C, 0.0), mx(C, -1e300);
+    for (int64_t c = 0; c < C; ++c)
+      for (int64_t i = 0; i < H; ++i)
+        for (int64_t j = 0; j < W; ++j) {
+          const double v = x[b][c][i][j].item<double>();
+          avg[c] += v / (H * W);
+          mx[c] = std::max(mx[c], v);
+        }
+    double h_avg = 0, h_max = 0;  // the hidden unit
+    for (int64_t c = 0; c < C; ++c) {
+      h_avg += w1[0][c].item<double>() * avg[c];
+      h_max += w1[0][c].item<double>() * mx[c];
+    }
+    h_avg = std::max(h_avg, 0.0);
+    h_max = std::max(h_max, 0.0);
+    std::vector<double> f1(C * H * W), pmax(H * W, -1e300), pmean(H * W, 0.0);
+    for (int64_t c = 0; c < C; ++c) {
+      const double ac = sigmoid(w2[c][0].item<double>() * h_avg + w2[c][0].item<double>() * h_max);
+      for (int64_t p = 0; p < H * W; ++p) {
+        const double v = x[b][c][p / W][p % W].item<double>() * ac;
+        f1[c * H * W + p] = v;
+        pmax[p] = std::max(pmax[p], v);
+        pmean[p] += v / C;
+      }
+    }
+    for (int64_t i = 0; i < H; ++i)
+      for (int64_t j = 0; j < W; ++j) {
+        double a = 0;
+        for (int64_t u = 0; u < K; ++u)
+          for (int64_t v = 0; v < K; ++v) {
+            const int64_t r = i + u - K / 2, q = j + v - K / 2;
+            if (r < 0 || r >= H || q < 0 || q >= W) continue;  // zero padding
+            a += ws[0][0][u][v].item<double>() * pmax[r * W + q] + ws[0][1][u][v].item<double>() * pmean[r * W + q];
+          }
+        for (int64_t c = 0; c < C; ++c)
+          EXPECT_NEAR(y[b][c][i][j].item<double>(), f1[c * H * W + i * W + j] * sigmoid(a), 1e-12)
+              << "b " << b << " c " << c << " at " << i << "," << j;
+      }
+  }
 }
 
 TEST(FeatureRefinement, ParameterCountIsSharedMlpPlusSpatialConv) {

@@ -22,14 +22,12 @@
 #include <arpa/inet.h>
 #include <fcntl.h>
 #include <netinet/in.h>
-#include <spawn.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "process_util.h"
 #include "synth_world.h"
-
-extern char** environ;
 
 namespace geo {
 namespace {
@@ -181,52 +179,12 @@ const std::string& world() {
 
 std::string geo_train() { return test::apps_dir() + "/geo_train"; }
 
-struct Proc {
-  pid_t pid = -1;
-  std::string log;
-};
+using test::Proc;
+using test::wait_for;
 
 // geo_train `args` with `env` added to this process's environment; output to `log`.
 Proc spawn(const std::vector<std::string>& args, const std::map<std::string, std::string>& env, const std::string& log) {
-  std::vector<std::string> envs;
-  for (char** e = environ; *e; ++e) {
-    const std::string kv = *e;
-    if (!env.count(kv.substr(0, kv.find('=')))) envs.push_back(kv);
-  }
-  for (const auto& [k, v] : env) envs.push_back(k + "=" + v);
-  std::vector<char*> argv, envp;
-  std::vector<std::string> all = {geo_train()};
-  all.insert(all.end(), args.begin(), args.end());
-  for (auto& a : all) argv.push_back(a.data());
-  argv.push_back(nullptr);
-  for (auto& e : envs) envp.push_back(e.data());
-  envp.push_back(nullptr);
-  posix_spawn_file_actions_t fa;
-  posix_spawn_file_actions_init(&fa);
-  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_adddup2(&fa, 1, 2);
-  Proc p;
-  p.log = log;
-  const int rc = posix_spawn(&p.pid, argv[0], &fa, nullptr, argv.data(), envp.data());
-  posix_spawn_file_actions_destroy(&fa);
-  EXPECT_EQ(rc, 0) << "cannot start " << argv[0] << ": " << std::strerror(rc);
-  return p;
-}
-
-// Exit code (128 + signal when killed); -1 and the process killed after `seconds`.
-int wait_for(Proc& p, double seconds) {
-  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
-  for (;;) {
-    int status = 0;
-    const pid_t r = ::waitpid(p.pid, &status, WNOHANG);
-    if (r == p.pid) return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-    if (std::chrono::steady_clock::now() > end) {
-      ::kill(p.pid, SIGKILL);
-      ::waitpid(p.pid, &status, 0);
-      return -1;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
+  return test::spawn(geo_train(), args, env, log);
 }
 
 std::string config_file(const std::string& dir, int iterations, bool shard, int checkpoint_interval = 2) {
