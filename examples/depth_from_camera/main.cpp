@@ -34,7 +34,6 @@ int main(int argc, char** argv) {
       const torch::Tensor depth = model.depth(image).cpu();  // [H,W], up to scale
       if (previous.defined())  // points in the previous camera -> this one; chained into a path
         camera_to_world = camera_to_world.matmul(torch::inverse(model.relative_pose(previous, image).cpu()));
-      previous = image;
       const auto median = depth.flatten().median().item<float>();
       std::printf("%s depth min %.3f median %.3f max %.3f camera at (%.3f, %.3f, %.3f)\n", f.filename().c_str(),
                   depth.min().item<float>(), median, depth.max().item<float>(), camera_to_world[0][3].item<float>(),
@@ -44,10 +43,15 @@ int main(int argc, char** argv) {
           std::vector<double> scale;
           const torch::Tensor metres = model.metric_depth(image, std::stod(argv[4]), {}, &scale).cpu();
           std::printf("  in metres: median %.2f m (x %.3f)\n", metres.flatten().median().item<float>(), scale.at(0));
+          if (previous.defined()) {  // the step from the previous frame, at the previous frame's scale
+            const torch::Tensor step = model.metric_relative_pose(previous, image, std::stod(argv[4])).cpu();
+            std::printf("  moved %.2f m since the previous frame\n", step.slice(0, 0, 3).select(1, 3).norm().item<float>());
+          }
         } catch (const geo::Error& e) {  // no road in front of the camera: said, not guessed
           std::printf("  in metres: %s\n", e.what());
         }
       }
+      previous = image;
       if (argc > 3) {  // 16-bit PNG, depth x 256, as geo_infer's <frame>-depth.png
         const auto q = (depth.clamp(0, 65535.0 / 256.0) * 256).round().to(torch::kInt32).contiguous();
         cv::Mat m(static_cast<int>(q.size(0)), static_cast<int>(q.size(1)), CV_32S, q.data_ptr<int32_t>()), m16;

@@ -7,6 +7,8 @@
 //   geo::Model model = geo::Model::load("model.pt", options);  // a geo_export file or a training checkpoint
 //   torch::Tensor depth = model.depth(image);             // [H,W] depth (up to scale) at the image's size
 //   torch::Tensor motion = model.relative_pose(prev, cur); // [4,4]: points in prev's camera -> cur's camera
+//   torch::Tensor metres = model.metric_depth(cur, 1.65);  // depth in metres from the camera's height
+//   torch::Tensor step = model.metric_relative_pose(prev, cur, 1.65);  // translation in metres
 //   torch::Tensor flow = model.flow(prev, cur);            // [2,H,W] pixels, prev -> cur
 //
 // Images: torch::Tensor [3,H,W] (or [B,3,H,W]), RGB, uint8 (0..255) or floating point in [0,1],
@@ -80,6 +82,11 @@ class Model {
   // `to`'s (translation up to the depth's scale). [B,4,4] for batches.
   torch::Tensor relative_pose(const torch::Tensor& from, const torch::Tensor& to,
                               const torch::Tensor& intrinsics = {}) const;
+  // relative_pose() with its translation in metres: scaled by the factor metric_depth() finds for
+  // `from` (the frame whose depth the PoseNet's translation shares its scale with). `scale`
+  // receives the factor(s). Throws geo::Error naming why when no road is found.
+  torch::Tensor metric_relative_pose(const torch::Tensor& from, const torch::Tensor& to, double camera_height,
+                                     const torch::Tensor& intrinsics = {}, std::vector<double>* scale = nullptr) const;
   // The PoseNet on a whole snippet of spec().seq_length frames (target = the middle one): [L-1,4,4]
   // transforms from the target's camera into each other frame's, in order.
   torch::Tensor pose(const std::vector<torch::Tensor>& frames) const;

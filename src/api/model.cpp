@@ -255,6 +255,22 @@ torch::Tensor Model::relative_pose(const torch::Tensor& from, const torch::Tenso
   });
 }
 
+torch::Tensor Model::metric_relative_pose(const torch::Tensor& from, const torch::Tensor& to, double camera_height,
+                                          const torch::Tensor& intrinsics, std::vector<double>* scale) const {
+  std::vector<double> factors;
+  metric_depth(from, camera_height, intrinsics, &factors);  // a geo::Error when `from` shows no road
+  auto T = relative_pose(from, to, intrinsics);
+  return guarded("geo::Model::metric_relative_pose", [&] {
+    torch::InferenceMode guard;
+    T = T.clone();
+    const auto batched = T.dim() == 3 ? T : T.unsqueeze(0);  // a view: scaling it scales T
+    for (int64_t b = 0; b < batched.size(0); ++b)
+      batched[b].slice(0, 0, 3).select(1, 3).mul_(factors.at(static_cast<size_t>(b)));
+    if (scale) *scale = factors;
+    return T;
+  });
+}
+
 torch::Tensor Model::flow(const torch::Tensor& from, const torch::Tensor& to, const torch::Tensor& intrinsics,
                           const torch::Tensor& previous) const {
   return flow_parts(from, to, intrinsics, previous).full;

@@ -168,6 +168,12 @@ FolderLock::~FolderLock() {
   if (fd_ >= 0) ::close(fd_);  // releases the lock
 }
 
+std::string zero_padded(long long number, int digits) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%0*lld", digits, number);
+  return buf;
+}
+
 std::string make_run_dir(const std::string& parent, const std::string& name) {
   const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
   char stamp[32];

@@ -1,5 +1,6 @@
 #include "data/sequence_dataset.h"
 
+#include "core/files.h"
 #include "data/calib.h"
 #include "data/image_io.h"
 
@@ -85,9 +86,7 @@ OdometryDataset::OdometryDataset(OdometryDatasetOptions options) : options_(std:
 }
 
 std::string OdometryDataset::image_path(const std::string& sequence, int64_t frame) const {
-  char name[32];
-  std::snprintf(name, sizeof name, "%06lld.png", static_cast<long long>(frame));
-  return options_.root + "/sequences/" + sequence + "/image_2/" + name;
+  return options_.root + "/sequences/" + sequence + "/image_2/" + zero_padded(frame, 6) + ".png";
 }
 
 std::string OdometryDataset::id(size_t index) const {

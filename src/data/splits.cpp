@@ -1,6 +1,7 @@
 #include "data/splits.h"
 
 #include "core/config.h"
+#include "core/files.h"
 #include "data/text_io.h"
 
 #include <algorithm>
@@ -25,9 +26,7 @@ std::string SplitEntry::scene() const {
 }
 
 std::string SplitEntry::image_path(const std::string& root, int64_t offset) const {
-  char name[32];
-  std::snprintf(name, sizeof name, "%010lld.png", static_cast<long long>(frame + offset));
-  return root + "/" + folder + "/image_0" + std::to_string(camera()) + "/data/" + name;
+  return root + "/" + folder + "/image_0" + std::to_string(camera()) + "/data/" + zero_padded(frame + offset, 10) + ".png";
 }
 
 namespace {

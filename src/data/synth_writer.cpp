@@ -15,12 +15,6 @@ namespace fs = std::filesystem;
 namespace geo {
 namespace {
 
-std::string numbered(const char* fmt, int64_t i) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, fmt, static_cast<long long>(i));
-  return buf;
-}
-
 // P = K [I | 0] for a rectified camera at the reference camera's centre.
 torch::Tensor projection(const SynthOptions& o) {
   auto P = torch::zeros({3, 4}, torch::kFloat64);
@@ -90,7 +84,7 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
       fs::create_directories(dir + sub);
     for (int64_t f = 0; f < o.frames_per_drive; ++f) {
       const auto frame = render_frame(scene, f, o);
-      const std::string name = numbered("%010lld", f);
+      const std::string name = zero_padded(f, 10);
       write_image(dir + "/image_02/data/" + name + ".png", frame.image);
       write_depth_png(dir + "/proj_depth/groundtruth/image_02/" + name + ".png", frame.depth);
       write_velodyne(dir + "/velodyne_points/data/" + name + ".bin", render_lidar(scene, f, o));
@@ -116,7 +110,7 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
   for (int i = 0; i < o.flow_pairs; ++i) {
     const SynthScene scene(synth_drive_seed(o.seed, 1, i), 40);
     const int64_t f = 5 + (i * 7) % 30;
-    const std::string name = numbered("%06lld", i);
+    const std::string name = zero_padded(i, 6);
     const auto before = render_frame(scene, f - 1, o);  // KITTI 2015's multi-view frame 09
     tick("flow pair");
     const auto a = render_frame(scene, f, o);
@@ -140,7 +134,7 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
   const SynthScene odo(synth_drive_seed(o.seed, 2, 9), o.odometry_frames);
   std::ostringstream times;
   for (int64_t f = 0; f < o.odometry_frames; ++f) {
-    write_image(seq + "/image_2/" + numbered("%06lld", f) + ".png", render_frame(odo, f, o).image);
+    write_image(seq + "/image_2/" + zero_padded(f, 6) + ".png", render_frame(odo, f, o).image);
     char stamp[32];
     std::snprintf(stamp, sizeof stamp, "%e\n", 0.1 * static_cast<double>(f));  // 10 Hz
     times << stamp;

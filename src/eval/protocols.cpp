@@ -1,6 +1,7 @@
 #include "eval/protocols.h"
 
 #include "core/logging.h"
+#include "core/files.h"
 #include "core/progress.h"
 #include "data/calib.h"
 #include "data/image_io.h"
@@ -27,12 +28,6 @@ namespace fs = std::filesystem;
 
 namespace geo {
 namespace {
-
-std::string numbered(const char* fmt, long long i) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, fmt, i);
-  return buf;
-}
 
 void require_file(const std::string& path, const std::string& what) {
   if (!fs::exists(path)) throw std::runtime_error(what + " not found: '" + path + "'");
@@ -110,7 +105,7 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
   for (size_t i = 0; i < entries.size(); ++i) {
     const auto& e = entries[i];
     const std::string image = e.image_path(root);
-    const std::string velo = root + "/" + e.folder + "/velodyne_points/data/" + numbered("%010lld", e.frame) + ".bin";
+    const std::string velo = root + "/" + e.folder + "/velodyne_points/data/" + zero_padded(e.frame, 10) + ".bin";
     require_file(image, "test image (line " + std::to_string(i + 1) + " of " + list + ")");
     require_file(velo, "Velodyne scan");
     const auto calib = read_raw_calib(root + "/" + e.date(), e.camera());
@@ -119,7 +114,7 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
     if (gt_only) {
       const auto img = read_image(image);
       const auto gt = velodyne_depth(read_velodyne(velo), calib.img_from_velo(), img.size(1), img.size(2), vo);
-      write_depth_png(o.export_gt + "/" + numbered("%06lld", static_cast<long long>(i)) + ".png", gt);
+      write_depth_png(o.export_gt + "/" + zero_padded(static_cast<long long>(i), 6) + ".png", gt);
       ++images;
       progress.update(static_cast<int64_t>(i + 1));
       continue;
@@ -135,7 +130,7 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
       } else if (npy.defined()) {
         depth = npy[static_cast<int64_t>(i)];
       } else {
-        const std::string p = o.predictions + "/" + numbered("%06lld", static_cast<long long>(i)) + ".png";
+        const std::string p = o.predictions + "/" + zero_padded(static_cast<long long>(i), 6) + ".png";
         require_file(p, "prediction for line " + std::to_string(i + 1));
         depth = read_depth_png(p)[0];
       }
@@ -158,7 +153,7 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
       if (scans_with_non_finite++ == 0) first_non_finite = velo;
     }
     const auto gt = velodyne_depth(points, calib.img_from_velo(), H, W, vo);
-    if (!o.export_gt.empty()) write_depth_png(o.export_gt + "/" + numbered("%06lld", static_cast<long long>(i)) + ".png", gt);
+    if (!o.export_gt.empty()) write_depth_png(o.export_gt + "/" + zero_padded(static_cast<long long>(i), 6) + ".png", gt);
     EigenOptions image_eo = eo;
     image_eo.median_scaling = o.scaling == DepthScaling::kMedian;
     if (o.scaling == DepthScaling::kCameraHeight) {
@@ -429,13 +424,13 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
     const int64_t L = pred->seq_length(), k = (L - 1) / 2;
     int64_t image_h = 0, image_w = 0;
     auto image = [&](int64_t f) {
-      const std::string p = seq + "/image_2/" + numbered("%06lld", static_cast<long long>(f)) + ".png";
+      const std::string p = seq + "/image_2/" + zero_padded(f, 6) + ".png";
       require_file(p, "odometry image");
       return net_input(p, *pred, &image_h, &image_w);
     };
     std::vector<torch::Tensor> frames;
     for (int64_t f = 0; f < n; ++f) frames.push_back(image(f));
-    const std::string extra = seq + "/image_2/" + numbered("%06lld", static_cast<long long>(n)) + ".png";
+    const std::string extra = seq + "/image_2/" + zero_padded(n, 6) + ".png";
     if (fs::exists(extra))
       throw std::runtime_error(gt_path + " holds " + std::to_string(n) + " poses but " + seq +
                                "/image_2 has more images (" + extra + " exists): the ground truth does not match");

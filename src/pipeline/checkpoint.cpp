@@ -1,5 +1,6 @@
 #include "pipeline/checkpoint.h"
 
+#include "core/files.h"
 #include "core/state_io.h"
 
 #include <algorithm>
@@ -185,9 +186,7 @@ bool CheckpointFile::load_optimizer(torch::optim::Optimizer& optimizer) {
 }
 
 std::string checkpoint_name(const std::string& stage, int64_t iteration) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "-%08lld.pt", static_cast<long long>(iteration));
-  return stage + buf;
+  return stage + "-" + zero_padded(iteration, 8) + ".pt";
 }
 
 std::string stage_of_checkpoint(const std::string& name) {
