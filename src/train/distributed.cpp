@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 #include <torch/version.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <limits>
@@ -134,6 +135,14 @@ class C10dGroup : public ProcessGroup {
       : rank_(l.rank), size_(l.world_size), local_rank_(l.local_rank), timeout_s_(config.timeout_s),
         master_(l.master_addr + ":" + std::to_string(l.master_port)) {
     const auto timeout = std::chrono::milliseconds(int64_t{1000} * config.timeout_s);
+    // One deadline for the whole rendezvous: LibTorch 1.13's store stops waiting for missing
+    // workers at the timeout without an error, so waiting again for their keys with the full
+    // timeout would report a missing process only after twice run.distributed.timeout_s.
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    const auto time_left = [&] {
+      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+      return std::max(left, std::chrono::milliseconds(100));
+    };
     const std::string where = l.master_addr + ":" + std::to_string(l.master_port);
     c10d::TCPStoreOptions so;
     so.port = static_cast<std::uint16_t>(l.master_port);
@@ -177,7 +186,9 @@ class C10dGroup : public ProcessGroup {
     // Every process launched with the same WORLD_SIZE, said at once (else Gloo's own enforce message,
     // or a wait for processes that never come): each compares with rank 0, rank 0 with each.
     const auto world_of = [&](int r) {
-      const auto v = store_->get("geo/world_size/" + std::to_string(r));
+      const std::string key = "geo/world_size/" + std::to_string(r);
+      store_->wait({key}, time_left());
+      const auto v = store_->get(key);
       return std::string(v.begin(), v.end());
     };
     for (int r = rank_ == 0 ? 1 : 0; r < (rank_ == 0 ? size_ : 1); ++r) {

@@ -404,6 +404,17 @@ TEST_F(Distributed, LaunchErrorsAreMessagesNotHangs) {
   EXPECT_EQ(wait_for(lonely, 60), 1);
   EXPECT_NE(test::read_file(dir + "/lonely.log").find("rank 1 could not reach the rendezvous at 127.0.0.1:"), std::string::npos)
       << test::read_file(dir + "/lonely.log");
+  // Rank 0 with its peer never started: an error naming rank 1 within about timeout_s (one wait,
+  // not one per rendezvous step: LibTorch 1.13's store gives up on missing workers silently).
+  const auto t0 = std::chrono::steady_clock::now();
+  Proc alone = spawn({"--config", cfg, "--set", "run.distributed.timeout_s=6", "--run-dir", dir + "/e"},
+                     {{"RANK", "0"}, {"WORLD_SIZE", "2"}, {"MASTER_ADDR", "127.0.0.1"}, {"MASTER_PORT", std::to_string(free_local_port())}},
+                     dir + "/alone.log");
+  EXPECT_EQ(wait_for(alone, 60), 1);
+  const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("rank 0 alone: exited after %.1f s (timeout_s 6)\n", waited);
+  EXPECT_LT(waited, 10.0) << "twice the timeout is 12 s";
+  EXPECT_NE(test::read_file(dir + "/alone.log").find("rank 1"), std::string::npos) << test::read_file(dir + "/alone.log");
   // Rank 0 on a port another program holds.
   const int s = ::socket(AF_INET, SOCK_STREAM, 0);
   sockaddr_in a{};
