@@ -448,7 +448,7 @@ void DataConfig::validate(Checker& c) const {
   c.require(num_workers >= 0 && num_workers <= 64, "num_workers", num_workers, "must be in 0..64");
   c.require(split != "odometry" || !sequences.empty(), "sequences", sequences,
             "must name at least one KITTI odometry sequence when data.split is odometry");
-  c.require(!split.empty(), "split", split, "must not be empty (eigen_zhou, raw_minus_kitti2015, odometry, ...)");
+  c.require(!split.empty(), "split", split, "must not be empty (eigen_zhou, kitti_raw_stereo, raw_minus_kitti2015, odometry, ...)");
   {
     Checker::Scope s(c, "augment");
     augment.validate(c);

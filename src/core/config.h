@@ -139,9 +139,10 @@ struct SynthDataConfig {
 struct DataConfig {
   std::string root;                   // dataset root (KITTI raw, packed cache or a geo_synth world)
   DataFormat format = DataFormat::kAuto;  // auto | kitti_raw | packed | synthetic (no files; data.synthetic)
-  // Training data of a task: eigen_zhou (depth; the paper's Eigen split), raw_minus_kitti2015 (flow,
-  // GeoNet: eigen_zhou without the KITTI 2015 scenes), odometry (pose, GeoNet: KITTI odometry
-  // `sequences`), or any split folder under configs/splits or <root>/splits.
+  // Training data of a task: eigen_zhou (depth; the paper's Eigen split), kitti_raw_stereo (flow,
+  // GeoNet's: every raw drive on disk but the KITTI 2015 scenes, cameras 02 and 03),
+  // raw_minus_kitti2015 (the eigen_zhou lists without the KITTI 2015 scenes), odometry (pose, GeoNet:
+  // KITTI odometry `sequences`), or any split folder under configs/splits or <root>/splits.
   std::string split = "eigen_zhou";
   std::vector<std::string> sequences = {"00", "01", "02", "03", "04", "05", "06", "07", "08"};  // odometry split (GeoNet)
   std::string train_list;             // explicit training list; empty = <split>/train_files.txt
@@ -150,6 +151,10 @@ struct DataConfig {
   int width = 416;                    // training width (paper Sec. 4.2)
   int seq_length = 3;                 // target in the middle + 2 sources (paper); 5 for odometry
   int num_workers = 2;                // loader threads prefetching batches
+  // KITTI raw: leave out the frames of configs/splits/static_frames.txt (SfMLearner's, GeoNet's
+  // remove_static). kitti_raw_stereo removes them from the frame list before snippets are formed
+  // (a neighbour is the next frame that moves, as GeoNet); list splits drop static targets.
+  bool remove_static = true;
   BadSample on_bad_sample = BadSample::kStop;  // stop | skip
   AugmentConfig augment;
   SynthDataConfig synthetic;          // data.format synthetic only
@@ -165,6 +170,7 @@ struct DataConfig {
     v("width", width);
     v("seq_length", seq_length);
     v("num_workers", num_workers);
+    v("remove_static", remove_static);
     v("on_bad_sample", on_bad_sample);
     v("augment", augment);
     v("synthetic", synthetic);

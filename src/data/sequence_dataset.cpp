@@ -17,7 +17,7 @@ SequenceDataset::SequenceDataset(std::vector<SplitEntry> entries, SequenceDatase
   const int64_t half = options_.seq_length / 2;
   for (auto& e : entries) {
     if (options_.check_neighbours &&
-        (e.frame - half < 0 || !std::filesystem::exists(e.image_path(options_.root, -half)) ||
+        (e.frame_at(-half) < 0 || !std::filesystem::exists(e.image_path(options_.root, -half)) ||
          !std::filesystem::exists(e.image_path(options_.root, half)))) {
       ++dropped_;
       continue;

@@ -10,6 +10,7 @@
 #include <regex>
 #include <sstream>
 #include <stdexcept>
+#include <utility>
 
 namespace geo {
 
@@ -26,7 +27,7 @@ std::string SplitEntry::scene() const {
 }
 
 std::string SplitEntry::image_path(const std::string& root, int64_t offset) const {
-  return root + "/" + folder + "/image_0" + std::to_string(camera()) + "/data/" + zero_padded(frame + offset, 10) + ".png";
+  return root + "/" + folder + "/image_0" + std::to_string(camera()) + "/data/" + zero_padded(frame_at(offset), 10) + ".png";
 }
 
 namespace {
@@ -117,6 +118,76 @@ size_t exclude_entries(std::vector<SplitEntry>& entries, const std::set<std::str
                                }),
                 entries.end());
   return before - entries.size();
+}
+
+namespace {
+
+// <root>/<date>/<drive>_sync folders (dates as KITTI names them, YYYY_MM_DD), sorted.
+std::vector<std::pair<std::string, std::string>> raw_drive_folders(const std::string& root) {
+  namespace fs = std::filesystem;
+  static const std::regex date_re(R"(\d{4}_\d{2}_\d{2})");
+  std::vector<std::pair<std::string, std::string>> out;  // (date, drive folder name)
+  std::error_code ec;
+  for (const auto& d : fs::directory_iterator(root, ec)) {
+    const std::string date = d.path().filename().string();
+    if (!d.is_directory() || !std::regex_match(date, date_re)) continue;
+    for (const auto& r : fs::directory_iterator(d.path(), ec)) {
+      const std::string drive = r.path().filename().string();
+      if (r.is_directory() && drive.size() > 5 && drive.compare(drive.size() - 5, 5, "_sync") == 0)
+        out.emplace_back(date, drive);
+    }
+  }
+  if (ec) throw std::runtime_error("cannot list the KITTI raw folder '" + root + "': " + ec.message());
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+}  // namespace
+
+std::set<std::string> raw_drives_on_disk(const std::string& root, const std::set<std::string>& test_scenes) {
+  std::set<std::string> out;
+  for (const auto& [date, drive] : raw_drive_folders(root)) {
+    const std::string scene = drive.substr(0, drive.size() - 5);
+    if (!test_scenes.count(scene)) out.insert(scene);
+  }
+  return out;
+}
+
+std::vector<SplitEntry> raw_drive_snippets(const std::string& root, const std::set<std::string>& test_scenes,
+                                           const std::set<std::string>& static_frames, int64_t seq_length) {
+  namespace fs = std::filesystem;
+  if (seq_length < 3 || seq_length % 2 == 0)
+    throw std::invalid_argument("seq_length must be odd and >= 3, got " + std::to_string(seq_length));
+  static const std::regex frame_re(R"((\d{1,10})\.png)");
+  const int64_t half = seq_length / 2;
+  std::vector<SplitEntry> out;
+  for (const auto& [date, drive] : raw_drive_folders(root)) {
+    if (test_scenes.count(drive.substr(0, drive.size() - 5))) continue;
+    for (const char side : {'l', 'r'}) {
+      const fs::path dir = fs::path(root) / date / drive / (side == 'l' ? "image_02" : "image_03") / "data";
+      std::vector<int64_t> frames;
+      std::error_code ec;
+      for (const auto& f : fs::directory_iterator(dir, ec)) {
+        std::smatch m;
+        const std::string name = f.path().filename().string();
+        if (!std::regex_match(name, m, frame_re)) continue;
+        const int64_t frame = std::stoll(m[1]);
+        if (!static_frames.count(static_key(drive, frame))) frames.push_back(frame);
+      }
+      std::sort(frames.begin(), frames.end());
+      for (size_t t = static_cast<size_t>(half); t + static_cast<size_t>(half) < frames.size(); ++t) {
+        SplitEntry e;
+        e.folder = date + "/" + drive;
+        e.frame = frames[t];
+        e.side = side;
+        e.snippet.assign(frames.begin() + static_cast<std::ptrdiff_t>(t - static_cast<size_t>(half)),
+                         frames.begin() + static_cast<std::ptrdiff_t>(t + static_cast<size_t>(half) + 1));
+        e.line = e.folder + " " + std::to_string(e.frame) + " " + side;
+        out.push_back(std::move(e));
+      }
+    }
+  }
+  return out;
 }
 
 std::string find_split_file(const std::string& root, const std::string& split, const std::string& file) {

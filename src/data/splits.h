@@ -16,12 +16,19 @@ struct SplitEntry {
   int64_t frame = 0;    // frame index
   char side = 'l';      // 'l' (camera 02) or 'r' (camera 03)
   std::string line;     // the line as written (for messages)
+  // The snippet's frames in order, the target in the middle, when they are not frame - L/2 ..
+  // frame + L/2 (raw_drive_snippets: GeoNet's frame lists without the static frames); else empty.
+  std::vector<int64_t> snippet;
+
+  int64_t frame_at(int64_t offset) const {  // the frame `offset` places from the target
+    return snippet.empty() ? frame + offset : snippet.at(static_cast<size_t>(offset + static_cast<int64_t>(snippet.size()) / 2));
+  }
 
   int camera() const { return side == 'r' ? 3 : 2; }
   std::string date() const;   // first path component of folder ("2011_09_26")
   std::string drive() const;  // last path component of folder ("2011_09_26_drive_0022_sync")
   std::string scene() const;  // drive() without "_sync" ("2011_09_26_drive_0022", as scene lists name it)
-  // <root>/<folder>/image_0c/data/%010d.png for frame + offset.
+  // <root>/<folder>/image_0c/data/%010d.png for frame_at(offset).
   std::string image_path(const std::string& root, int64_t offset = 0) const;
 };
 
@@ -39,6 +46,17 @@ std::set<std::string> read_static_frames(const std::string& path);
 // "" if none.
 std::string find_split_file(const std::string& root, const std::string& split, const std::string& file);
 std::string static_key(const std::string& drive_folder, int64_t frame);
+
+// GeoNet's raw training snippets (kitti_raw_loader.py, its kitti_raw_stereo data): every frame of
+// cameras 02 and 03 of every drive on disk (<root>/<date>/<drive>_sync/image_0c/data/*.png) whose
+// scene is not in `test_scenes`, the `static_frames` removed from each drive's frame list, then a
+// snippet around every entry with seq_length / 2 list neighbours on both sides in the same drive
+// and camera (so a neighbour is the next frame that moves). Ordered by folder, camera, frame.
+std::vector<SplitEntry> raw_drive_snippets(const std::string& root, const std::set<std::string>& test_scenes,
+                                           const std::set<std::string>& static_frames, int64_t seq_length);
+// The drives (scenes, "2011_09_26_drive_0005") raw_drive_snippets would read: every <date>/<drive>_sync
+// folder under `root` not in `test_scenes`.
+std::set<std::string> raw_drives_on_disk(const std::string& root, const std::set<std::string>& test_scenes);
 
 // Removes entries whose drive is a test scene or whose frame is static; returns how many were removed.
 size_t exclude_entries(std::vector<SplitEntry>& entries, const std::set<std::string>& test_scenes,

@@ -11,31 +11,42 @@ namespace fs = std::filesystem;
 namespace geo {
 
 RawTrainingLists raw_training_lists(const DataConfig& d, const std::string& root) {
-  // raw_minus_kitti2015 (GeoNet's flow data): the eigen_zhou lists without the KITTI 2015 scenes.
-  const bool minus_2015 = d.split == "raw_minus_kitti2015";
+  // kitti_raw_stereo (GeoNet's flow data): every drive on disk without the KITTI 2015 scenes (and
+  // eigen_zhou's validation list without them); raw_minus_kitti2015: the eigen_zhou lists without them.
+  const bool stereo_drives = d.split == "kitti_raw_stereo" && d.train_list.empty();
+  const bool minus_2015 = d.split == "raw_minus_kitti2015" || d.split == "kitti_raw_stereo";
   const std::string list_split = minus_2015 ? "eigen_zhou" : d.split;
   RawTrainingLists out;
-  out.train_list = d.train_list.empty() ? find_split_file(root, list_split, "train_files.txt") : d.train_list;
+  out.from_drives = stereo_drives;
+  if (stereo_drives) {
+    if (root.empty() || !fs::is_directory(root))
+      throw ConfigError("data.root: data.split kitti_raw_stereo reads every drive under the KITTI raw folder, and '" +
+                        root + "' is not a folder");
+    out.train_list = root + " (every drive, cameras 02 and 03)";
+  } else {
+    out.train_list = d.train_list.empty() ? find_split_file(root, list_split, "train_files.txt") : d.train_list;
+  }
   out.val_list = d.val_list.empty() ? find_split_file(root, list_split, "val_files.txt") : d.val_list;
-  if (out.train_list.empty() || !fs::exists(out.train_list))
+  if (!stereo_drives && (out.train_list.empty() || !fs::exists(out.train_list)))
     throw ConfigError("data.train_list: no training list found (" +
                       (d.train_list.empty() ? "looked for " + root + "/splits/" + list_split +
                                                   "/train_files.txt and the shipped configs/splits/" + list_split
                                             : "'" + d.train_list + "' does not exist") + ")");
   if (!out.val_list.empty() && !fs::exists(out.val_list)) out.val_list.clear();
-  const std::string scenes_file = find_split_file(root, "eigen", "test_scenes.txt");
+  // GeoNet's flow data keeps the Eigen test drives: only the KITTI 2015 scenes are left out.
+  const std::string scenes_file = stereo_drives ? "" : find_split_file(root, "eigen", "test_scenes.txt");
   if (!scenes_file.empty()) {
     out.test_scenes = read_scene_list(scenes_file);
     out.exclusions.push_back(scenes_file);
   }
   if (minus_2015) {
     const std::string stereo = find_split_file(root, "stereo", "test_scenes_stereo.txt");
-    if (stereo.empty()) throw ConfigError("data.split raw_minus_kitti2015: no stereo/test_scenes_stereo.txt found");
+    if (stereo.empty()) throw ConfigError("data.split " + d.split + ": no stereo/test_scenes_stereo.txt found");
     for (const auto& s : read_scene_list(stereo)) out.test_scenes.insert(s);
     out.exclusions.push_back(stereo);
   }
   const std::string static_file = shipped_config_dir() + "/splits/static_frames.txt";
-  if (fs::exists(static_file)) {
+  if (d.remove_static && fs::exists(static_file)) {
     out.static_frames = read_static_frames(static_file);
     out.exclusions.push_back(static_file);
   }
@@ -71,7 +82,8 @@ TrainingDrives training_drives(const DataConfig& d) {
   }
   try {
     const auto lists = raw_training_lists(d, root);
-    for (const auto& list : {lists.train_list, lists.val_list}) {
+    if (lists.from_drives) out.drives = raw_drives_on_disk(root, lists.test_scenes);
+    for (const auto& list : {lists.from_drives ? std::string() : lists.train_list, lists.val_list}) {
       if (list.empty()) continue;
       auto entries = read_split(list);
       exclude_entries(entries, lists.test_scenes, lists.static_frames);

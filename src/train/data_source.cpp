@@ -59,7 +59,7 @@ TrainingData open_at(const DataConfig& d, TrainingData out) {
     return out;
   }
   out.format = "kitti_raw";
-  const bool minus_2015 = d.split == "raw_minus_kitti2015";
+  const bool minus_2015 = d.split == "raw_minus_kitti2015" || d.split == "kitti_raw_stereo";
   auto lists = raw_training_lists(d, d.root);
   out.train_list = lists.train_list;
   out.val_list = lists.val_list;
@@ -71,15 +71,19 @@ TrainingData open_at(const DataConfig& d, TrainingData out) {
   so.height = d.height;
   so.width = d.width;
   so.seq_length = d.seq_length;
-  auto entries = read_split(out.train_list);
+  auto entries = lists.from_drives ? raw_drive_snippets(d.root, scenes, statics, d.seq_length) : read_split(out.train_list);
   const size_t listed = entries.size();
-  out.excluded = exclude_entries(entries, scenes, statics);
+  if (lists.from_drives && entries.empty())
+    throw ConfigError("data.split kitti_raw_stereo: no " + std::to_string(d.seq_length) + "-frame snippet under '" + d.root +
+                      "' (looked for <date>/<drive>_sync/image_02|03/data/*.png outside the KITTI 2015 scenes of " +
+                      join_list(out.exclusions, ",") + ")");
+  if (!lists.from_drives) out.excluded = exclude_entries(entries, scenes, statics);
   if (entries.empty())
     throw ConfigError("data.split " + d.split + ": all " + std::to_string(listed) + " entries of " + out.train_list +
                       " are excluded (test scenes or static frames listed in " + join_list(out.exclusions, ",") + ")");
   auto train = std::make_shared<SequenceDataset>(std::move(entries), so);
   out.dropped = train->dropped();
-  if (train->size() == 0) {
+  if (train->size() == 0 && !lists.from_drives) {
     // Name a frame that is really missing: the target, or the first absent neighbour.
     const auto first = read_split(out.train_list).front();
     std::string missing = first.image_path(d.root);

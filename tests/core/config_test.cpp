@@ -266,7 +266,7 @@ TEST(Config, ShippedConfigsParseWithThePapersSchedule) {
   EXPECT_EQ(pose.data.seq_length, 5);
   EXPECT_EQ(pose.data.sequences, (std::vector<std::string>{"00", "01", "02", "03", "04", "05", "06", "07", "08"}));
   const Config flow = geo::load_config(geo::resolve_config_path("flow_geonet"));
-  EXPECT_EQ(flow.data.split, "raw_minus_kitti2015");
+  EXPECT_EQ(flow.data.split, "kitti_raw_stereo");
   EXPECT_EQ(flow.stages[0].train.names(), std::vector<std::string>{"flow"});
   EXPECT_EQ(flow.loss.flow_mask, geo::FlowMask::kConsistency);
 }

@@ -2,6 +2,7 @@
 // hand-made inputs with known answers, malformed inputs with the messages they must give, and the
 // real KITTI excerpts when ../shared/kitti_samples is present.
 #include "core/config.h"
+#include "core/files.h"
 #include "data/calib.h"
 #include "data/splits.h"
 #include "data/text_io.h"
@@ -12,6 +13,7 @@
 #include <cmath>
 
 #include <limits>
+#include <set>
 
 #include "test_util.h"
 
@@ -171,6 +173,48 @@ TEST(VelodyneDepth, NonFiniteAndFarOffPointsAreLeftOutAndCounted) {
   const auto d = velodyne_depth(pts, P, 4, 5);
   EXPECT_EQ(d[1][1].item<float>(), 5.0f);
   EXPECT_EQ((d > 0).sum().item<int64_t>(), 1);
+}
+
+// GeoNet's kitti_raw_stereo frames: every drive on disk but the test scenes, both cameras, the static
+// frames removed from the list before snippets are formed (a neighbour is the next moving frame).
+TEST(Splits, RawDriveSnippetsAreGeoNetsFrameListsWithoutStaticFrames) {
+  const auto root = test::fresh_dir("raw_drives");
+  auto frames = [&](const std::string& drive, const char* camera, int n) {
+    const std::string dir = root + "/2011_09_26/" + drive + "/" + camera + "/data";
+    std::filesystem::create_directories(dir);
+    for (int f = 0; f < n; ++f) test::write_text(dir + "/" + zero_padded(f, 10) + ".png", "");
+  };
+  frames("2011_09_26_drive_0001_sync", "image_02", 6);
+  frames("2011_09_26_drive_0001_sync", "image_03", 6);
+  frames("2011_09_26_drive_0002_sync", "image_02", 6);  // a test scene
+  frames("2011_09_26_drive_0003_sync", "image_02", 2);  // shorter than a snippet
+  std::filesystem::create_directories(root + "/calibration/x_sync/image_02/data");  // not a date folder
+  const std::set<std::string> statics = {static_key("2011_09_26_drive_0001_sync", 2),
+                                         static_key("2011_09_26_drive_0001_sync", 3)};
+  const std::set<std::string> tests = {"2011_09_26_drive_0002"};
+  const auto e = raw_drive_snippets(root, tests, statics, 3);
+  ASSERT_EQ(e.size(), 4u);  // frames 0 1 4 5 left in each camera: targets 1 and 4
+  EXPECT_EQ(e[0].snippet, (std::vector<int64_t>{0, 1, 4}));
+  EXPECT_EQ(e[0].frame, 1);
+  EXPECT_EQ(e[1].snippet, (std::vector<int64_t>{1, 4, 5}));
+  EXPECT_EQ(e[1].frame, 4);
+  EXPECT_EQ(e[0].side, 'l');
+  EXPECT_EQ(e[2].side, 'r');
+  EXPECT_EQ(e[2].line, "2011_09_26/2011_09_26_drive_0001_sync 1 r");
+  const std::string drive = root + "/2011_09_26/2011_09_26_drive_0001_sync";
+  EXPECT_EQ(e[1].image_path(root, -1), drive + "/image_02/data/0000000001.png");
+  EXPECT_EQ(e[1].image_path(root, 1), drive + "/image_02/data/0000000005.png");
+  EXPECT_EQ(e[0].image_path(root, 1), drive + "/image_02/data/0000000004.png");  // 2 and 3 do not move
+  EXPECT_EQ(e[3].image_path(root, 0), drive + "/image_03/data/0000000004.png");
+  // Without static frames: frame - 1 .. frame + 1, targets 1..4 in both cameras.
+  const auto all = raw_drive_snippets(root, tests, {}, 3);
+  ASSERT_EQ(all.size(), 8u);
+  EXPECT_EQ(all[2].snippet, (std::vector<int64_t>{2, 3, 4}));
+  EXPECT_EQ(raw_drive_snippets(root, tests, {}, 5).size(), 4u);  // targets 2 and 3
+  EXPECT_EQ(raw_drives_on_disk(root, tests), (std::set<std::string>{"2011_09_26_drive_0001", "2011_09_26_drive_0003"}));
+  // A list entry keeps frame - L/2 .. frame + L/2.
+  EXPECT_EQ(parse_split_line("2011_09_26/2011_09_26_drive_0001_sync 3 l", "x").image_path(root, 1),
+            drive + "/image_02/data/0000000004.png");
 }
 
 // ---- real KITTI excerpts (skipped when ../shared/kitti_samples is absent) ----

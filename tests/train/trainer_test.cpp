@@ -261,8 +261,28 @@ TEST(TrainingData, PerTaskSplits) {
   EXPECT_TRUE(std::any_of(shipped.exclusions.begin(), shipped.exclusions.end(), [](const std::string& f) {
     return f.find("stereo/test_scenes_stereo.txt") != std::string::npos;
   }));
+  // kitti_raw_stereo (GeoNet's flow data): every drive on disk but the KITTI 2015 scenes (the Eigen
+  // test drive included), both cameras: each camera's frames but the two ends.
+  DataConfig k = tiny_config().data;
+  k.split = "kitti_raw_stereo";
+  size_t expected = 0;
+  std::string drives;
+  for (const auto& drive : std::filesystem::directory_iterator(world() + "/2011_01_01")) {
+    if (!drive.is_directory()) continue;  // the calibration files
+    drives += drive.path().filename().string().substr(0, drive.path().filename().string().size() - 5) + "\n";
+    for (const char* camera : {"image_02", "image_03"}) {
+      const auto dir = drive.path() / camera / "data";
+      if (std::filesystem::is_directory(dir))
+        expected += static_cast<size_t>(std::distance(std::filesystem::directory_iterator(dir), {})) - 2;
+    }
+  }
+  EXPECT_EQ(std::count(drives.begin(), drives.end(), '\n'), 2);  // the training and the Eigen test drive
+  EXPECT_EQ(open_training_data(k).train->size(), expected);
   test::write_text(world() + "/splits/stereo/test_scenes_stereo.txt", "2011_01_01_drive_0001\n");
   GEO_EXPECT_THROW_WITH(open_training_data(r), "all 7 entries", "are excluded", "test_scenes_stereo.txt");
+  EXPECT_LT(open_training_data(k).train->size(), expected);
+  test::write_text(world() + "/splits/stereo/test_scenes_stereo.txt", drives);
+  GEO_EXPECT_THROW_WITH(open_training_data(k), "kitti_raw_stereo: no 3-frame snippet", "test_scenes_stereo.txt");
   std::filesystem::remove_all(world() + "/splits/stereo");
 }
 
