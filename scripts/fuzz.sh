@@ -15,7 +15,7 @@ JOBS="${GEO_JOBS:-$(nproc)}"
 if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
   # No -Werror here: GCC 12 warns falsely (maybe-uninitialized in <regex>) under the sanitizers.
   cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release -DGEO_SANITIZE=address,undefined \
-    -DCMAKE_CXX_FLAGS_RELEASE="-O1 -g" -DGEO_WERROR=OFF
+    -DCMAKE_CXX_FLAGS_RELEASE="-O1 -g" -DGEO_WERROR=OFF -DGEO_UNITY_BUILD="$([ "${GEO_UNITY:-1}" = 1 ] && echo ON || echo OFF)"
 fi
 echo "geo fuzz: building the sanitized fuzz tests in $BUILD_DIR with $JOBS jobs"
 cmake --build "$BUILD_DIR" -j "$JOBS" --target fuzz_tests
