@@ -5,7 +5,9 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <regex>
 #include <string>
+#include <vector>
 
 namespace geo::app {
 
@@ -29,5 +31,32 @@ inline CLI::Validator bounded_below(long long min, bool strict) {
 inline CLI::Validator positive() { return bounded_below(1, false); }       // counts: 1, 2, ...
 inline CLI::Validator non_negative() { return bounded_below(0, false); }   // 0 = off / all
 inline CLI::Validator above_zero() { return bounded_below(0, true); }      // lengths, heights
+
+// --config FILE (a path or a shipped config's name, e.g. stage1.yaml) and --set KEY=VALUE...
+// (config overrides). Returns the --config option.
+inline CLI::Option* add_config_options(CLI::App& app, std::string& config, std::vector<std::string>& overrides,
+                                       const std::string& config_help) {
+  auto* option = app.add_option("--config", config, config_help);
+  app.add_option("--set", overrides, "override a config key, e.g. --set data.root=/data/kitti_raw")->take_all();
+  return option;
+}
+
+// --device auto|cpu|cuda|cuda:N, checked when parsed; `unset` says what leaving it out means.
+inline CLI::Option* add_device_option(CLI::App& app, std::string& device, const std::string& unset) {
+  static const std::regex device_re("auto|cpu|cuda(:[0-9]+)?");
+  return app
+      .add_option("--device", device, "auto (CUDA when available), cpu, cuda or cuda:N (an error without CUDA); " + unset)
+      ->check(CLI::Validator(
+          [](std::string& value) -> std::string {
+            return std::regex_match(value, device_re) ? "" : "must be auto, cpu, cuda or cuda:N (got '" + value + "')";
+          },
+          "DEVICE"));
+}
+
+// --precision, one of `choices`.
+inline CLI::Option* add_precision_option(CLI::App& app, std::string& precision, const std::vector<std::string>& choices,
+                                         const std::string& help) {
+  return app.add_option("--precision", precision, help)->check(CLI::IsMember(choices));
+}
 
 }  // namespace geo::app

@@ -45,7 +45,7 @@
 #include "train/train_step.h"
 #include "app_options.h"
 #ifdef GEO_BENCH_PNG
-#include "train/data_source.h"
+#include "data/training_data.h"
 #endif
 #ifdef GEO_BENCH_CUDA_STATS
 #include <c10/cuda/CUDACachingAllocator.h>
@@ -345,12 +345,13 @@ int main(int argc, char** argv) {
       profile_top = 0;
   bool profile_shapes = false;
   std::string precision;
-  app.add_option("--config", config_path,
-                 "YAML config (model, data size, stages); default: the paper's settings and its two stages");
-  app.add_option("--device", device_name, "cpu (default), cuda, cuda:N or auto; cuda without CUDA is an error");
+  std::vector<std::string> overrides;
+  geo::app::add_config_options(app, config_path, overrides,
+                               "YAML config (model, data size, stages); default: the paper's settings and its two stages");
+  geo::app::add_device_option(app, device_name, "default: cpu");
   app.add_option("--batch", batches, "inference batch sizes, e.g. 1,4")->delimiter(',')->check(geo::app::positive());
-  app.add_option("--precision", precision, "fp32, tf32 or bf16 (run.precision; default: the config's)")
-      ->check(CLI::IsMember({"fp32", "tf32", "bf16"}));
+  geo::app::add_precision_option(app, precision, {"fp32", "tf32", "bf16"},
+                                 "fp32, tf32 or bf16 (run.precision; default: the config's)");
   app.add_option("--train-batch", train_batch, "training batch size (default: each stage's batch_size)");
   app.add_option("--fr", fr_mode, "feature refinement: both, on or off")->check(CLI::IsMember({"both", "on", "off"}));
   app.add_option("--warmup", warmup, "untimed inference runs before timing (fresh memory is slow to touch)")
@@ -379,8 +380,7 @@ int main(int argc, char** argv) {
 
   try {
     geo::setup_logging("info");
-    const std::vector<std::string> overrides =
-        precision.empty() ? std::vector<std::string>{} : std::vector<std::string>{"run.precision=" + precision};
+    if (!precision.empty()) overrides.push_back("run.precision=" + precision);
     const geo::Config config = config_path.empty() ? geo::parse_config("", "<defaults>", overrides)
                                                    : geo::load_config(geo::resolve_config_path(config_path), overrides);
     geo::apply_precision(config.run.precision);
@@ -540,10 +540,7 @@ int main(int argc, char** argv) {
                                  ": this build has no OpenCV; give a packed cache (geo_prepare --out)");
       source = std::make_shared<geo::PackedSnippets>(data_root + "/train");
 #endif
-      geo::LoaderOptions lo;
-      lo.batch_size = train_batch > 0 ? train_batch : config.stages.front().batch_size;
-      lo.workers = d.num_workers;
-      lo.augment = d.augment;
+      const auto lo = geo::loader_options(d, train_batch > 0 ? train_batch : config.stages.front().batch_size);
       spdlog::info("loader on {} ({}), batch {}, {} worker(s) ...", data_root, kind, lo.batch_size, lo.workers);
       Row r{"loader", "loader (" + kind + ")", "-", lo.batch_size};
       const Memory mem(torch::kCPU);

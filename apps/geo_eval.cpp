@@ -64,7 +64,7 @@ int main(int argc, char** argv) {
       ->expected(1, -1)
       ->check(geo::app::above_zero());
   app.add_option("--export-gt", o.export_gt, "eigen: write the ground-truth depth maps (uint16 PNG, depth x 256)");
-  app.add_option("--device", device, "auto (CUDA when available), cpu, cuda or cuda:N (an error without CUDA)");
+  geo::app::add_device_option(app, device, "default: auto");
   std::string flow_resize = "nearest";
   app.add_option("--flow-resize", flow_resize, "kitti2015: resize predicted flow to the ground truth by nearest (GeoNet) or bilinear")
       ->check(CLI::IsMember({"nearest", "bilinear"}));

@@ -35,11 +35,10 @@ int main(int argc, char** argv) {
   app.add_option("--checkpoint", checkpoint, "checkpoint file, run folder or geo_export model file")->required();
   app.add_option("--input", input, "an image, a folder of frames (sorted by name) or a video file")->required();
   app.add_option("--output", output, "output folder (created)")->required();
-  app.add_option("--device", device, "auto (CUDA when available), cpu, cuda or cuda:N (an error without CUDA)");
+  geo::app::add_device_option(app, device, "default: auto");
   std::string precision = "fp32";
-  app.add_option("--precision", precision,
-                 "fp32, bf16 (faster on CPUs with AVX512-BF16/AMX, depth within ~1%) or auto (bf16 on such a CPU)")
-      ->check(CLI::IsMember({"fp32", "bf16", "auto"}));
+  geo::app::add_precision_option(app, precision, {"fp32", "bf16", "auto"},
+                                 "fp32, bf16 (faster on CPUs with AVX512-BF16/AMX, depth within ~1%) or auto (bf16 on such a CPU)");
   app.add_option("--intrinsics", intrinsics,
                  "fx fy cx cy of the input images in pixels (default: KITTI-like 0.58 W, 1.92 H, W/2, H/2)")
       ->expected(4);

@@ -14,7 +14,7 @@
 #include "core/runtime.h"
 #include "data/loader.h"
 #include "data/packed.h"
-#include "train/data_source.h"
+#include "data/training_data.h"
 #include "app_options.h"
 
 int main(int argc, char** argv) {
@@ -23,8 +23,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> overrides;
   bool throughput = false;
   int batches = 20, batch_size = 0;
-  app.add_option("--config", config_path, "config whose data section is used (default stage1.yaml)");
-  app.add_option("--set", overrides, "override a config key, e.g. --set data.root=/data/kitti_raw")->take_all();
+  geo::app::add_config_options(app, config_path, overrides, "config whose data section is used (default stage1.yaml)");
   app.add_option("--out", out, "cache folder to write (train/ and val/ inside)");
   app.add_flag("--throughput", throughput, "measure samples/s of the configured data instead of packing");
   app.add_option("--batches", batches, "batches to time with --throughput")->check(geo::app::positive());
@@ -38,10 +37,7 @@ int main(int argc, char** argv) {
     spdlog::info("{} data: {} training snippets ({} excluded, {} without neighbours), {} validation",
                  data.format, data.train->size(), data.excluded, data.dropped, data.val ? data.val->size() : 0);
     if (throughput) {
-      geo::LoaderOptions lo;
-      lo.batch_size = batch_size > 0 ? batch_size : cfg.stages.front().batch_size;
-      lo.workers = cfg.data.num_workers;
-      lo.augment = cfg.data.augment;
+      const auto lo = geo::loader_options(cfg.data, batch_size > 0 ? batch_size : cfg.stages.front().batch_size);
       spdlog::info("loader: {:.1f} samples/s ({} batches of {}, {}x{}, {} worker(s), augmentation {})",
                    geo::measure_throughput(data.train, lo, batches), batches, lo.batch_size, cfg.data.width, cfg.data.height,
                    lo.workers, cfg.data.augment.enabled ? "on" : "off");

@@ -15,21 +15,21 @@
 #include "core/runtime.h"
 #include "train/trainer.h"
 
+#include "app_options.h"
+
 int main(int argc, char** argv) {
   CLI::App app{"geo_train: unsupervised training of depth, camera motion and optical flow "
                "(GeoNet with feature refinement) from monocular video"};
   std::string config_path, resume_dir;
   std::vector<std::string> overrides;
   geo::TrainOptions opts;
-  auto* cfg_opt = app.add_option("--config", config_path,
-                                 "YAML config (stage1.yaml, stage2.yaml, smoke.yaml or a path)");
+  auto* cfg_opt = geo::app::add_config_options(app, config_path, overrides,
+                                               "YAML config (stage1.yaml, stage2.yaml, smoke.yaml or a path)");
   auto* res_opt = app.add_option("--resume", resume_dir, "continue the run in this folder from its latest checkpoint");
   cfg_opt->excludes(res_opt);
-  app.add_option("--set", overrides, "override a config key, e.g. --set data.root=/data/kitti_raw")->take_all();
   app.add_option("--run-dir", opts.run_dir, "run folder to create (default: <run.dir>/<run.name>-<time>)");
   app.add_option("--init", opts.init, "start the first stage from this checkpoint or run folder");
-  app.add_option("--device", opts.device,
-                 "auto (CUDA when available), cpu, cuda or cuda:N (an error without CUDA); default: run.device");
+  geo::app::add_device_option(app, opts.device, "default: run.device");
   app.add_option("--master-addr", opts.master_addr,
                  "distributed under SLURM: the host of rank 0 when MASTER_ADDR is not set (torchrun sets it)");
   app.footer("Distributed: launched by torchrun (RANK, WORLD_SIZE, LOCAL_RANK, MASTER_ADDR, MASTER_PORT) or srun "

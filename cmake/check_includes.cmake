@@ -23,6 +23,7 @@ endfunction()
 forbid("src/pipeline/*" "[\"<](train|eval|data|api)/" "the pipeline layer sits below training, evaluation and data")
 forbid("src/api/*" "[\"<](train|eval|data)/" "the library is built on the pipeline layer only")
 forbid("src/eval/*" "[\"<]train/" "evaluation does not depend on training")
+forbid("src/data/*" "[\"<](train|eval|api|pipeline)/" "data readers sit below the networks, training and evaluation")
 # The public header: LibTorch and the standard library only (no OpenCV, yaml-cpp, spdlog, fmt, geo internals).
 forbid("include/geo/*.h" "\"|<(opencv|yaml|spdlog|fmt|CLI)" "the public header includes LibTorch and the standard library only")
 

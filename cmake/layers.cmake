@@ -2,6 +2,7 @@
 #
 #   core -> geometry -> losses, models -> pipeline -> { geo (the library), train_parts -> training }
 #                                  data -> data_io -> evaluation (on geo and pipeline, never training)
+#                                          data_io -> training_data (what a config trains on) -> training
 #
 # geo_layers_check(TARGET NOT forbidden...) fails the configuration when TARGET links, directly or
 # through any of its dependencies, one of the forbidden targets.
@@ -65,6 +66,9 @@ geo_layers_check(geo NOT ${geo_training_layers} geo_evaluation geo_data geo_data
 geo_layers_check(geo_evaluation NOT ${geo_training_layers} ABOVE geo geo_pipeline)
 geo_layers_check(geo_train_parts NOT geo_evaluation geo ABOVE geo_pipeline)
 geo_layers_check(geo_training NOT geo_evaluation geo ABOVE geo_pipeline)
+# The data a config trains on: readers only (geo_prepare links it and no training).
+geo_layers_check(geo_training_data NOT ${geo_training_layers} geo_pipeline geo_evaluation geo)
+geo_layers_check(geo_prepare NOT ${geo_training_layers} geo_pipeline)
 file(WRITE ${PROJECT_BINARY_DIR}/layers.txt
      "# Each geo library and every geo library it links (directly or not); checked by cmake/layers.cmake\n"
      "${GEO_LAYERS_REPORT}")

@@ -162,6 +162,15 @@ Batch BatchLoader::next() {
   return b;
 }
 
+LoaderOptions loader_options(const DataConfig& data, int64_t batch_size) {
+  LoaderOptions o;
+  o.batch_size = batch_size;
+  o.workers = data.num_workers;
+  o.skip_bad = data.on_bad_sample == BadSample::kSkip;
+  o.augment = data.augment;
+  return o;
+}
+
 double measure_throughput(std::shared_ptr<const SnippetSource> source, const LoaderOptions& options, int batches) {
   TORCH_CHECK(batches > 0, "measure_throughput: batches must be > 0");
   BatchLoader loader(std::move(source), options);

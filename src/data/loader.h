@@ -53,6 +53,10 @@ struct LoaderOptions {
   int world_size = 1;
 };
 
+// The loader settings of a config's data section for batches of `batch_size`: data.num_workers,
+// data.on_bad_sample, data.augment (the trainer, validation, geo_prepare and geo_bench start here).
+LoaderOptions loader_options(const DataConfig& data, int64_t batch_size);
+
 class BatchLoader {
  public:
   BatchLoader(std::shared_ptr<const SnippetSource> source, LoaderOptions options, int64_t first_batch = 0);

@@ -1,4 +1,4 @@
-// What a config trains on, named by KITTI raw drive: shared by training (train/data_source.h, which
+// What a config trains on, named by KITTI raw drive: shared by training (data/training_data.h, which
 // reads the frames) and evaluation (which warns when a model's training drives hold test data).
 // GeoNet keeps each task's training data disjoint from its test set: depth on eigen_zhou without the
 // Eigen test scenes, flow on raw without the KITTI 2015 scenes, pose on odometry 00-08.

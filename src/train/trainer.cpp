@@ -7,7 +7,7 @@
 #include "data/image_io.h"
 #endif
 #include "data/loader.h"
-#include "train/data_source.h"
+#include "data/training_data.h"
 #include "train/distributed.h"
 #include "train/compute_losses.h"
 #include "train/train_step.h"
@@ -191,12 +191,8 @@ class Run {
     step.set_gradient_averager(averager_.get(), cfg_.run.distributed.overlap);
     if (!resume_from_.empty()) CheckpointFile(resume_from_).load_optimizer(step.optimizer());
     const LrSchedule lr = LrSchedule::of(s);
-    LoaderOptions lo;
-    lo.batch_size = s.batch_size;
+    LoaderOptions lo = loader_options(cfg_.data, s.batch_size);
     lo.seed = static_cast<uint64_t>(cfg_.run.seed) * 131 + static_cast<uint64_t>(state_.stage);
-    lo.workers = cfg_.data.num_workers;
-    lo.skip_bad = cfg_.data.on_bad_sample == BadSample::kSkip;
-    lo.augment = cfg_.data.augment;
     lo.pin_memory = device_.is_cuda();  // page-locked batches, copied to the GPU without blocking
     if (group_ && cfg_.run.distributed.shard_data) {
       lo.rank = group_->rank();

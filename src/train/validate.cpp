@@ -12,11 +12,9 @@ Validation validate(Networks& nets, std::shared_ptr<const SnippetSource> source,
   nets.depth->eval();
   nets.pose->eval();
   if (nets.flow) nets.flow->eval();
-  LoaderOptions lo;
-  lo.batch_size = stage.batch_size;
+  LoaderOptions lo = loader_options(config.data, stage.batch_size);
   lo.workers = 0;
   lo.shuffle = false;
-  lo.skip_bad = config.data.on_bad_sample == BadSample::kSkip;
   lo.augment.enabled = false;
   Validation v;
   v.snippets = source->size();

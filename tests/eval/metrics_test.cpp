@@ -1,5 +1,6 @@
 // Metrics against hand-computed values, and the protocols end to end on a synthetic world whose
 // ground truth, given back as "predictions", must score perfectly.
+#include "core/files.h"
 #include "core/state_io.h"
 #include "data/image_io.h"
 #include "data/synth_writer.h"
@@ -170,18 +171,30 @@ TEST(PoseMetrics, KittiOdometryErrorsAsTheDevkitOnAHandMadePair) {
   EXPECT_NEAR(kitti_odometry_errors(g, p, lengths).t_err, 0.0, 1e-12);
 }
 
-TEST(Protocols, GroundTruthPredictionsScorePerfectlyOnASyntheticWorld) {
-  const auto root = test::fresh_dir("protocols");
-  std::filesystem::rename(test::write_small_world("protocols_world", 6, 2, 8), root + "/world");
-  // Depth: the dense ground truth as predictions, named by line of the test list.
+// A small synthetic world of its own for each protocol test (6 frames per drive, 2 flow pairs, 8
+// odometry frames), in <name>/world.
+std::string protocol_world(const std::string& name) {
+  const auto root = test::fresh_dir(name);
+  std::filesystem::rename(test::write_small_world(name + "_world", 6, 2, 8), root + "/world");
+  return root;
+}
+
+// The Eigen test list's dense ground truth as predictions (named by line of the list).
+std::vector<std::string> dense_truth_as_predictions(const std::string& root) {
   const auto tests = read_lines(root + "/world/raw/splits/eigen/test_files.txt");
+  std::filesystem::create_directories(root + "/depth");
   for (size_t i = 0; i < tests.size(); ++i) {
     const auto d = tests[i].substr(0, tests[i].find("/image_02"));
     const auto f = tests[i].substr(tests[i].rfind('/') + 1);
-    std::filesystem::create_directories(root + "/depth");
     std::filesystem::copy_file(root + "/world/raw/" + d + "/proj_depth/groundtruth/image_02/" + f,
-                               root + "/depth/" + std::string(6 - std::to_string(i).size(), '0') + std::to_string(i) + ".png");
+                               root + "/depth/" + zero_padded(static_cast<long long>(i), 6) + ".png");
   }
+  return tests;
+}
+
+TEST(Protocols, EigenDepthOfTheTruthScoresNearlyPerfectly) {
+  const auto root = protocol_world("protocols_eigen");
+  const auto tests = dense_truth_as_predictions(root);
   EvalOptions e;
   e.split = "eigen";
   e.data_root = root + "/world";
@@ -212,7 +225,20 @@ TEST(Protocols, GroundTruthPredictionsScorePerfectlyOnASyntheticWorld) {
     EXPECT_EQ(with_nan.metrics[0].second, exact);
     write_velodyne(velo, points);
   }
-  // Flow: the ground truth itself.
+  // --export-gt alone: the ground truth is written, no model or predictions needed, no metrics.
+  EvalOptions g;
+  g.split = "eigen";
+  g.data_root = root + "/world";
+  g.export_gt = root + "/gt_only";
+  g.matlab_offset = false;  // as the last export to gt/ above
+  const auto exported = evaluate(g, nullptr);
+  EXPECT_TRUE(exported.metrics.empty());
+  EXPECT_EQ(exported.counts[0], (std::pair<std::string, int64_t>{"exported", static_cast<int64_t>(tests.size())}));
+  EXPECT_EQ(test::read_file(root + "/gt_only/000000.png"), test::read_file(root + "/gt/000000.png"));
+}
+
+TEST(Protocols, Kitti2015FlowOfTheTruthScoresPerfectly) {
+  const auto root = protocol_world("protocols_flow");
   EvalOptions f;
   f.split = "kitti2015";
   f.data_root = root + "/world";
@@ -246,7 +272,20 @@ TEST(Protocols, GroundTruthPredictionsScorePerfectlyOnASyntheticWorld) {
   EXPECT_EQ(evaluate(f, nullptr).counts[0].second, 1);
   test::write_text(root + "/pairs.txt", "training/image_2/000007_10.png\n");
   GEO_EXPECT_THROW_WITH(evaluate(f, nullptr), "000007");
-  // Pose: the ground-truth trajectory, and zero motion.
+  // Ground truth that cannot score: an all-invalid flow map is left out and counted (it used to
+  // count as EPE 0).
+  f.split_file.clear();
+  const std::string occ1 = root + "/world/kitti2015/training/flow_occ/000001_10.png";
+  const auto gt1 = read_flow_png(occ1);
+  write_flow_png(occ1, gt1.flow, torch::zeros_like(gt1.valid));
+  f.predictions = root + "/world/kitti2015/training/flow_noc";
+  const auto partial = evaluate(f, nullptr);
+  EXPECT_EQ(partial.counts[0], (std::pair<std::string, int64_t>{"pairs", 1}));
+  EXPECT_EQ(count_of(partial, "pairs_without_ground_truth"), 1);
+}
+
+TEST(Protocols, OdometryTrajectoryOfTheTruthScoresPerfectly) {
+  const auto root = protocol_world("protocols_pose");
   EvalOptions p;
   p.split = "odometry";
   p.data_root = root + "/world";
@@ -274,54 +313,36 @@ TEST(Protocols, GroundTruthPredictionsScorePerfectlyOnASyntheticWorld) {
   const auto back = read_result(root + "/r.json");
   EXPECT_EQ(back.split, "odometry");
   EXPECT_NEAR(back.metrics[0].second, pose.metrics[0].second, 1e-9);
+}
 
-  // --export-gt alone: the ground truth is written, no model or predictions needed, no metrics.
-  EvalOptions g;
-  g.split = "eigen";
-  g.data_root = root + "/world";
-  g.export_gt = root + "/gt_only";
-  g.matlab_offset = false;  // as the last export to gt/ above
-  const auto exported = evaluate(g, nullptr);
-  EXPECT_TRUE(exported.metrics.empty());
-  EXPECT_EQ(exported.counts[0], (std::pair<std::string, int64_t>{"exported", static_cast<int64_t>(tests.size())}));
-  EXPECT_EQ(test::read_file(root + "/gt_only/000000.png"), test::read_file(root + "/gt/000000.png"));
-
-  // Untrained models: a 5-frame PoseNet is evaluated on odometry snippets (GeoNet's protocol), and a
-  // KITTI 2015 pair with its previous frame (_09) feeds the PoseNet (09, 10, 11).
+// Untrained models: a 5-frame PoseNet is evaluated on odometry snippets (GeoNet's protocol), a
+// KITTI 2015 pair with its previous frame (_09) feeds the PoseNet (09, 10, 11), a FlowNet's rigid
+// flow is scored beside its full flow, and images that outnumber the poses are an error.
+TEST(Protocols, ModelsOnTheOdometryAndFlowProtocols) {
+  const auto root = protocol_world("protocols_models");
+  EvalOptions p;
+  p.split = "odometry";
+  p.data_root = root + "/world";
   Config c5 = parse_config("model: {encoder_depth: 18}\ndata: {height: 64, width: 208, seq_length: 5}\n");
   Predictor five(c5, "cpu");
-  p.predictions.clear();
   const auto r5 = evaluate(p, &five);
   EXPECT_EQ(r5.counts[0].second, 4);
   EXPECT_TRUE(std::isfinite(r5.metrics[0].second));
   Config c3 = parse_config("model: {encoder_depth: 18}\ndata: {height: 64, width: 208}\n");
   Predictor three(c3, "cpu");
   std::filesystem::remove(root + "/world/kitti2015/training/image_2/000000_09.png");  // geo_synth writes both
-  f.split_file.clear();
-  f.predictions.clear();
+  EvalOptions f;
+  f.split = "kitti2015";
+  f.data_root = root + "/world";
   const auto r3 = evaluate(f, &three);
   EXPECT_EQ(r3.counts.back(), (std::pair<std::string, int64_t>{"pairs_with_frame_09", 1}));
-  // A model with a FlowNet: its rigid flow is scored beside the full flow, on the background and the
-  // moving cars as well.
   EXPECT_TRUE(std::isfinite(metric_of(r3, "rigid_epe_all")));
   EXPECT_NE(metric_of(r3, "rigid_epe_all"), metric_of(r3, "epe_all"));
   EXPECT_TRUE(std::isfinite(metric_of(r3, "rigid_epe_bg")));
-
-  // Ground truth that cannot score: an all-invalid flow map is left out and counted (it used to
-  // count as EPE 0), and a pose file shorter than the image sequence is an error.
-  const std::string occ1 = root + "/world/kitti2015/training/flow_occ/000001_10.png";
-  const auto gt1 = read_flow_png(occ1);
-  write_flow_png(occ1, gt1.flow, torch::zeros_like(gt1.valid));
-  f.predictions = root + "/world/kitti2015/training/flow_noc";
-  const auto partial = evaluate(f, nullptr);
-  EXPECT_EQ(partial.counts[0], (std::pair<std::string, int64_t>{"pairs", 1}));
-  EXPECT_EQ(count_of(partial, "pairs_without_ground_truth"), 1);
   const std::string images = root + "/world/odometry/sequences/09/image_2/";
   std::filesystem::copy_file(images + "000007.png", images + "000008.png");
-  p.predictions.clear();
   GEO_EXPECT_THROW_WITH(evaluate(p, &three), "09.txt holds 8 poses", "000008.png exists");
 }
-
 
 // Predictions and ground truth that cannot be right are refused (naming the file) or, where a
 // protocol has an answer, scored and counted in the results: depths <= 0, ground truth without
@@ -335,7 +356,7 @@ TEST(Protocols, PredictionsAndGroundTruthThatCannotBeRightAreRefusedOrCounted) {
   e.split = "eigen";
   e.data_root = root + "/world";
   e.predictions = root + "/depth";
-  auto depth_file = [&](size_t i) { return root + "/depth/" + std::string(5, '0') + std::to_string(i) + ".png"; };
+  auto depth_file = [&](size_t i) { return root + "/depth/" + zero_padded(static_cast<long long>(i), 6) + ".png"; };
   std::filesystem::create_directories(root + "/depth");
   for (size_t i = 0; i < tests.size(); ++i) write_depth_png(depth_file(i), torch::full({1, 64, 208}, 10.0));
   EXPECT_EQ(count_of(evaluate(e, nullptr), "predictions_with_nonpositive_depth"), 0);
@@ -401,7 +422,7 @@ TEST(Protocols, CameraHeightScalingRecoversTheScaleWithoutGroundTruth) {
     const auto d = tests[i].substr(0, tests[i].find("/image_02"));
     const auto f = tests[i].substr(tests[i].rfind('/') + 1);
     const auto truth = read_depth_png(root + "/world/raw/" + d + "/proj_depth/groundtruth/image_02/" + f);
-    write_depth_png(root + "/depth/" + std::string(5, '0') + std::to_string(i) + ".png", truth * 0.3);
+    write_depth_png(root + "/depth/" + zero_padded(static_cast<long long>(i), 6) + ".png", truth * 0.3);
   }
   EvalOptions e;
   e.split = "eigen";

@@ -1,7 +1,7 @@
 // The training loop on the synthetic world rendered in memory (data.format synthetic): built and
 // run in both builds; without OpenCV it is, with packed caches, the training data there is.
 #include "core/config.h"
-#include "train/data_source.h"
+#include "data/training_data.h"
 #include "train/trainer.h"
 
 #include <gtest/gtest.h>

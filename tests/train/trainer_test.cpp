@@ -6,7 +6,7 @@
 #include "core/files.h"
 #include "data/synth_writer.h"
 #include "train/checkpoints.h"
-#include "train/data_source.h"
+#include "data/training_data.h"
 #include "train/trainer.h"
 
 #include <gtest/gtest.h>

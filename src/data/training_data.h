@@ -1,7 +1,8 @@
 // Resolves the training and validation data of a config (paper Sec. 4.2; KITTI raw, Eigen split).
-// data.split selects the data of a task: eigen_zhou (depth, the paper's), raw_minus_kitti2015
-// (flow, GeoNet's: the eigen_zhou lists without the 29 KITTI 2015 scenes of
-// stereo/test_scenes_stereo.txt) or odometry (pose, GeoNet's: KITTI odometry data.sequences, 00-08).
+// data.split selects the data of a task: eigen_zhou (depth, the paper's), kitti_raw_stereo (flow,
+// GeoNet's: every raw drive on disk without the 29 KITTI 2015 scenes of stereo/test_scenes_stereo.txt,
+// both cameras), raw_minus_kitti2015 (the eigen_zhou lists without those scenes) or odometry (pose,
+// GeoNet's: KITTI odometry data.sequences, 00-08). Shared by geo_train, geo_prepare and geo_bench.
 //   data.format auto   -> a packed cache when <root>/train/index.txt is one (geo_prepare), else KITTI raw
 //   kitti_raw lists    -> data.train_list / data.val_list, else <root>/splits/<split>/{train,val}_files.txt
 //                         (a geo_synth world ships its own), else configs/splits/<split>/...

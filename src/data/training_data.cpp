@@ -1,4 +1,4 @@
-#include "train/data_source.h"
+#include "data/training_data.h"
 
 #include "core/logging.h"
 #include "data/packed.h"
