@@ -179,6 +179,15 @@ std::string protocol_world(const std::string& name) {
   return root;
 }
 
+// The options of `split` on <root>/world, scoring `predictions` (none: a model or --export-gt).
+EvalOptions options_for(const std::string& split, const std::string& root, const std::string& predictions = "") {
+  EvalOptions o;
+  o.split = split;
+  o.data_root = root + "/world";
+  o.predictions = predictions;
+  return o;
+}
+
 // The Eigen test list's dense ground truth as predictions (named by line of the list).
 std::vector<std::string> dense_truth_as_predictions(const std::string& root) {
   const auto tests = read_lines(root + "/world/raw/splits/eigen/test_files.txt");
@@ -195,10 +204,7 @@ std::vector<std::string> dense_truth_as_predictions(const std::string& root) {
 TEST(Protocols, EigenDepthOfTheTruthScoresNearlyPerfectly) {
   const auto root = protocol_world("protocols_eigen");
   const auto tests = dense_truth_as_predictions(root);
-  EvalOptions e;
-  e.split = "eigen";
-  e.data_root = root + "/world";
-  e.predictions = root + "/depth";
+  EvalOptions e = options_for("eigen", root, root + "/depth");
   e.export_gt = root + "/gt";
   const auto depth = evaluate(e, nullptr);
   EXPECT_EQ(depth.counts[0].second, static_cast<int64_t>(tests.size()));
@@ -226,9 +232,7 @@ TEST(Protocols, EigenDepthOfTheTruthScoresNearlyPerfectly) {
     write_velodyne(velo, points);
   }
   // --export-gt alone: the ground truth is written, no model or predictions needed, no metrics.
-  EvalOptions g;
-  g.split = "eigen";
-  g.data_root = root + "/world";
+  EvalOptions g = options_for("eigen", root);
   g.export_gt = root + "/gt_only";
   g.matlab_offset = false;  // as the last export to gt/ above
   const auto exported = evaluate(g, nullptr);
@@ -239,10 +243,7 @@ TEST(Protocols, EigenDepthOfTheTruthScoresNearlyPerfectly) {
 
 TEST(Protocols, Kitti2015FlowOfTheTruthScoresPerfectly) {
   const auto root = protocol_world("protocols_flow");
-  EvalOptions f;
-  f.split = "kitti2015";
-  f.data_root = root + "/world";
-  f.predictions = root + "/world/kitti2015/training/flow_occ";
+  EvalOptions f = options_for("kitti2015", root, root + "/world/kitti2015/training/flow_occ");
   const auto flow = evaluate(f, nullptr);
   EXPECT_NEAR(flow.metrics[0].second, 0.0, 1e-9);
   EXPECT_EQ(flow.counts[0].second, 2);
@@ -286,10 +287,7 @@ TEST(Protocols, Kitti2015FlowOfTheTruthScoresPerfectly) {
 
 TEST(Protocols, OdometryTrajectoryOfTheTruthScoresPerfectly) {
   const auto root = protocol_world("protocols_pose");
-  EvalOptions p;
-  p.split = "odometry";
-  p.data_root = root + "/world";
-  p.predictions = root + "/world/odometry/poses/09.txt";
+  EvalOptions p = options_for("odometry", root, root + "/world/odometry/poses/09.txt");
   const auto pose = evaluate(p, nullptr);
   EXPECT_NEAR(pose.metrics[0].second, 0.0, 1e-6);
   EXPECT_EQ(pose.counts[0].second, 4);  // centres 2..5 of 8 frames
@@ -320,9 +318,7 @@ TEST(Protocols, OdometryTrajectoryOfTheTruthScoresPerfectly) {
 // flow is scored beside its full flow, and images that outnumber the poses are an error.
 TEST(Protocols, ModelsOnTheOdometryAndFlowProtocols) {
   const auto root = protocol_world("protocols_models");
-  EvalOptions p;
-  p.split = "odometry";
-  p.data_root = root + "/world";
+  const EvalOptions p = options_for("odometry", root);
   Config c5 = parse_config("model: {encoder_depth: 18}\ndata: {height: 64, width: 208, seq_length: 5}\n");
   Predictor five(c5, "cpu");
   const auto r5 = evaluate(p, &five);
@@ -331,10 +327,7 @@ TEST(Protocols, ModelsOnTheOdometryAndFlowProtocols) {
   Config c3 = parse_config("model: {encoder_depth: 18}\ndata: {height: 64, width: 208}\n");
   Predictor three(c3, "cpu");
   std::filesystem::remove(root + "/world/kitti2015/training/image_2/000000_09.png");  // geo_synth writes both
-  EvalOptions f;
-  f.split = "kitti2015";
-  f.data_root = root + "/world";
-  const auto r3 = evaluate(f, &three);
+  const auto r3 = evaluate(options_for("kitti2015", root), &three);
   EXPECT_EQ(r3.counts.back(), (std::pair<std::string, int64_t>{"pairs_with_frame_09", 1}));
   EXPECT_TRUE(std::isfinite(metric_of(r3, "rigid_epe_all")));
   EXPECT_NE(metric_of(r3, "rigid_epe_all"), metric_of(r3, "epe_all"));
