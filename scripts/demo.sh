@@ -8,8 +8,9 @@ cd "$(dirname "$0")/.."
 OUT="${GEO_DEMO_DIR:-out/demo}"
 echo "geo demo: about 15 minutes on 2 cores from a fresh machine (package install and build of the"
 echo "tools ~6 min, synthetic world ~10 s, training ~8 min, evaluation ~1 min). Output: $OUT"
-# The tools only; scripts/test.sh builds the tests.
-GEO_TARGETS="${GEO_TARGETS:-geo_synth geo_train geo_eval geo_infer}" scripts/setup.sh
+# The tools only; scripts/test.sh builds the tests. The demo reads and writes images: OpenCV on,
+# also in a build folder configured without it (e.g. by GEO_OPENCV=0 scripts/test.sh).
+GEO_OPENCV=1 GEO_TARGETS="${GEO_TARGETS:-geo_synth geo_train geo_eval geo_infer}" scripts/setup.sh
 BIN="${GEO_BUILD_DIR:-build}/apps"
 mkdir -p "$OUT"
 if [ ! -f "$OUT/world/README.txt" ]; then
