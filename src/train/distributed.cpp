@@ -200,10 +200,21 @@ class C10dGroup : public ProcessGroup {
                                  where + " within run.distributed.timeout_s (" + std::to_string(timeout_s_) +
                                  " s): " + message_of(e));
       }
-      if (other != std::to_string(size_))
+      // Rank 0's store must outlive the others' reads: each says it has read rank 0's world size,
+      // and rank 0 waits for that (briefly) before leaving on a mismatch, so that every process
+      // reports the mismatch instead of a closed connection.
+      if (rank_ != 0) store_->set("geo/world_size_read/" + std::to_string(rank_), std::vector<uint8_t>{1});
+      if (other != std::to_string(size_)) {
+        if (rank_ == 0) {
+          try {
+            store_->wait({"geo/world_size_read/" + std::to_string(r)}, std::min(time_left(), std::chrono::milliseconds(5000)));
+          } catch (const std::exception&) {  // it may have gone: the message below is rank 0's either way
+          }
+        }
         throw std::runtime_error("WORLD_SIZE differs between the processes: rank " + std::to_string(rank_) + " has " +
                                  std::to_string(size_) + ", rank " + std::to_string(r) + " has " + other +
                                  " (launch every process of a run with the same WORLD_SIZE)");
+      }
     }
     std::string backend = config.backend;
     if (backend == "auto") backend = device.is_cuda() && nccl_available() ? "nccl" : "gloo";
