@@ -1,12 +1,16 @@
 #include "core/runtime.h"
 
+#include <algorithm>
 #include <cstdlib>
 #include <cstring>
 #include <stdexcept>
+#include <thread>
 
 #include <ATen/Context.h>
 #include <ATen/autocast_mode.h>
+#include <spdlog/spdlog.h>
 #include <torch/cuda.h>
+#include <torch/torch.h>
 #include <torch/version.h>
 #if defined(__GLIBC__)
 #include <malloc.h>
@@ -68,6 +72,18 @@ void apply_precision(Precision precision) {
   const bool tf32 = precision != Precision::kFp32;
   at::globalContext().setAllowTF32CuDNN(tf32);
   at::globalContext().setAllowTF32CuBLAS(tf32);
+}
+
+int apply_run_settings(const RunConfig& run, const torch::Device& device) {
+  const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  if (run.threads > cores)
+    spdlog::warn("run.threads {} is more than this machine's {} cores: using {}", run.threads, cores, cores);
+  const int threads = run.threads > 0 ? std::min(run.threads, cores) : cores;
+  torch::set_num_threads(threads);
+  torch::manual_seed(static_cast<uint64_t>(run.seed));
+  apply_precision(run.precision);
+  if (device.is_cuda()) at::globalContext().setBenchmarkCuDNN(true);
+  return threads;
 }
 
 // LibTorch 2.4 replaced the per-device autocast functions (set_enabled for CUDA, set_cpu_enabled,

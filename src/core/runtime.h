@@ -30,6 +30,12 @@ bool cpu_has_fast_bf16();
 // fp32, on for tf32 and bf16 (no effect on CPU).
 void apply_precision(Precision precision);
 
+// A run's process settings, in one place for geo_train and geo_bench: intra-op threads
+// (`run.threads`, 0 = all cores; more than the machine's cores is said and clamped), the random
+// seed, run.precision (apply_precision) and, on CUDA, cuDNN's autotuning (the shapes are fixed, so
+// it tunes once). Returns the number of threads in use.
+int apply_run_settings(const RunConfig& run, const torch::Device& device);
+
 // While alive and `enabled`: the operations on `device`'s type run under autocast to bfloat16
 // (convolutions and matrix products in bf16, precision-sensitive operations in fp32; PyTorch's
 // autocast lists). Wrap only the networks' forward; cast their outputs back to float32.
