@@ -30,17 +30,18 @@ int main(int argc, char** argv) {
       "Eigen protocol: Velodyne ground truth (pixel = round(x/z) - 1, depth = Velodyne x, nearest point kept),\n"
       "prediction resized bilinearly, 1e-3 < gt < 80, Garg crop, per-image median scaling, clamp [1e-3, 80].");
   geo::EvalOptions o;
-  std::string checkpoint, output, device = "auto", runs = "runs";
+  std::string checkpoint, output, device = "auto", runs = "runs", predictions, export_gt;
+  bool trivial = false;
   std::vector<std::string> compare;
   bool no_matlab = false;
   app.add_option("--split", o.split, "eigen, kitti2015 or odometry")->check(CLI::IsMember({"eigen", "kitti2015", "odometry"}));
   app.add_option("--data-root", o.data_root, "dataset root (default: $GEO_KITTI_ROOT, else ./data/kitti)");
   auto* checkpoint_opt = app.add_option("--checkpoint", checkpoint, "checkpoint file or run folder (default: newest run in --runs)");
   app.add_option("--runs", runs, "where to look for the newest run when --checkpoint is not given");
-  auto* predictions_opt = app.add_option("--predictions", o.predictions, "evaluate precomputed predictions instead of a model");
+  auto* predictions_opt = app.add_option("--predictions", predictions, "evaluate precomputed predictions instead of a model");
   std::string untrained;
   auto* untrained_opt = app.add_option("--untrained", untrained, "evaluate an untrained model of this config (baseline)");
-  auto* trivial_opt = app.add_flag("--trivial", o.trivial, "evaluate the trivial baseline: constant depth, zero flow, zero motion");
+  auto* trivial_opt = app.add_flag("--trivial", trivial, "evaluate the trivial baseline: constant depth, zero flow, zero motion");
   // One source of predictions: a model, a predictions file, an untrained model or the trivial baseline.
   trivial_opt->excludes(checkpoint_opt)->excludes(predictions_opt)->excludes(untrained_opt);
   untrained_opt->excludes(checkpoint_opt)->excludes(predictions_opt);
@@ -63,7 +64,7 @@ int main(int argc, char** argv) {
                  "odometry: segment lengths in metres of KITTI's t_err (%) and r_err (deg/100 m) (default 100 200 ... 800)")
       ->expected(1, -1)
       ->check(geo::app::above_zero());
-  app.add_option("--export-gt", o.export_gt, "eigen: write the ground-truth depth maps (uint16 PNG, depth x 256)");
+  app.add_option("--export-gt", export_gt, "eigen: write the ground-truth depth maps (uint16 PNG, depth x 256)");
   geo::app::add_device_option(app, device, "default: auto");
   std::string flow_resize = "nearest";
   app.add_option("--flow-resize", flow_resize, "kitti2015: resize predicted flow to the ground truth by nearest (GeoNet) or bilinear")
@@ -96,10 +97,17 @@ int main(int argc, char** argv) {
       if (!std::filesystem::is_directory(o.data_root))
         throw std::runtime_error("no data root: '" + o.data_root + "' does not exist; give --data-root DIR or set GEO_KITTI_ROOT");
     }
+    // The source of the predictions: a model (a checkpoint, an untrained network), files, or the
+    // trivial baseline; none with --export-gt alone.
     std::unique_ptr<geo::Predictor> predictor;
+    std::unique_ptr<geo::PredictionSource> source;
     if (!untrained.empty()) {
       predictor = std::make_unique<geo::Predictor>(geo::load_config(geo::resolve_config_path(untrained)), device);
-    } else if (o.predictions.empty() && !o.trivial && (o.export_gt.empty() || !checkpoint.empty())) {
+    } else if (trivial) {
+      source = geo::trivial_source();
+    } else if (!predictions.empty()) {
+      source = geo::file_source(predictions);
+    } else if (export_gt.empty() || !checkpoint.empty()) {
       // (--export-gt alone writes the ground truth and needs no model)
       if (checkpoint.empty()) {
         checkpoint = geo::latest_run_checkpoint(runs);
@@ -112,9 +120,18 @@ int main(int argc, char** argv) {
     if (predictor) {
       spdlog::info("model {} ({}x{}, FlowNet {})", predictor->path(), predictor->width(), predictor->height(),
                    predictor->has_flow() ? "yes" : "no: rigid flow only");
+      source = geo::model_source(*predictor);
     }
-    spdlog::info("evaluating split {} on {}", o.split, geo::split_root(o.split, o.data_root));
-    const auto r = geo::evaluate(o, predictor.get());
+    geo::EvalResult r;
+    if (!export_gt.empty()) {
+      if (o.split != "eigen") throw std::runtime_error("--export-gt is for --split eigen (got " + o.split + ")");
+      r = geo::export_eigen_ground_truth(o, export_gt);
+      spdlog::info("ground truth of {} test images written to {}", r.counts[0].second, export_gt);
+    }
+    if (source) {
+      spdlog::info("evaluating split {} on {}", o.split, geo::split_root(o.split, o.data_root));
+      r = geo::evaluate(o, *source);
+    }
     std::printf("%s", geo::format_results({r}, {o.split}).c_str());
     if (!output.empty()) {
       geo::write_file_atomic(output, r.json());

@@ -174,15 +174,4 @@ std::string zero_padded(long long number, int digits) {
   return buf;
 }
 
-std::string make_run_dir(const std::string& parent, const std::string& name) {
-  const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
-  char stamp[32];
-  std::strftime(stamp, sizeof stamp, "%Y%m%d-%H%M%S", std::localtime(&now));
-  fs::create_directories(parent);
-  const fs::path base = fs::path(parent) / (name + "-" + stamp);
-  fs::path dir = base;
-  for (int k = 2; !fs::create_directory(dir); ++k) dir = base.string() + "-" + std::to_string(k);
-  return dir.string();
-}
-
 }  // namespace geo

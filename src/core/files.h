@@ -40,7 +40,4 @@ class FolderLock {
 // 0000000042.png) and checkpoint numbers.
 std::string zero_padded(long long number, int digits);
 
-// Creates <parent>/<name>-YYYYmmdd-HHMMSS (suffixing -2, -3... if taken) and returns it.
-std::string make_run_dir(const std::string& parent, const std::string& name);
-
 }  // namespace geo

@@ -39,21 +39,20 @@ Model::FlowParts Predictor::flow(const torch::Tensor& tgt, const torch::Tensor& 
   return model_->flow_parts(tgt, src, K, prev);
 }
 
-
 std::string latest_run_checkpoint(const std::string& runs_dir) {
   if (!fs::is_directory(runs_dir)) return "";
   std::string best;
   fs::file_time_type newest{};
   for (const auto& e : fs::directory_iterator(runs_dir)) {
-    const auto latest = e.path() / "checkpoints" / "latest";
-    if (!fs::exists(latest)) continue;
-    const auto t = fs::last_write_time(latest);
+    const RunFolder run(e.path().string());
+    if (!fs::exists(run.latest_pointer())) continue;
+    const auto t = fs::last_write_time(run.latest_pointer());
     if (best.empty() || t > newest) {
       newest = t;
-      best = e.path().string();
+      best = run.root();
     }
   }
-  return best.empty() ? "" : resolve_checkpoint(best);
+  return best.empty() ? "" : RunFolder(best).resolve();
 }
 
 }  // namespace geo

@@ -10,6 +10,7 @@
 #include "data/training_lists.h"
 #include "data/velodyne_depth.h"
 #include "eval/metrics.h"
+#include "eval/sources.h"
 #include "geometry/pose.h"
 #include "geometry/road_plane.h"
 
@@ -29,32 +30,6 @@ namespace fs = std::filesystem;
 namespace geo {
 namespace {
 
-void require_file(const std::string& path, const std::string& what) {
-  if (!fs::exists(path)) throw std::runtime_error(what + " not found: '" + path + "'");
-}
-
-// Predictions must be finite: a NaN would otherwise turn into a nan metric (or, through a mask, a
-// perfect-looking 0) with exit code 0.
-void require_finite(const torch::Tensor& t, const std::string& what) {
-  const auto bad = (~torch::isfinite(t)).sum().item<int64_t>();
-  if (bad > 0)
-    throw std::runtime_error(what + " holds " + std::to_string(bad) + " non-finite value(s) (NaN/Inf) of " +
-                             std::to_string(t.numel()) + ": nothing was scored");
-}
-
-
-// Frames of one pair or snippet, and ground truth and its frame, must have one size: flow between
-// frames of different sizes, or ground truth of another size, means nothing.
-void require_same_size(const std::string& a, int64_t ha, int64_t wa, const std::string& b, int64_t hb, int64_t wb) {
-  if (ha != hb || wa != wb)
-    throw std::runtime_error(a + " is " + std::to_string(wa) + "x" + std::to_string(ha) + " but " + b + " is " +
-                             std::to_string(wb) + "x" + std::to_string(hb) + ": they must have one size; nothing was scored");
-}
-
-torch::Tensor net_input(const std::string& path, const Predictor& p, int64_t* H = nullptr, int64_t* W = nullptr) {
-  return read_image_resized(path, p.height(), p.width(), H, W).unsqueeze(0);
-}
-
 // The camera height to scale by: the one asked for, else the data root's record (a geo_synth world's
 // camera_height.txt, at the world's root or above the split's), else KITTI's 1.65 m.
 double camera_height_of(const EvalOptions& o, const std::string& root) {
@@ -71,21 +46,28 @@ double camera_height_of(const EvalOptions& o, const std::string& root) {
   return 1.65;
 }
 
-EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* pred) {
+std::string eigen_list(const EvalOptions& o, const std::string& root) {
   const std::string list = o.split_file.empty() ? find_split_file(root, "eigen", "test_files.txt") : o.split_file;
   if (list.empty()) throw std::runtime_error("no Eigen test list: give --split-file");
+  return list;
+}
+
+// The Velodyne scan of a test line (checked to exist) and its calibration's projection.
+struct EigenTestImage {
+  std::string image, velodyne;
+  RawCalib calib;
+};
+EigenTestImage eigen_test_image(const std::string& root, const SplitEntry& e, size_t line, const std::string& list) {
+  EigenTestImage t{e.image_path(root), root + "/" + e.folder + "/velodyne_points/data/" + zero_padded(e.frame, 10) + ".bin",
+                   read_raw_calib(root + "/" + e.date(), e.camera())};
+  require_file(t.image, "test image (line " + std::to_string(line + 1) + " of " + list + ")");
+  require_file(t.velodyne, "Velodyne scan");
+  return t;
+}
+
+EvalResult eval_eigen(const EvalOptions& o, const std::string& root, PredictionSource& source) {
+  const std::string list = eigen_list(o, root);
   const auto entries = read_split(list);
-  torch::Tensor npy;
-  if (!o.predictions.empty() && o.predictions.size() > 4 && o.predictions.substr(o.predictions.size() - 4) == ".npy") {
-    npy = read_npy(o.predictions);
-    if (npy.numel() == 0)
-      throw std::runtime_error(o.predictions + ": the array has a zero dimension " + c10::str(npy.sizes()) +
-                               ": no depth to score");
-    if (npy.dim() != 3 || npy.size(0) != static_cast<int64_t>(entries.size()))
-      throw std::runtime_error(o.predictions + ": expected [" + std::to_string(entries.size()) +
-                               ",H,W] depths (one per line of " + list + "), got " + c10::str(npy.sizes()));
-  }
-  if (!o.export_gt.empty()) fs::create_directories(o.export_gt);
   EigenOptions eo;
   VelodyneDepthOptions vo;
   vo.matlab_offset = o.matlab_offset;
@@ -99,61 +81,31 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
   const double camera_height = o.scaling == DepthScaling::kCameraHeight ? camera_height_of(o, root) : 0.0;
   std::string first_nonpositive;
   std::string first_non_finite;
-  // --export-gt without a model or predictions: write the ground truth only, no metrics.
-  const bool gt_only = !pred && o.predictions.empty() && !o.trivial && !o.export_gt.empty();
   Progress progress("eigen", static_cast<int64_t>(entries.size()), 0, "images");
   for (size_t i = 0; i < entries.size(); ++i) {
-    const auto& e = entries[i];
-    const std::string image = e.image_path(root);
-    const std::string velo = root + "/" + e.folder + "/velodyne_points/data/" + zero_padded(e.frame, 10) + ".bin";
-    require_file(image, "test image (line " + std::to_string(i + 1) + " of " + list + ")");
-    require_file(velo, "Velodyne scan");
-    const auto calib = read_raw_calib(root + "/" + e.date(), e.camera());
-    int64_t H = 0, W = 0;
-    torch::Tensor depth;
-    if (gt_only) {
-      const auto img = read_image(image);
-      const auto gt = velodyne_depth(read_velodyne(velo), calib.img_from_velo(), img.size(1), img.size(2), vo);
-      write_depth_png(o.export_gt + "/" + zero_padded(static_cast<long long>(i), 6) + ".png", gt);
-      ++images;
-      progress.update(static_cast<int64_t>(i + 1));
-      continue;
-    }
-    if (pred) {
-      depth = pred->depth(net_input(image, *pred, &H, &W))[0][0].cpu();
-    } else {
-      const auto img = read_image(image);
-      H = img.size(1);
-      W = img.size(2);
-      if (o.trivial) {
-        depth = torch::ones({H, W});  // any constant: median scaling makes it the best constant
-      } else if (npy.defined()) {
-        depth = npy[static_cast<int64_t>(i)];
-      } else {
-        const std::string p = o.predictions + "/" + zero_padded(static_cast<long long>(i), 6) + ".png";
-        require_file(p, "prediction for line " + std::to_string(i + 1));
-        depth = read_depth_png(p)[0];
-      }
-    }
+    const auto test = eigen_test_image(root, entries[i], i, list);
+    const std::string& image = test.image;
+    const std::string& velo = test.velodyne;
+    const auto& calib = test.calib;
+    const DepthAnswer answer = source.depth(DepthQuery{i, entries.size(), list, image});
+    const int64_t H = answer.height, W = answer.width;
+    const torch::Tensor& depth = answer.depth;
     require_finite(depth, "the depth prediction for line " + std::to_string(i + 1) + " (" + image + ")");
-    if (!o.trivial) {
-      // Depths are positive: all <= 0 is no depth map (a disparity's sign, a log depth); some <= 0 are
-      // clamped to 1e-3 as every protocol does, counted and reported.
-      const int64_t nonpositive = (depth <= 0).sum().item<int64_t>();
-      if (nonpositive == depth.numel())
-        throw std::runtime_error("the depth prediction for line " + std::to_string(i + 1) + " (" + image +
-                                 ") is <= 0 everywhere: depths must be positive (a log depth or a negated "
-                                 "disparity?); nothing was scored");
-      if (nonpositive > 0 && images_nonpositive++ == 0) first_nonpositive = std::to_string(i + 1);
-      pixels_nonpositive += nonpositive;
-    }
+    // Depths are positive: all <= 0 is no depth map (a disparity's sign, a log depth); some <= 0 are
+    // clamped to 1e-3 as every protocol does, counted and reported.
+    const int64_t nonpositive = (depth <= 0).sum().item<int64_t>();
+    if (nonpositive == depth.numel())
+      throw std::runtime_error("the depth prediction for line " + std::to_string(i + 1) + " (" + image +
+                               ") is <= 0 everywhere: depths must be positive (a log depth or a negated "
+                               "disparity?); nothing was scored");
+    if (nonpositive > 0 && images_nonpositive++ == 0) first_nonpositive = std::to_string(i + 1);
+    pixels_nonpositive += nonpositive;
     const auto points = read_velodyne(velo);
     if (const int64_t bad = count_non_finite_points(points); bad > 0) {
       non_finite_points += bad;
       if (scans_with_non_finite++ == 0) first_non_finite = velo;
     }
     const auto gt = velodyne_depth(points, calib.img_from_velo(), H, W, vo);
-    if (!o.export_gt.empty()) write_depth_png(o.export_gt + "/" + zero_padded(static_cast<long long>(i), 6) + ".png", gt);
     EigenOptions image_eo = eo;
     image_eo.median_scaling = o.scaling == DepthScaling::kMedian;
     if (o.scaling == DepthScaling::kCameraHeight) {
@@ -197,10 +149,6 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, Predictor* 
     spdlog::warn("{} Velodyne points in {} of {} scans have a NaN or infinite coordinate and are left out of the "
                  "ground truth; first: {}", non_finite_points, scans_with_non_finite, entries.size(), first_non_finite);
   EvalResult r;
-  if (gt_only) {
-    r.counts = {{"exported", images}, {"listed", static_cast<int64_t>(entries.size())}};
-    return r;
-  }
   if (images == 0)
     throw std::runtime_error(without_plane.empty() ? "no test image had valid ground-truth pixels"
                                                    : "no test image had a road plane for camera-height scaling; first: " +
@@ -271,7 +219,7 @@ torch::Tensor flow_calib_K(const std::string& root, const std::string& name) {
                            "/training/calib_cam_to_cam/" + name + ".txt)");
 }
 
-EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predictor* pred) {
+EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, PredictionSource& source) {
   std::vector<std::string> names;
   if (!o.split_file.empty()) {
     for (const auto& line : read_lines(o.split_file)) {
@@ -293,9 +241,10 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
   FlowScores full, rigid;
   int64_t with_previous = 0, with_objects = 0, px_occ = 0, px_noc = 0;
   std::vector<std::string> without_gt;  // pairs whose flow_occ or flow_noc has no valid pixel
-  int64_t predictions_resized = 0;      // --predictions files whose size differs from the ground truth
+  int64_t predictions_resized = 0;      // prediction files whose size differs from the ground truth
   std::string resized;                  // the first of them
-  const bool split_stages = pred && pred->has_flow();  // rigid flow apart from the full flow
+  bool from_files = false;              // predictions meant at the ground truth's size
+  const bool split_stages = source.model() && source.model()->has_flow();  // rigid flow apart from the full flow
   Progress progress("kitti2015", static_cast<int64_t>(names.size()), 0, "pairs");
   for (size_t i = 0; i < names.size(); ++i) {
     const std::string t = root + "/training/image_2/" + names[i] + "_10.png";
@@ -304,43 +253,21 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
     const std::string gnoc = root + "/training/flow_noc/" + names[i] + "_10.png";
     const std::string objects = root + "/training/obj_map/" + names[i] + "_10.png";
     for (const auto* p : {&t, &s, &gocc, &gnoc}) require_file(*p, "pair " + names[i]);
-    torch::Tensor flow, rigid_flow;
-    int64_t frame_h = 0, frame_w = 0;  // the pair's frame size, where the frames are read
-    if (pred) {
-      int64_t H = 0, W = 0, H2 = 0, W2 = 0;
-      const auto a = net_input(t, *pred, &H, &W), b = net_input(s, *pred, &H2, &W2);
-      require_same_size(s, H2, W2, t, H, W);
-      frame_h = H, frame_w = W;
-      auto K = flow_calib_K(root, names[i]).clone();
-      K[0] *= static_cast<double>(pred->width()) / W;
-      K[1] *= static_cast<double>(pred->height()) / H;
-      // The frame before the pair (KITTI 2015's multi-view extension, image_2/%06d_09.png) gives
-      // the PoseNet its real snippet (09, 10, 11), as GeoNet; without it (tgt, tgt, src).
-      const std::string prev_path = root + "/training/image_2/" + names[i] + "_09.png";
-      torch::Tensor prev;
-      if (fs::exists(prev_path)) {
-        int64_t H0 = 0, W0 = 0;
-        prev = net_input(prev_path, *pred, &H0, &W0);
-        require_same_size(prev_path, H0, W0, t, H, W);
-        ++with_previous;
-      }
-      const auto parts = pred->flow(a, b, K.to(torch::kFloat32).unsqueeze(0), prev);
-      flow = parts.full[0].cpu();
-      rigid_flow = parts.rigid[0].cpu();
-    } else if (o.trivial) {
-      flow = torch::zeros({2, 1, 1});
-    } else {
-      const std::string p = o.predictions + "/" + names[i] + "_10.png";
-      require_file(p, "flow prediction");
-      flow = read_flow_png(p).flow;
-    }
+    const FlowAnswer answer =
+        source.flow(FlowQuery{names[i], t, s, root + "/training/image_2/" + names[i] + "_09.png",
+                              source.model() ? flow_calib_K(root, names[i]) : torch::Tensor()});
+    const torch::Tensor& flow = answer.full;
+    const torch::Tensor& rigid_flow = answer.rigid;
+    const int64_t frame_h = answer.frame_height, frame_w = answer.frame_width;
+    with_previous += answer.used_previous;
+    from_files = from_files || answer.meant_at_ground_truth_size;
     require_finite(flow, "the flow prediction for pair " + names[i]);
     const auto occ = read_flow_png(gocc), noc = read_flow_png(gnoc);
     require_same_size(gnoc, noc.flow.size(1), noc.flow.size(2), gocc, occ.flow.size(1), occ.flow.size(2));
     if (frame_h > 0) require_same_size(gocc, occ.flow.size(1), occ.flow.size(2), t, frame_h, frame_w);
     // A file-based prediction is meant at the ground truth's size (KITTI's devkit rejects others):
     // geo rescales it like a model's output, loudly.
-    if (!pred && !o.trivial && (flow.size(1) != occ.flow.size(1) || flow.size(2) != occ.flow.size(2))) {
+    if (answer.meant_at_ground_truth_size && (flow.size(1) != occ.flow.size(1) || flow.size(2) != occ.flow.size(2))) {
       if (resized.empty())
         resized = names[i] + " (" + std::to_string(flow.size(1)) + "x" + std::to_string(flow.size(2)) + " vs " +
                   std::to_string(occ.flow.size(1)) + "x" + std::to_string(occ.flow.size(2)) + ")";
@@ -391,8 +318,8 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
               {"pairs_with_object_map", with_objects}};
   if (with_objects > 0)
     r.counts.insert(r.counts.end(), {{"pixels_bg", full.bg.pixels}, {"pixels_fg", full.fg.pixels}});
-  if (!pred && !o.trivial) r.counts.emplace_back("predictions_resized", predictions_resized);
-  if (pred) {
+  if (from_files) r.counts.emplace_back("predictions_resized", predictions_resized);
+  if (source.model()) {
     r.counts.emplace_back("pairs_with_frame_09", with_previous);
     if (with_previous < static_cast<int64_t>(names.size()))
       spdlog::warn("{} of {} pairs have no previous frame (training/image_2/<pair>_09.png, KITTI 2015's multi-view "
@@ -404,7 +331,7 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
 
 torch::Tensor positions(const torch::Tensor& poses) { return poses.slice(1, 0, 3).select(2, 3); }  // [N,3]
 
-EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predictor* pred) {
+EvalResult eval_odometry(const EvalOptions& o, const std::string& root, PredictionSource& source) {
   const std::string seq = root + "/sequences/" + o.sequence, gt_path = root + "/poses/" + o.sequence + ".txt";
   require_file(gt_path, "ground-truth poses of sequence " + o.sequence);
   const auto gt = read_poses(gt_path);
@@ -414,81 +341,16 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicto
   if (positions(gt).sub(positions(gt)[0]).norm(2, 1).max().item<double>() < 1e-9)
     throw std::runtime_error(gt_path + ": the ground truth has no motion (every position is the first): a trajectory "
                              "error means nothing; nothing was scored");
-  torch::Tensor traj;
+  const bool metric = source.model() && o.scaling == DepthScaling::kCameraHeight;
+  const TrajectoryAnswer answer =
+      source.trajectory(SequenceQuery{seq, o.sequence, gt_path, n, metric ? camera_height_of(o, root) : 0.0});
+  const torch::Tensor& traj = answer.trajectory;
   // 5-frame PoseNets (GeoNet's odometry model): snippet c-2..c+2 predicted at once, cam_to_world of
   // its frames in the target's frame (the target's pose is the identity).
-  std::vector<torch::Tensor> snippet_poses(static_cast<size_t>(n));
-  torch::Tensor metric_traj;  // --scaling camera-height: the trajectory in metres, no ground truth used
-  int64_t frames_with_road = 0;
-  if (pred) {
-    const int64_t L = pred->seq_length(), k = (L - 1) / 2;
-    int64_t image_h = 0, image_w = 0;
-    auto image = [&](int64_t f) {
-      const std::string p = seq + "/image_2/" + zero_padded(f, 6) + ".png";
-      require_file(p, "odometry image");
-      return net_input(p, *pred, &image_h, &image_w);
-    };
-    std::vector<torch::Tensor> frames;
-    for (int64_t f = 0; f < n; ++f) frames.push_back(image(f));
-    const std::string extra = seq + "/image_2/" + zero_padded(n, 6) + ".png";
-    if (fs::exists(extra))
-      throw std::runtime_error(gt_path + " holds " + std::to_string(n) + " poses but " + seq +
-                               "/image_2 has more images (" + extra + " exists): the ground truth does not match");
-    std::vector<torch::Tensor> cam_to_world = {torch::eye(4, torch::kFloat64)}, steps;
-    Progress progress("odometry " + o.sequence, n, 0, "frames");
-    for (int64_t j = 0; j < n; ++j) {
-      // The snippet around j (frames clamped at the sequence ends): k before, k after.
-      std::vector<torch::Tensor> srcs;
-      for (int64_t m = k; m >= 1; --m) srcs.push_back(frames[std::max<int64_t>(j - m, 0)]);
-      for (int64_t m = 1; m <= k; ++m) srcs.push_back(frames[std::min<int64_t>(j + m, n - 1)]);
-      const auto src_from_tgt = pred->pose(frames[j], srcs)[0].cpu().to(torch::kFloat64);  // [L-1,4,4]
-      if (j + 1 < n) {  // T_{j+1 <- j}: the first source after the target, chained into the trajectory
-        steps.push_back(torch::inverse(src_from_tgt[k]));
-        cam_to_world.push_back(cam_to_world.back().matmul(steps.back()));
-      }
-      if (L == 5 && j >= 2 && j + 2 < n) {
-        std::vector<torch::Tensor> in_target;
-        for (int64_t m = 0; m < 4; ++m) in_target.push_back(torch::inverse(src_from_tgt[m]));
-        in_target.insert(in_target.begin() + 2, torch::eye(4, torch::kFloat64));
-        snippet_poses[static_cast<size_t>(j)] = torch::stack(in_target);  // frames j-2..j+2
-      }
-      progress.update(j + 1);
-    }
-    traj = torch::stack(cam_to_world);
-    if (o.scaling == DepthScaling::kCameraHeight) {
-      // Each step at its frame's metric scale: the road plane of the frame's predicted depth,
-      // smoothed over 11 frames (as geo_infer --camera-height).
-      const double height = camera_height_of(o, root);
-      auto K = read_odometry_calib(seq + "/calib.txt").P[2].slice(1, 0, 3).clone();
-      K[0] *= static_cast<double>(pred->width()) / static_cast<double>(image_w);
-      K[1] *= static_cast<double>(pred->height()) / static_cast<double>(image_h);
-      std::vector<double> scales(static_cast<size_t>(n));
-      for (int64_t f = 0; f < n; ++f) {
-        const auto plane = fit_road_plane(pred->depth(frames[f])[0][0].cpu(), K);
-        scales[static_cast<size_t>(f)] = camera_height_scale(plane, height);
-        frames_with_road += plane.found;
-      }
-      scales = smooth_scales(scales, 5);
-      std::vector<torch::Tensor> metric = {torch::eye(4, torch::kFloat64)};
-      for (size_t j = 0; j < steps.size(); ++j) {
-        if (!(scales[j] > 0))
-          throw std::runtime_error("--scaling camera-height: no road plane in any frame near frame " + std::to_string(j) +
-                                   " of sequence " + o.sequence + ": a metric trajectory needs a road in front of the camera");
-        auto step = steps[j].clone();
-        step.slice(0, 0, 3).select(1, 3).mul_(scales[j]);
-        metric.push_back(metric.back().matmul(step));
-      }
-      metric_traj = torch::stack(metric);
-    }
-  } else if (o.trivial) {
-    traj = torch::eye(4, torch::kFloat64).repeat({n, 1, 1});
-  } else {
-    traj = read_poses(o.predictions);
-    if (traj.size(0) != n)
-      throw std::runtime_error(o.predictions + ": " + std::to_string(traj.size(0)) + " poses, the sequence has " +
-                               std::to_string(n));
-  }
-  require_finite(traj, pred ? std::string("the predicted trajectory") : "the trajectory " + o.predictions);
+  const auto& snippet_poses = answer.snippet_poses;
+  const torch::Tensor& metric_traj = answer.metric;  // camera-height: the trajectory in metres, no ground truth used
+  const int64_t frames_with_road = answer.frames_with_road;
+  require_finite(traj, source.model() ? std::string("the predicted trajectory") : "the trajectory " + source.name());
   if (!o.output_poses.empty()) write_poses(o.output_poses, traj);
   std::vector<int64_t> centres;
   if (!o.split_file.empty()) {
@@ -585,28 +447,50 @@ void check_training_drives(EvalResult& r, const Predictor& pred) {
 
 }  // namespace
 
+EvalResult export_eigen_ground_truth(const EvalOptions& o, const std::string& dir) {
+  if (!fs::is_directory(o.data_root)) throw std::runtime_error("data root '" + o.data_root + "' is not a directory (--data-root)");
+  const std::string root = split_root("eigen", o.data_root);
+  const std::string list = eigen_list(o, root);
+  const auto entries = read_split(list);
+  fs::create_directories(dir);
+  VelodyneDepthOptions vo;
+  vo.matlab_offset = o.matlab_offset;
+  Progress progress("eigen ground truth", static_cast<int64_t>(entries.size()), 0, "images");
+  for (size_t i = 0; i < entries.size(); ++i) {
+    const auto test = eigen_test_image(root, entries[i], i, list);
+    const auto img = read_image(test.image);
+    const auto gt = velodyne_depth(read_velodyne(test.velodyne), test.calib.img_from_velo(), img.size(1), img.size(2), vo);
+    write_depth_png(dir + "/" + zero_padded(static_cast<long long>(i), 6) + ".png", gt);
+    progress.update(static_cast<int64_t>(i + 1));
+  }
+  EvalResult r;
+  r.split = "eigen";
+  r.source = "ground truth export";
+  r.data_root = root;
+  r.counts = {{"exported", static_cast<int64_t>(entries.size())}, {"listed", static_cast<int64_t>(entries.size())}};
+  return r;
+}
+
 std::string split_root(const std::string& split, const std::string& root) {
   const std::string sub = split == "eigen" ? "/raw" : split == "kitti2015" ? "/kitti2015" : "/odometry";
   return fs::is_directory(root + sub) ? root + sub : root;
 }
 
-EvalResult evaluate(const EvalOptions& o, Predictor* pred) {
-  const bool gt_only = o.split == "eigen" && !o.export_gt.empty();
-  if (!pred && o.predictions.empty() && !o.trivial && !gt_only)
-    throw std::runtime_error("nothing to evaluate: give --checkpoint or --predictions");
+EvalResult evaluate(const EvalOptions& o, PredictionSource& source) {
+  Predictor* pred = source.model();
   if (!fs::is_directory(o.data_root)) throw std::runtime_error("data root '" + o.data_root + "' is not a directory (--data-root)");
   const std::string root = split_root(o.split, o.data_root);
   EvalResult r;
-  if (o.split == "eigen") r = eval_eigen(o, root, pred);
-  else if (o.split == "kitti2015") r = eval_kitti2015(o, root, pred);
-  else if (o.split == "odometry") r = eval_odometry(o, root, pred);
+  if (o.split == "eigen") r = eval_eigen(o, root, source);
+  else if (o.split == "kitti2015") r = eval_kitti2015(o, root, source);
+  else if (o.split == "odometry") r = eval_odometry(o, root, source);
   else throw std::runtime_error("unknown split '" + o.split + "' (eigen, kitti2015, odometry)");
   r.split = o.split;
-  if ((o.split == "eigen" && !gt_only) || (o.split == "odometry" && pred && o.scaling == DepthScaling::kCameraHeight))
+  if (o.split == "eigen" || (o.split == "odometry" && pred && o.scaling == DepthScaling::kCameraHeight))
     r.scaling = o.scaling == DepthScaling::kMedian ? "median"
                 : o.scaling == DepthScaling::kNone ? "none"
                                                    : "camera-height " + std::to_string(camera_height_of(o, root)) + " m";
-  r.source = pred ? pred->path() : o.trivial ? "trivial baseline" : !o.predictions.empty() ? o.predictions : "ground truth export";
+  r.source = source.name();
   r.data_root = root;
   if (!is_synth_world(o.data_root, root)) {
     // Real KITTI: the 200 KITTI 2015 pairs come from the 29 raw drives of stereo/test_scenes_stereo.txt,

@@ -1,5 +1,6 @@
-// The published evaluation protocols (Eigen depth, KITTI 2015 flow, SfMLearner's snippet ATE) over KITTI-format folders (real KITTI or a
-// geo_synth world), from a checkpoint or from precomputed predictions:
+// The published evaluation protocols (Eigen depth, KITTI 2015 flow, SfMLearner's snippet ATE) over
+// KITTI-format folders (real KITTI or a geo_synth world), of the predictions of a source
+// (eval/sources.h: a model, prediction files, the trivial baseline):
 //   eigen      depth on the Eigen test images, Velodyne ground truth, Garg crop, median scaling, 80 m
 //   kitti2015  flow EPE on flow_noc and flow_occ, Fl-all, over the image_2/%06d_10.png pairs; where
 //              obj_map/ exists, EPE and Fl of the background and the foreground (moving objects)
@@ -11,6 +12,7 @@
 
 #include "eval/metrics.h"
 #include "eval/predictor.h"
+#include "eval/sources.h"
 
 #include <string>
 #include <utility>
@@ -26,12 +28,9 @@ struct EvalOptions {
   std::string split;            // eigen | kitti2015 | odometry
   std::string data_root;        // KITTI raw / KITTI 2015 / odometry root, or a geo_synth world root
   std::string split_file;       // subset / order; default: the split's standard list or all pairs/frames
-  std::string predictions;      // evaluate these instead of a checkpoint (formats: geo_eval --help)
-  std::string export_gt;        // eigen: write the ground-truth depth maps here (uint16, depth x 256)
   std::string sequence = "09";  // odometry sequence
   std::string output_poses;     // odometry: write the predicted trajectory here
   bool matlab_offset = true;    // eigen: pixel = round(x/z) - 1 as in the reference code
-  bool trivial = false;         // evaluate the trivial baseline: constant depth, zero flow, no motion
   FlowResize flow_resize = FlowResize::kNearest;  // kitti2015: prediction -> ground-truth size (GeoNet: nearest)
   DepthScaling scaling = DepthScaling::kMedian;  // eigen
   // Metres above the road for --scaling camera-height; 0: the height the data root records
@@ -53,8 +52,17 @@ struct EvalResult {
   std::string json() const;
 };
 
-// predictor may be null when options.predictions or options.trivial is set. Throws naming the missing/bad file.
-EvalResult evaluate(const EvalOptions& options, Predictor* predictor);
+// Scores the source's predictions on options.split. Throws naming the missing/bad file.
+EvalResult evaluate(const EvalOptions& options, PredictionSource& source);
+// The model's own predictions (model_source).
+inline EvalResult evaluate(const EvalOptions& options, Predictor& model) {
+  const auto source = model_source(model);
+  return evaluate(options, *source);
+}
+
+// Eigen: the ground-truth depth of each test line as <dir>/<line, 6 digits>.png (uint16, depth x
+// 256, 0 where there is none) at the test image's size, as the protocol projects it.
+EvalResult export_eigen_ground_truth(const EvalOptions& options, const std::string& dir);
 
 // "<root>/raw", "<root>/kitti2015" or "<root>/odometry" when `root` is a geo_synth world, else root.
 std::string split_root(const std::string& split, const std::string& root);

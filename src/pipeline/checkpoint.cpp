@@ -31,37 +31,6 @@ void write_networks(torch::serialize::OutputArchive& archive, const Networks& ne
 
 }  // namespace
 
-std::string latest_checkpoint_name(const std::string& checkpoints_dir) {
-  std::ifstream in(checkpoints_dir + "/latest");
-  std::string line;
-  std::getline(in, line);
-  return line;
-}
-
-bool is_rotation_checkpoint_name(const std::string& name) {
-  // <stage>-NNNNNNNN.pt: a non-empty stage name, '-', eight digits, ".pt".
-  const size_t n = name.size();
-  if (n < 13 || name.compare(n - 3, 3, ".pt") != 0 || name[n - 12] != '-') return false;
-  for (size_t i = n - 11; i < n - 3; ++i)
-    if (name[i] < '0' || name[i] > '9') return false;
-  return true;
-}
-
-bool is_best_checkpoint_name(const std::string& name) {
-  // best-<stage>.pt; a stage named "best..." has rotation checkpoints "best...-NNNNNNNN.pt", not best.
-  return name.size() > 8 && name.rfind("best-", 0) == 0 && name.compare(name.size() - 3, 3, ".pt") == 0 &&
-         !is_rotation_checkpoint_name(name);
-}
-
-bool is_temporary_file_name(const std::string& name) {
-  // <file>.tmp (best-<stage>.pt.tmp) or <file>.tmp.<pid> (write_file_durable's).
-  const size_t at = name.rfind(".tmp");
-  if (at == std::string::npos || at == 0) return false;
-  if (at + 4 == name.size()) return true;
-  if (name[at + 4] != '.' || at + 5 == name.size()) return false;
-  return name.find_first_not_of("0123456789", at + 5) == std::string::npos;
-}
-
 void write_checkpoint(torch::serialize::OutputArchive& a, const CheckpointContents& c) {
   write_networks(a, c.networks, std::nullopt);
   if (c.optimizer) {
@@ -183,33 +152,6 @@ bool CheckpointFile::load_optimizer(torch::optim::Optimizer& optimizer) {
   if (!archive_.try_read("optimizer", opt)) return false;
   optimizer.load(opt);
   return true;
-}
-
-std::string checkpoint_name(const std::string& stage, int64_t iteration) {
-  return stage + "-" + zero_padded(iteration, 8) + ".pt";
-}
-
-std::string stage_of_checkpoint(const std::string& name) {
-  const auto dash = name.rfind('-');
-  if (dash == std::string::npos || dash == 0 || name.size() < 4 || name.substr(name.size() - 3) != ".pt") return "";
-  const std::string digits = name.substr(dash + 1, name.size() - 3 - dash - 1);
-  if (digits.empty() || !std::all_of(digits.begin(), digits.end(), ::isdigit)) return "";
-  return name.substr(0, dash);
-}
-
-std::string resolve_checkpoint(const std::string& path) {
-  if (fs::is_regular_file(path)) return path;
-  if (!fs::is_directory(path)) throw std::runtime_error("checkpoint '" + path + "' does not exist");
-  const std::string latest = latest_checkpoint_name(path + "/checkpoints");
-  if (latest.empty())
-    throw std::runtime_error("run folder '" + path + "' has no checkpoint (checkpoints/latest missing or empty)");
-  const std::string stage = stage_of_checkpoint(latest);
-  const std::string best = path + "/checkpoints/best-" + stage + ".pt";
-  if (!stage.empty() && fs::is_regular_file(best)) return best;
-  const std::string file = path + "/checkpoints/" + latest;
-  if (!fs::is_regular_file(file))
-    throw std::runtime_error("run folder '" + path + "': checkpoints/latest names " + latest + ", which does not exist");
-  return file;
 }
 
 }  // namespace geo

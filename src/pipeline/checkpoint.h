@@ -1,5 +1,4 @@
-// The one owner of geo's two file formats (LibTorch archives), and of finding the checkpoint a run
-// folder stands for. Nothing else reads or writes their keys.
+// The one owner of geo's two file formats (LibTorch archives). Nothing else reads or writes their keys.
 //
 //   training checkpoint (geo_train)     model file (geo_export)
 //     depth, pose, [flow]  networks       geo_model_format "geo-model 1"
@@ -10,14 +9,12 @@
 // Checkpoints written before the typed train state (a float64 "meta" [stage, iteration, best] and a
 // separate "world_size") are still read.
 //
-// In a run folder:
-//   checkpoints/<stage>-<iteration>.pt   training checkpoints (train/checkpoints.h rotates them)
-//   checkpoints/best-<stage>.pt          the stage's checkpoint with the lowest validation score
-//   checkpoints/latest                   the name of the newest checkpoint
+// Where checkpoints lie in a run folder, and which one a folder stands for: pipeline/run_folder.h.
 #pragma once
 
 #include "core/config.h"
 #include "pipeline/networks.h"
+#include "pipeline/run_folder.h"
 
 #include <torch/torch.h>
 
@@ -84,24 +81,5 @@ class CheckpointFile {
   std::optional<Config> config_;
   std::optional<NetworkSpec> spec_;
 };
-
-// The checkpoint name in <checkpoints_dir>/latest, or "" when there is none.
-std::string latest_checkpoint_name(const std::string& checkpoints_dir);
-// best-<stage>.pt files are links to a stage's best checkpoint, not checkpoints of their own.
-bool is_best_checkpoint_name(const std::string& name);
-// <stage>-NNNNNNNN.pt, the checkpoints that rotate.
-bool is_rotation_checkpoint_name(const std::string& name);
-// The temporary file of an interrupted write: <file>.tmp or <file>.tmp.<pid>; nothing else.
-bool is_temporary_file_name(const std::string& name);
-
-// "<stage>-<iteration, 8 digits>.pt"
-std::string checkpoint_name(const std::string& stage, int64_t iteration);
-// The stage part of a checkpoint name ("s2-00000004.pt" -> "s2"); "" if it is not one.
-std::string stage_of_checkpoint(const std::string& name);
-
-// The checkpoint a path names: a .pt file as given; a run folder -> the best checkpoint of the stage
-// its latest checkpoint belongs to (best-<stage>.pt), else that latest checkpoint. Throws naming the
-// path when there is none.
-std::string resolve_checkpoint(const std::string& path);
 
 }  // namespace geo

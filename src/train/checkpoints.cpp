@@ -13,12 +13,12 @@ namespace fs = std::filesystem;
 
 namespace geo {
 
-CheckpointManager::CheckpointManager(std::string dir, int keep_last, bool read_only)
-    : dir_(std::move(dir)), keep_last_(std::max(1, keep_last)) {
+CheckpointManager::CheckpointManager(RunFolder folder, int keep_last, bool read_only)
+    : folder_(std::move(folder)), keep_last_(std::max(1, keep_last)) {
   if (read_only) return;
   fs::create_directories(this->dir());
   // Temporary files of an interrupted write (the run folder's lock is held, so none is in use).
-  for (const auto& folder : {dir_, this->dir()})
+  for (const auto& folder : {folder_.root(), this->dir()})
     for (const auto& e : fs::directory_iterator(folder))
       if (e.is_regular_file() && is_temporary_file_name(e.path().filename().string())) fs::remove(e.path());
   std::vector<std::pair<fs::file_time_type, std::string>> found;
@@ -35,19 +35,19 @@ std::string CheckpointManager::save(const std::string& stage, int64_t iteration,
   torch::serialize::OutputArchive archive;
   fill(archive);
   const std::string name = checkpoint_name(stage, iteration);
-  const std::string path = dir() + "/" + name;
+  const std::string path = folder_.checkpoint(stage, iteration);
   save_archive(archive, path);
   if (best) {
     // A new name for the same file, swapped into place: rotation deleting <stage>-<it>.pt later
     // leaves best-<stage>.pt whole, and no second copy of the weights is written.
-    const std::string best_path = dir() + "/best-" + stage + ".pt", best_tmp = best_path + ".tmp";
+    const std::string best_path = folder_.best(stage), best_tmp = best_path + ".tmp";
     fs::remove(best_tmp);
     std::error_code ec;
     fs::create_hard_link(path, best_tmp, ec);
     if (ec) fs::copy_file(path, best_tmp, fs::copy_options::overwrite_existing);
     fs::rename(best_tmp, best_path);
   }
-  write_file_atomic(dir() + "/latest", name + "\n");
+  write_file_atomic(folder_.latest_pointer(), name + "\n");
   kept_.erase(std::remove(kept_.begin(), kept_.end(), name), kept_.end());
   kept_.push_back(name);
   while (static_cast<int>(kept_.size()) > keep_last_) {
@@ -57,10 +57,7 @@ std::string CheckpointManager::save(const std::string& stage, int64_t iteration,
   return path;
 }
 
-std::string CheckpointManager::latest() const {
-  const std::string name = latest_checkpoint_name(dir());
-  return name.empty() ? "" : dir() + "/" + name;
-}
+std::string CheckpointManager::latest() const { return folder_.latest(); }
 
 void CheckpointManager::check_resumable(const std::string& path) const {
   auto readable = [](const std::string& p, std::string* why) {

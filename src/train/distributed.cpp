@@ -1,5 +1,7 @@
 #include "train/distributed.h"
 
+#include "core/runtime.h"
+
 #include <spdlog/spdlog.h>
 #include <torch/version.h>
 
@@ -515,6 +517,43 @@ void verify_same_weights(ProcessGroup& group, const std::vector<torch::Tensor>& 
     throw std::runtime_error("rank " + std::to_string(group.rank()) + ": the weights differ across processes at step " +
                              std::to_string(step) + " (run.distributed.verify_interval): checksums range over [" +
                              std::to_string(-lo[0].item<double>()) + ", " + std::to_string(hi[0].item<double>()) + "]");
+}
+
+// ---------------------------------------------------------------- a training process in a group
+
+std::unique_ptr<ProcessGroup> join_launched_group(const DistributedConfig& config, const std::string& device_name,
+                                                  const std::string& master_addr) {
+  const LaunchInfo launch = launch_from_environment(nullptr, master_addr);
+  if (!launch.distributed()) return nullptr;
+  return ProcessGroup::connect(launch, config, select_device(device_name));
+}
+
+torch::Device process_device(const std::string& name, const ProcessGroup* group) {
+  const torch::Device d = select_device(name);
+  if (group && d.is_cuda() && (name == "auto" || name == "cuda"))
+    return select_device("cuda:" + std::to_string(group->local_rank()));
+  return d;
+}
+
+int agreed_signal(ProcessGroup* group, int local, const torch::Device& device) {
+  if (!group) return local;
+  std::vector<torch::Tensor> flag{torch::full(
+      {1}, local, torch::TensorOptions(torch::kInt32).device(group->backend() == "nccl" ? device : torch::kCPU))};
+  group->all_reduce_max(flag);
+  return flag[0].cpu().item<int>();
+}
+
+void broadcast_networks(ProcessGroup& group, Networks& nets) {
+  broadcast_module(group, *nets.depth);
+  broadcast_module(group, *nets.pose);
+  if (nets.flow) broadcast_module(group, *nets.flow);
+}
+
+int synchronise_batchnorm(ProcessGroup& group, Networks& nets) {
+  const auto sum = sum_across(group);
+  int layers = set_batchnorm_sync(*nets.depth, sum) + set_batchnorm_sync(*nets.pose, sum);
+  if (nets.flow) layers += set_batchnorm_sync(*nets.flow, sum);
+  return layers;
 }
 
 }  // namespace geo

@@ -18,6 +18,7 @@
 
 #include "core/config.h"
 #include "models/layers.h"
+#include "pipeline/networks.h"
 
 #include <torch/torch.h>
 
@@ -154,5 +155,23 @@ void broadcast_module(ProcessGroup& group, torch::nn::Module& module);
 // A checksum of the parameters that is equal across processes exactly when the weights are (sum
 // and sum of squares, in float64); compared with all_reduce_max/min, a difference is an error.
 void verify_same_weights(ProcessGroup& group, const std::vector<torch::Tensor>& parameters, int64_t step);
+
+// What a training process does as part of a group:
+
+// This process's group when it was launched as one process of several (torchrun, srun: the
+// environment says so); null for a single process. `device_name`: run.device or --device.
+std::unique_ptr<ProcessGroup> join_launched_group(const DistributedConfig& config, const std::string& device_name,
+                                                  const std::string& master_addr);
+// This process's device: `name` as select_device reads it, except that "cuda" or "auto" with CUDA
+// in a group is this process's own GPU, cuda:LOCAL_RANK.
+torch::Device process_device(const std::string& name, const ProcessGroup* group);
+// The signal (SIGINT/SIGTERM number, 0 for none) any process of the group received, agreed on at
+// the same step by one tiny all-reduce, so that all processes stop at the step rank 0 checkpoints.
+// `local` alone without a group.
+int agreed_signal(ProcessGroup* group, int local, const torch::Device& device);
+// rank 0's weights and buffers in every process's networks.
+void broadcast_networks(ProcessGroup& group, Networks& nets);
+// Every BatchNorm of the networks synchronised across the group; returns how many layers.
+int synchronise_batchnorm(ProcessGroup& group, Networks& nets);
 
 }  // namespace geo

@@ -25,10 +25,9 @@ std::optional<double> term(const StepRecord& r, const std::string& name) {
 
 // ---------------------------------------------------------------- CSV
 
-CsvSink::CsvSink(std::string dir) : dir_(std::move(dir)) {}
+CsvSink::CsvSink(RunFolder folder) : folder_(std::move(folder)) {}
 
-void CsvSink::append(const std::string& file, const std::string& header, const std::string& row) {
-  const std::string path = dir_ + "/" + file;
+void CsvSink::append(const std::string& path, const std::string& header, const std::string& row) {
   const bool fresh = !fs::exists(path);
   std::ofstream out(path, std::ios::app);
   if (fresh) out << header << "\n";
@@ -37,8 +36,7 @@ void CsvSink::append(const std::string& file, const std::string& header, const s
 }
 
 void CsvSink::trim_after(int64_t stage_index, int64_t iteration) {
-  for (const char* file : {"metrics.csv", "val.csv"}) {
-    const std::string path = dir_ + "/" + file;
+  for (const std::string& path : {folder_.metrics_csv(), folder_.validation_csv()}) {
     if (!fs::exists(path)) continue;
     std::ifstream in(path);
     std::string line, kept;
@@ -71,18 +69,18 @@ void CsvSink::on_step(const StepRecord& r) {
   }
   header += ",lr";
   row += fmt::format(",{:.6g}", r.lr);
-  append("metrics.csv", header, row);
+  append(folder_.metrics_csv(), header, row);
 }
 
 void CsvSink::on_validation(const ValidationRecord& r) {
-  append("val.csv", "stage_index,stage,iteration,photometric,flow,score",
+  append(folder_.validation_csv(), "stage_index,stage,iteration,photometric,flow,score",
          fmt::format("{},{},{},{:.9g},{},{:.9g}", r.stage_index, r.stage, r.iteration, r.rigid,
                      r.flow ? fmt::format("{:.9g}", *r.flow) : "", r.score));
 }
 
 // ---------------------------------------------------------------- TensorBoard
 
-TensorBoardSink::TensorBoardSink(const std::string& dir, int64_t resumed_at) : writer_(dir + "/tb") {
+TensorBoardSink::TensorBoardSink(const RunFolder& folder, int64_t resumed_at) : writer_(folder.tensorboard()) {
   if (resumed_at >= 0) writer_.add_session_start(resumed_at);
 }
 
@@ -107,6 +105,16 @@ void TensorBoardSink::on_validation(const ValidationRecord& r) {
 
 void TensorBoardSink::on_image(const ImageRecord& r) {
   writer_.add_image(r.stage + "/" + r.tag, r.global_step, r.png, r.height, r.width, r.channels);
+}
+
+// ---------------------------------------------------------------- summary images
+
+SummaryPngSink::SummaryPngSink(RunFolder folder) : folder_(std::move(folder)) {
+  fs::create_directories(folder_.summaries());
+}
+
+void SummaryPngSink::on_image(const ImageRecord& r) {
+  write_file_atomic(folder_.summary(r.stage, r.iteration, r.tag), r.png);
 }
 
 // ---------------------------------------------------------------- console

@@ -1,10 +1,12 @@
 // Where training reports go: MetricsSink receives every step, validation and summary image;
-// CsvSink writes metrics.csv / val.csv, TensorBoardSink <run>/tb/events.out.tfevents.*, and
-// ProgressSink the console progress line. Library users add their own sinks (TrainOptions::sinks).
-// LibTorch-free.
+// CsvSink writes metrics.csv / val.csv, TensorBoardSink <run>/tb/events.out.tfevents.*,
+// SummaryPngSink the summary images as summaries/*.png, and ProgressSink the console progress
+// line (the run folder's paths: pipeline/run_folder.h). Library users add their own sinks
+// (TrainOptions::sinks). LibTorch-free.
 #pragma once
 
 #include "core/progress.h"
+#include "pipeline/run_folder.h"
 #include "train/tensorboard.h"
 
 #include <chrono>
@@ -62,7 +64,7 @@ class MetricsSink {
 // (terms a stage does not compute are empty). val.csv: stage_index,stage,iteration,photometric,flow,score.
 class CsvSink : public MetricsSink {
  public:
-  explicit CsvSink(std::string dir);
+  explicit CsvSink(RunFolder folder);
   // Resume: drops rows after (stage_index, iteration), which an interrupted process logged past
   // its last checkpoint.
   void trim_after(int64_t stage_index, int64_t iteration);
@@ -70,16 +72,16 @@ class CsvSink : public MetricsSink {
   void on_validation(const ValidationRecord& r) override;
 
  private:
-  void append(const std::string& file, const std::string& header, const std::string& row);
-  std::string dir_;
+  void append(const std::string& path, const std::string& header, const std::string& row);
+  RunFolder folder_;
 };
 
 // Scalars "loss/<term>", "lr", "grad_norm", "iterations_per_s", "val/photometric", "val/flow",
 // "val/score", and the summary images "<stage>/<tag>", against the global step.
 class TensorBoardSink : public MetricsSink {
  public:
-  // Events go to <dir>/tb; `resumed_at` >= 0 first writes a SessionLog START at that global step.
-  explicit TensorBoardSink(const std::string& dir, int64_t resumed_at = -1);
+  // Events go to the folder's tb/; `resumed_at` >= 0 first writes a SessionLog START at that global step.
+  explicit TensorBoardSink(const RunFolder& folder, int64_t resumed_at = -1);
   void on_step(const StepRecord& r) override;
   void on_validation(const ValidationRecord& r) override;
   void on_image(const ImageRecord& r) override;
@@ -89,6 +91,16 @@ class TensorBoardSink : public MetricsSink {
  private:
   EventWriter writer_;
   std::optional<std::pair<int64_t, std::chrono::steady_clock::time_point>> last_;
+};
+
+// Each summary image as summaries/<stage>-<iteration>-<tag>.png (the PNG bytes it carries).
+class SummaryPngSink : public MetricsSink {
+ public:
+  explicit SummaryPngSink(RunFolder folder);  // creates summaries/
+  void on_image(const ImageRecord& r) override;
+
+ private:
+  RunFolder folder_;
 };
 
 // The console progress (core/progress.h): every `interval` iterations a log line (stage,

@@ -18,7 +18,7 @@
 #include <atomic>
 #include <csignal>
 #include <filesystem>
-#include <thread>
+#include <optional>
 
 namespace fs = std::filesystem;
 
@@ -50,18 +50,12 @@ class Run {
  public:
   // `group`: this process's distributed group (null: a single process). Only rank 0 writes to the
   // run folder (checkpoints, logs, summaries) and validates.
-  Run(Config config, std::string dir, const TrainOptions& options, bool resuming, ProcessGroup* group = nullptr)
-      : cfg_(std::move(config)), dir_(std::move(dir)), opts_(options), group_(group),
+  Run(Config config, RunFolder folder, const TrainOptions& options, bool resuming, ProcessGroup* group = nullptr)
+      : cfg_(std::move(config)), folder_(std::move(folder)), opts_(options), group_(group),
         writer_(!group || group->rank() == 0),
         device_(process_device(options.device.empty() ? cfg_.run.device : options.device, group)),
-        checkpoints_(dir_, cfg_.logging.keep_last, !writer_) {
-    const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-    if (cfg_.run.threads > cores)
-      spdlog::warn("run.threads {} is more than this machine's {} cores: using {}", cfg_.run.threads, cores, cores);
-    torch::set_num_threads(cfg_.run.threads > 0 ? std::min(cfg_.run.threads, cores) : cores);
-    torch::manual_seed(static_cast<uint64_t>(cfg_.run.seed));
-    apply_precision(cfg_.run.precision);
-    if (device_.is_cuda()) at::globalContext().setBenchmarkCuDNN(true);  // fixed shapes: cuDNN autotunes once
+        checkpoints_(folder_, cfg_.logging.keep_last, !writer_) {
+    apply_run_settings(cfg_.run, device_);
     data_ = open_training_data(cfg_.data);
     bool with_flow = false;
     for (const auto& s : cfg_.stages) with_flow = with_flow || s.uses_flow();
@@ -69,9 +63,7 @@ class Run {
     nets_.to(device_);
     if (group_) averager_ = std::make_unique<GradientAverager>(*group_);
     if (group_ && cfg_.run.distributed.sync_batchnorm) {
-      const auto sum = sum_across(*group_);
-      int layers = set_batchnorm_sync(*nets_.depth, sum) + set_batchnorm_sync(*nets_.pose, sum);
-      if (nets_.flow) layers += set_batchnorm_sync(*nets_.flow, sum);
+      const int layers = synchronise_batchnorm(*group_, nets_);
       if (writer_)
         spdlog::info("BatchNorm synchronised across the {} processes ({} layers: 2 all-reduces each per step){}",
                      group_->size(), layers,
@@ -80,23 +72,34 @@ class Run {
     if (resuming) restore();
     else init_networks(stage());  // here, so that a bad --init stops the run before it starts
     if (writer_) {
-      fs::create_directories(dir_ + "/summaries");
-      auto csv = std::make_shared<CsvSink>(dir_);
+      auto csv = std::make_shared<CsvSink>(folder_);
       if (resuming) csv->trim_after(state_.stage, state_.iteration);
-      sinks_ = {csv, std::make_shared<TensorBoardSink>(dir_, resuming ? global_step() : -1),
-                std::make_shared<ProgressSink>(cfg_.logging.interval)};
+      sinks_ = {csv, std::make_shared<TensorBoardSink>(folder_, resuming ? global_step() : -1),
+                std::make_shared<SummaryPngSink>(folder_), std::make_shared<ProgressSink>(cfg_.logging.interval)};
     }
     sinks_.insert(sinks_.end(), opts_.sinks.begin(), opts_.sinks.end());
   }
 
   int run() {
     SignalScope signals;
+    report_start();
+    for (; state_.stage < static_cast<int64_t>(cfg_.stages.size()); next_stage()) {
+      const int rc = run_stage(signals);
+      if (rc != 0) return rc;
+    }
+    spdlog::info("training finished; checkpoints in {}", checkpoints_.dir());
+    return 0;
+  }
+
+ private:
+  // What this run is about to do, and the settings that will hurt it.
+  void report_start() const {
     spdlog::info("run folder {}; device {} ({}); {} threads; data {} in {} ({} training snippets{}{}, {} validation); "
                  "TensorBoard: tensorboard --logdir {}",
-                 dir_, device_.str(), name_of(cfg_.run.precision), torch::get_num_threads(), data_.format, data_.root, data_.train->size(),
+                 folder_.root(), device_.str(), name_of(cfg_.run.precision), torch::get_num_threads(), data_.format, data_.root, data_.train->size(),
                  data_.excluded ? ", " + std::to_string(data_.excluded) + " excluded by " + join_list(data_.exclusions, ", ") : "",
                  data_.dropped ? ", " + std::to_string(data_.dropped) + " without neighbours" : "",
-                 data_.val ? data_.val->size() : 0, fs::path(dir_).parent_path().string());
+                 data_.val ? data_.val->size() : 0, fs::path(folder_.root()).parent_path().string());
     if (!data_.val && cfg_.logging.val_interval > 0)
       spdlog::warn("no validation data ({}): nothing is validated, no best-<stage>.pt is kept, and a run folder "
                    "resolves to its latest checkpoint", data_.format == "packed" ? "the cache has no val/"
@@ -118,15 +121,8 @@ class Run {
                    stage().batch_size * group_->size(),
                    cfg_.run.distributed.shard_data ? "each reads its own shard of the data stream"
                                                    : "all read the same batches (run.distributed.shard_data false)");
-    for (; state_.stage < static_cast<int64_t>(cfg_.stages.size()); next_stage()) {
-      const int rc = run_stage(signals);
-      if (rc != 0) return rc;
-    }
-    spdlog::info("training finished; checkpoints in {}", checkpoints_.dir());
-    return 0;
   }
 
- private:
   const StageConfig& stage() const { return cfg_.stages[state_.stage]; }
 
   int64_t global_step() const {
@@ -147,7 +143,7 @@ class Run {
   void restore() {
     resume_from_ = checkpoints_.latest();
     if (resume_from_.empty())
-      throw std::runtime_error(dir_ + ": no checkpoint to resume from (checkpoints/latest missing)");
+      throw std::runtime_error(folder_.root() + ": no checkpoint to resume from (checkpoints/latest missing)");
     checkpoints_.check_resumable(resume_from_);
     CheckpointFile file(resume_from_);
     file.load_networks(nets_, false);
@@ -182,11 +178,7 @@ class Run {
 
   int run_stage(const SignalScope& signals) {
     const auto& s = stage();
-    if (group_) {  // every process starts the stage from rank 0's weights
-      broadcast_module(*group_, *nets_.depth);
-      broadcast_module(*group_, *nets_.pose);
-      if (nets_.flow) broadcast_module(*group_, *nets_.flow);
-    }
+    if (group_) broadcast_networks(*group_, nets_);  // every process starts the stage from rank 0's weights
     TrainStep step(nets_, cfg_, s);
     step.set_gradient_averager(averager_.get(), cfg_.run.distributed.overlap);
     if (!resume_from_.empty()) CheckpointFile(resume_from_).load_optimizer(step.optimizer());
@@ -245,26 +237,16 @@ class Run {
       const auto& dist = cfg_.run.distributed;
       if (group_ && dist.verify_interval > 0 && state_.iteration % dist.verify_interval == 0)
         verify_same_weights(*group_, nets_.trainable_parameters(), global_step());
-      const int signal = agreed_signal(signals);
+      const int signal = agreed_signal(group_, signals.received(), device_);
       const bool checkpoint = due(log.checkpoint_interval);
       if (writer_ && (checkpoint || signal || new_best)) save(step, new_best);
       if (signal) {
         spdlog::warn("signal {} received: checkpoint written at stage {} iteration {}; continue with "
-                     "geo_train --resume {}", signal, s.name, state_.iteration, dir_);
+                     "geo_train --resume {}", signal, s.name, state_.iteration, folder_.root());
         return 130;
       }
     }
     return 0;
-  }
-
-  // The signal (SIGINT/SIGTERM) any process received; distributed, all processes agree on it at the
-  // same step (one tiny all-reduce), so rank 0 checkpoints the step every process stops at.
-  int agreed_signal(const SignalScope& signals) {
-    if (!group_) return signals.received();
-    std::vector<torch::Tensor> flag{torch::full({1}, signals.received(), torch::TensorOptions(torch::kInt32).device(
-                                                                               group_->backend() == "nccl" ? device_ : torch::kCPU))};
-    group_->all_reduce_max(flag);
-    return flag[0].cpu().item<int>();
   }
 
   void report_step(const StepResult& r, double lr) {
@@ -317,9 +299,9 @@ class Run {
     spdlog::info("checkpoint {}{}", path, best ? " (best of stage " + stage().name + ")" : "");
   }
 
-  // PNGs of the first sample, also sent to the sinks: target, disparity, source warped by the
-  // rigid flow, and in flow stages the full flow and the forward visibility mask of eq. 13.
-  // A build without OpenCV writes no images (said once).
+  // Summary images of the first sample, to the sinks (summaries/*.png, TensorBoard): target,
+  // disparity, source warped by the rigid flow, and in flow stages the full flow and the forward
+  // visibility mask of eq. 13. A build without OpenCV makes no images (said once).
   void write_summaries(const Batch& batch, const StepOutput& out) {
 #ifdef GEO_WITH_OPENCV
     torch::NoGradGuard no_grad;
@@ -331,9 +313,7 @@ class Run {
       images.emplace_back("flow", colorize_flow(out.fwd_full[0][0][0].cpu()));
       images.emplace_back("visible", out.flow->fwd_visible[0][0][0].cpu().expand({3, -1, -1}));
     }
-    const std::string base = dir_ + "/summaries/" + stage().name + "-" + std::to_string(state_.iteration);
     for (const auto& [tag, image] : images) {
-      write_image(base + "-" + tag + ".png", image);
       ImageRecord rec{stage().name, state_.iteration, global_step(), tag, encode_png(image),
                       static_cast<int>(image.size(1)), static_cast<int>(image.size(2)), 3};
       for (auto& sink : sinks_) sink->on_image(rec);
@@ -345,17 +325,8 @@ class Run {
 #endif
   }
 
-  // cuda / auto with CUDA in a distributed run: this process's GPU, cuda:LOCAL_RANK.
-  static torch::Device process_device(const std::string& name, ProcessGroup* group) {
-    torch::Device d = select_device(name);
-    if (group && d.is_cuda() && (name == "auto" || name == "cuda")) {
-      d = select_device("cuda:" + std::to_string(group->local_rank()));
-    }
-    return d;
-  }
-
   Config cfg_;
-  std::string dir_;
+  RunFolder folder_;
   TrainOptions opts_;
   ProcessGroup* group_;
   bool writer_;
@@ -374,10 +345,8 @@ class Run {
 // This process's group when geo_train was launched as one process of several (torchrun, srun);
 // null for a single process.
 std::unique_ptr<ProcessGroup> join_group(const Config& config, const TrainOptions& options) {
-  const LaunchInfo launch = launch_from_environment(nullptr, options.master_addr);
-  if (!launch.distributed()) return nullptr;
-  return ProcessGroup::connect(launch, config.run.distributed,
-                               select_device(options.device.empty() ? config.run.device : options.device));
+  return join_launched_group(config.run.distributed, options.device.empty() ? config.run.device : options.device,
+                             options.master_addr);
 }
 
 // The other ranks of a distributed run: they read the run folder rank 0 set up and write nothing.
@@ -385,7 +354,7 @@ int follow(const Config& config, const std::string& dir, const TrainOptions& opt
            bool resuming) {
   setup_logging(config.logging.level == "info" || config.logging.level == "debug" || config.logging.level == "trace"
                     ? "warn" : config.logging.level);
-  Run run(config, dir, options, resuming, &group);
+  Run run(config, RunFolder(dir), options, resuming, &group);
   return run.run();
 }
 
@@ -398,39 +367,39 @@ int train(const Config& config, const TrainOptions& options, std::string* run_di
     if (run_dir) *run_dir = dir;
     return follow(config, dir, options, *group, false);
   }
-  std::string dir = options.run_dir;
-  bool created = dir.empty() || !fs::exists(dir);
+  const bool created = options.run_dir.empty() || !fs::exists(options.run_dir);
+  std::optional<RunFolder> folder;
   std::unique_ptr<FolderLock> lock;
   try {
-    if (dir.empty()) dir = make_run_dir(config.run.dir, config.run.name);
-    else if (fs::exists(dir + "/checkpoints/latest"))
+    folder = options.run_dir.empty() ? RunFolder::create_new(config.run.dir, config.run.name) : RunFolder(options.run_dir);
+    const std::string& dir = folder->root();
+    if (!folder->latest().empty())
       throw std::runtime_error("run folder '" + dir + "' already holds a run; use --resume " + dir + " or another --run-dir");
-    else
-      // A run that stopped before its first checkpoint cannot be resumed, and a new one would append
-      // to its logs: refused, so that two runs never mix in one folder.
-      for (const char* f : {"config.yaml", "metrics.csv", "val.csv", "train.log", "checkpoints"})
-        if (fs::exists(dir + "/" + f))
-          throw std::runtime_error("run folder '" + dir + "' holds the files of an earlier run (" + f +
-                                   ") that stopped before its first checkpoint: remove the folder or use another --run-dir");
+    // A run that stopped before its first checkpoint cannot be resumed, and a new one would append
+    // to its logs: refused, so that two runs never mix in one folder.
+    const auto earlier = folder->run_files();
+    if (!earlier.empty())
+      throw std::runtime_error("run folder '" + dir + "' holds the files of an earlier run (" + join_list(earlier, ", ") +
+                               ") that stopped before its first checkpoint: remove the folder or use another --run-dir");
     fs::create_directories(dir);
     lock = std::make_unique<FolderLock>(dir);  // one writer per run folder
-    write_file_atomic(dir + "/config.yaml", to_yaml(config));
+    write_file_atomic(folder->config(), to_yaml(config));
   } catch (const std::exception& e) {
     if (group) group->share_from_rank0("run_dir", e.what(), true);
     throw;
   }
-  if (group) group->share_from_rank0("run_dir", dir);
-  if (run_dir) *run_dir = dir;
-  setup_logging(config.logging.level, dir + "/train.log");
+  if (group) group->share_from_rank0("run_dir", folder->root());
+  if (run_dir) *run_dir = folder->root();
+  setup_logging(config.logging.level, folder->log());
   std::unique_ptr<Run> run;
   try {
-    run = std::make_unique<Run>(config, dir, options, false, group.get());
+    run = std::make_unique<Run>(config, *folder, options, false, group.get());
   } catch (...) {
     // A run that could not start (bad data root, ...) leaves no half-made folder behind.
     if (created) {
       setup_logging(config.logging.level);  // release train.log
       std::error_code ec;
-      fs::remove_all(dir, ec);
+      fs::remove_all(folder->root(), ec);
     }
     throw;
   }
@@ -438,7 +407,8 @@ int train(const Config& config, const TrainOptions& options, std::string* run_di
 }
 
 int resume(const std::string& run_dir, const TrainOptions& options) {
-  const std::string cfg_path = run_dir + "/config.yaml";
+  const RunFolder folder(run_dir);
+  const std::string cfg_path = folder.config();
   if (!fs::exists(cfg_path))
     throw std::runtime_error("--resume '" + run_dir + "': not a run folder (no config.yaml)");
   const Config config = load_config(cfg_path);
@@ -455,8 +425,8 @@ int resume(const std::string& run_dir, const TrainOptions& options) {
     throw;
   }
   if (group) group->share_from_rank0("resume", run_dir);
-  setup_logging(config.logging.level, run_dir + "/train.log");
-  Run run(config, run_dir, options, true, group.get());
+  setup_logging(config.logging.level, folder.log());
+  Run run(config, folder, options, true, group.get());
   return run.run();
 }
 

@@ -68,12 +68,11 @@ run: {seed: 1, threads: 2}
   ASSERT_EQ(train(cfg, t), 0);
 
   Predictor trained(t.run_dir, "cpu"), untrained(cfg, "cpu");
-  auto eval = [&](const std::string& split, Predictor* p, bool trivial) {
+  auto eval = [&](const std::string& split, Predictor* p) {  // null: the trivial baseline
     EvalOptions e;
     e.split = split;
     e.data_root = root + "/world";
-    e.trivial = trivial;
-    return evaluate(e, p);
+    return p ? evaluate(e, *p) : evaluate(e, *trivial_source());
   };
   struct Check {
     const char* split;
@@ -82,9 +81,9 @@ run: {seed: 1, threads: 2}
   };
   for (const Check c : {Check{"eigen", "abs_rel", 0.92}, Check{"odometry", "ate_mean", 0.5},
                         Check{"kitti2015", "epe_all", 0.8}}) {
-    const double tr = metric(eval(c.split, &trained, false), c.metric);
-    const double un = metric(eval(c.split, &untrained, false), c.metric);
-    const double tv = metric(eval(c.split, nullptr, true), c.metric);
+    const double tr = metric(eval(c.split, &trained), c.metric);
+    const double un = metric(eval(c.split, &untrained), c.metric);
+    const double tv = metric(eval(c.split, nullptr), c.metric);
     std::printf("learning check %-9s %-8s trained %.4f  untrained %.4f  trivial %.4f\n", c.split, c.metric, tr, un, tv);
     EXPECT_LT(tr, c.margin * std::min(un, tv)) << c.split << " " << c.metric;
   }
@@ -92,7 +91,7 @@ run: {seed: 1, threads: 2}
   // and on the static scene. Measured on the demo's world (seed 1, 240 + 200 iterations): cars 3.61
   // vs 3.93 px (0.92), static scene 1.50 vs 1.74. The margin 0.97 leaves room for the noise of a
   // short run while still requiring a gain that a zero residual (ratio exactly 1) cannot give.
-  const auto flow = eval("kitti2015", &trained, false);
+  const auto flow = eval("kitti2015", &trained);
   const double fg = metric(flow, "epe_fg"), rigid_fg = metric(flow, "rigid_epe_fg");
   const double bg = metric(flow, "epe_bg"), rigid_bg = metric(flow, "rigid_epe_bg");
   std::printf("learning check stage 2: cars full %.4f rigid %.4f (%.3f), static full %.4f rigid %.4f (%.3f)\n", fg,
@@ -107,9 +106,9 @@ run: {seed: 1, threads: 2}
   EvalOptions h;
   h.split = "eigen";
   h.data_root = root + "/world";
-  const double median_abs_rel = metric(evaluate(h, &trained), "abs_rel");
+  const double median_abs_rel = metric(evaluate(h, trained), "abs_rel");
   h.scaling = DepthScaling::kCameraHeight;
-  const auto height = evaluate(h, &trained);
+  const auto height = evaluate(h, trained);
   std::printf("learning check camera height: abs_rel %.4f (median scaling %.4f), scale agreement %.3f +- %.3f\n",
               metric(height, "abs_rel"), median_abs_rel, metric(height, "scale_agreement_median"),
               metric(height, "scale_agreement_std"));
@@ -126,7 +125,7 @@ run: {seed: 1, threads: 2}
   m.split = "odometry";
   m.data_root = root + "/world";
   m.scaling = DepthScaling::kCameraHeight;
-  const auto odometry = evaluate(m, &trained);
+  const auto odometry = evaluate(m, trained);
   std::printf("learning check metric trajectory: scale error %.3f, road plane in %lld of %lld frames\n",
               metric(odometry, "metric_scale_error"), static_cast<long long>(count_of(odometry, "frames_with_road_plane")),
               static_cast<long long>(count_of(odometry, "frames")));

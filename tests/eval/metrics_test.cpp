@@ -179,14 +179,16 @@ std::string protocol_world(const std::string& name) {
   return root;
 }
 
-// The options of `split` on <root>/world, scoring `predictions` (none: a model or --export-gt).
-EvalOptions options_for(const std::string& split, const std::string& root, const std::string& predictions = "") {
+// The options of `split` on <root>/world.
+EvalOptions options_for(const std::string& split, const std::string& root) {
   EvalOptions o;
   o.split = split;
   o.data_root = root + "/world";
-  o.predictions = predictions;
   return o;
 }
+
+// The protocol's score of prediction files.
+EvalResult score_files(const EvalOptions& o, const std::string& predictions) { return evaluate(o, *file_source(predictions)); }
 
 // The Eigen test list's dense ground truth as predictions (named by line of the list).
 std::vector<std::string> dense_truth_as_predictions(const std::string& root) {
@@ -204,17 +206,16 @@ std::vector<std::string> dense_truth_as_predictions(const std::string& root) {
 TEST(Protocols, EigenDepthOfTheTruthScoresNearlyPerfectly) {
   const auto root = protocol_world("protocols_eigen");
   const auto tests = dense_truth_as_predictions(root);
-  EvalOptions e = options_for("eigen", root, root + "/depth");
-  e.export_gt = root + "/gt";
-  const auto depth = evaluate(e, nullptr);
+  EvalOptions e = options_for("eigen", root);
+  const std::string predictions = root + "/depth";
+  const auto depth = score_files(e, predictions);
   EXPECT_EQ(depth.counts[0].second, static_cast<int64_t>(tests.size()));
   // The protocol's ground truth is the Velodyne x (27 cm behind the camera here, as in KITTI) at
   // round(x/z) - 1, so even the dense camera-z truth scores near, not exactly, zero.
   EXPECT_LT(depth.metrics[0].second, 0.1) << "abs_rel of the truth";
   EXPECT_GT(depth.metrics[4].second, 0.95);
-  EXPECT_TRUE(std::filesystem::exists(root + "/gt/000000.png"));
   e.matlab_offset = false;
-  const double exact = evaluate(e, nullptr).metrics[0].second;
+  const double exact = score_files(e, predictions).metrics[0].second;
   EXPECT_LT(exact, depth.metrics[0].second);
   std::printf("abs_rel of the dense truth: %.4f (reference pixel shift), %.4f (exact pixels)\n", depth.metrics[0].second, exact);
   EXPECT_EQ(count_of(depth, "velodyne_points_non_finite"), 0);
@@ -226,25 +227,34 @@ TEST(Protocols, EigenDepthOfTheTruthScoresNearlyPerfectly) {
     const auto points = read_velodyne(velo);
     auto nan_point = torch::full({2, 4}, std::nanf(""));
     write_velodyne(velo, torch::cat({points, nan_point}));
-    const auto with_nan = evaluate(e, nullptr);
+    const auto with_nan = score_files(e, predictions);
     EXPECT_EQ(count_of(with_nan, "velodyne_points_non_finite"), 2);
     EXPECT_EQ(with_nan.metrics[0].second, exact);
     write_velodyne(velo, points);
   }
-  // --export-gt alone: the ground truth is written, no model or predictions needed, no metrics.
-  EvalOptions g = options_for("eigen", root);
-  g.export_gt = root + "/gt_only";
-  g.matlab_offset = false;  // as the last export to gt/ above
-  const auto exported = evaluate(g, nullptr);
-  EXPECT_TRUE(exported.metrics.empty());
-  EXPECT_EQ(exported.counts[0], (std::pair<std::string, int64_t>{"exported", static_cast<int64_t>(tests.size())}));
-  EXPECT_EQ(test::read_file(root + "/gt_only/000000.png"), test::read_file(root + "/gt/000000.png"));
+  // --export-gt: the ground truth the protocol scores against, written without a model, no metrics;
+  // scored as predictions it matches itself to the PNG's 1/256 m (median ratio 1, every pixel within
+  // delta < 1.25), with either pixel convention.
+  for (const bool offset : {true, false}) {
+    EvalOptions g = options_for("eigen", root);
+    g.matlab_offset = offset;
+    const std::string dir = root + (offset ? "/gt_offset" : "/gt_exact");
+    const auto exported = export_eigen_ground_truth(g, dir);
+    EXPECT_TRUE(exported.metrics.empty());
+    EXPECT_EQ(exported.counts[0], (std::pair<std::string, int64_t>{"exported", static_cast<int64_t>(tests.size())}));
+    const auto itself = score_files(g, dir);
+    EXPECT_LT(metric_of(itself, "abs_rel"), 1e-3) << "offset " << offset;
+    EXPECT_EQ(metric_of(itself, "a1"), 1.0);
+    EXPECT_NEAR(metric_of(itself, "scale_ratio_median"), 1.0, 1e-3);
+  }
+  EXPECT_NE(test::read_file(root + "/gt_offset/000000.png"), test::read_file(root + "/gt_exact/000000.png"));
 }
 
 TEST(Protocols, Kitti2015FlowOfTheTruthScoresPerfectly) {
   const auto root = protocol_world("protocols_flow");
-  EvalOptions f = options_for("kitti2015", root, root + "/world/kitti2015/training/flow_occ");
-  const auto flow = evaluate(f, nullptr);
+  EvalOptions f = options_for("kitti2015", root);
+  std::string predictions = root + "/world/kitti2015/training/flow_occ";
+  const auto flow = score_files(f, predictions);
   EXPECT_NEAR(flow.metrics[0].second, 0.0, 1e-9);
   EXPECT_EQ(flow.counts[0].second, 2);
   // geo_synth's object maps: background and foreground scored apart, pixels counted (the flow_occ
@@ -261,45 +271,40 @@ TEST(Protocols, Kitti2015FlowOfTheTruthScoresPerfectly) {
   EXPECT_EQ(count_of(flow, "predictions_resized"), 0);
   {  // A prediction of another size than its ground truth is resized and counted, not silently.
     const std::string small = root + "/flow_small";
-    std::filesystem::copy(f.predictions, small);
+    std::filesystem::copy(predictions, small);
     const auto first = std::filesystem::directory_iterator(small)->path().string();
     write_flow_png(first, torch::zeros({2, 4, 6}), torch::ones({1, 4, 6}));
-    EvalOptions fsmall = f;
-    fsmall.predictions = small;
-    EXPECT_EQ(count_of(evaluate(fsmall, nullptr), "predictions_resized"), 1);
+    EXPECT_EQ(count_of(score_files(f, small), "predictions_resized"), 1);
   }
   test::write_text(root + "/pairs.txt", "training/image_2/000001_10.png\n");
   f.split_file = root + "/pairs.txt";
-  EXPECT_EQ(evaluate(f, nullptr).counts[0].second, 1);
+  EXPECT_EQ(score_files(f, predictions).counts[0].second, 1);
   test::write_text(root + "/pairs.txt", "training/image_2/000007_10.png\n");
-  GEO_EXPECT_THROW_WITH(evaluate(f, nullptr), "000007");
+  GEO_EXPECT_THROW_WITH(score_files(f, predictions), "000007");
   // Ground truth that cannot score: an all-invalid flow map is left out and counted (it used to
   // count as EPE 0).
   f.split_file.clear();
   const std::string occ1 = root + "/world/kitti2015/training/flow_occ/000001_10.png";
   const auto gt1 = read_flow_png(occ1);
   write_flow_png(occ1, gt1.flow, torch::zeros_like(gt1.valid));
-  f.predictions = root + "/world/kitti2015/training/flow_noc";
-  const auto partial = evaluate(f, nullptr);
+  const auto partial = score_files(f, root + "/world/kitti2015/training/flow_noc");
   EXPECT_EQ(partial.counts[0], (std::pair<std::string, int64_t>{"pairs", 1}));
   EXPECT_EQ(count_of(partial, "pairs_without_ground_truth"), 1);
 }
 
 TEST(Protocols, OdometryTrajectoryOfTheTruthScoresPerfectly) {
   const auto root = protocol_world("protocols_pose");
-  EvalOptions p = options_for("odometry", root, root + "/world/odometry/poses/09.txt");
-  const auto pose = evaluate(p, nullptr);
+  EvalOptions p = options_for("odometry", root);
+  const auto pose = score_files(p, root + "/world/odometry/poses/09.txt");
   EXPECT_NEAR(pose.metrics[0].second, 0.0, 1e-6);
   EXPECT_EQ(pose.counts[0].second, 4);  // centres 2..5 of 8 frames
   write_poses(root + "/still.txt", torch::eye(4, torch::kFloat64).repeat({8, 1, 1}));
-  p.predictions = root + "/still.txt";
-  EXPECT_GT(evaluate(p, nullptr).metrics[0].second, 0.5);
+  EXPECT_GT(score_files(p, root + "/still.txt").metrics[0].second, 0.5);
   // A trajectory with a NaN is an error, not a nan metric with exit code 0.
   auto nan_traj = read_poses(root + "/world/odometry/poses/09.txt");
   nan_traj[3][0][3] = std::nan("");
   write_poses(root + "/nan.txt", nan_traj);
-  p.predictions = root + "/nan.txt";
-  GEO_EXPECT_THROW_WITH(evaluate(p, nullptr), "nan.txt line 4", "NaN or infinity");
+  GEO_EXPECT_THROW_WITH(score_files(p, root + "/nan.txt"), "nan.txt line 4", "NaN or infinity");
   // Non-finite metrics are written as JSON null and read back as NaN.
   EvalResult with_nan = pose;
   with_nan.metrics[1].second = std::nan("");
@@ -321,20 +326,20 @@ TEST(Protocols, ModelsOnTheOdometryAndFlowProtocols) {
   const EvalOptions p = options_for("odometry", root);
   Config c5 = parse_config("model: {encoder_depth: 18}\ndata: {height: 64, width: 208, seq_length: 5}\n");
   Predictor five(c5, "cpu");
-  const auto r5 = evaluate(p, &five);
+  const auto r5 = evaluate(p, five);
   EXPECT_EQ(r5.counts[0].second, 4);
   EXPECT_TRUE(std::isfinite(r5.metrics[0].second));
   Config c3 = parse_config("model: {encoder_depth: 18}\ndata: {height: 64, width: 208}\n");
   Predictor three(c3, "cpu");
   std::filesystem::remove(root + "/world/kitti2015/training/image_2/000000_09.png");  // geo_synth writes both
-  const auto r3 = evaluate(options_for("kitti2015", root), &three);
+  const auto r3 = evaluate(options_for("kitti2015", root), three);
   EXPECT_EQ(r3.counts.back(), (std::pair<std::string, int64_t>{"pairs_with_frame_09", 1}));
   EXPECT_TRUE(std::isfinite(metric_of(r3, "rigid_epe_all")));
   EXPECT_NE(metric_of(r3, "rigid_epe_all"), metric_of(r3, "epe_all"));
   EXPECT_TRUE(std::isfinite(metric_of(r3, "rigid_epe_bg")));
   const std::string images = root + "/world/odometry/sequences/09/image_2/";
   std::filesystem::copy_file(images + "000007.png", images + "000008.png");
-  GEO_EXPECT_THROW_WITH(evaluate(p, &three), "09.txt holds 8 poses", "000008.png exists");
+  GEO_EXPECT_THROW_WITH(evaluate(p, three), "09.txt holds 8 poses", "000008.png exists");
 }
 
 // Predictions and ground truth that cannot be right are refused (naming the file) or, where a
@@ -348,17 +353,17 @@ TEST(Protocols, PredictionsAndGroundTruthThatCannotBeRightAreRefusedOrCounted) {
   EvalOptions e;
   e.split = "eigen";
   e.data_root = root + "/world";
-  e.predictions = root + "/depth";
+  const std::string depth_dir = root + "/depth";
   auto depth_file = [&](size_t i) { return root + "/depth/" + zero_padded(static_cast<long long>(i), 6) + ".png"; };
   std::filesystem::create_directories(root + "/depth");
   for (size_t i = 0; i < tests.size(); ++i) write_depth_png(depth_file(i), torch::full({1, 64, 208}, 10.0));
-  EXPECT_EQ(count_of(evaluate(e, nullptr), "predictions_with_nonpositive_depth"), 0);
+  EXPECT_EQ(count_of(score_files(e, depth_dir), "predictions_with_nonpositive_depth"), 0);
   auto half = torch::full({1, 64, 208}, 10.0);
   half.slice(2, 0, 104).zero_();  // 0 in a depth PNG: no depth
   write_depth_png(depth_file(1), half);
-  EXPECT_EQ(count_of(evaluate(e, nullptr), "predictions_with_nonpositive_depth"), 1);
+  EXPECT_EQ(count_of(score_files(e, depth_dir), "predictions_with_nonpositive_depth"), 1);
   write_depth_png(depth_file(1), torch::zeros({1, 64, 208}));
-  GEO_EXPECT_THROW_WITH(evaluate(e, nullptr), "line 2", "is <= 0 everywhere", "nothing was scored");
+  GEO_EXPECT_THROW_WITH(score_files(e, depth_dir), "line 2", "is <= 0 everywhere", "nothing was scored");
 
   // Odometry: no motion at all is refused; a stopped car's snippet scores 0 whatever the prediction,
   // so it is counted.
@@ -366,21 +371,20 @@ TEST(Protocols, PredictionsAndGroundTruthThatCannotBeRightAreRefusedOrCounted) {
   p.split = "odometry";
   p.data_root = root + "/world";
   const std::string gt_path = root + "/world/odometry/poses/09.txt";
-  p.predictions = gt_path;
   const auto moving = read_poses(gt_path);
   ASSERT_EQ(moving.size(0), 9);
-  EXPECT_EQ(count_of(evaluate(p, nullptr), "static_snippets"), 0);
+  EXPECT_EQ(count_of(score_files(p, gt_path), "static_snippets"), 0);
   auto stopped = moving.clone();
   for (int64_t i = 1; i < 5; ++i) stopped[i] = moving[0];  // frames 0-4 at one place: snippet 2
   write_poses(gt_path, stopped);
-  EXPECT_EQ(count_of(evaluate(p, nullptr), "static_snippets"), 1);
+  EXPECT_EQ(count_of(score_files(p, gt_path), "static_snippets"), 1);
   write_poses(gt_path, moving[0].unsqueeze(0).repeat({9, 1, 1}));
-  GEO_EXPECT_THROW_WITH(evaluate(p, nullptr), gt_path, "has no motion");
+  GEO_EXPECT_THROW_WITH(score_files(p, gt_path), gt_path, "has no motion");
   write_poses(gt_path, moving);
   // KITTI's t_err / r_err: none on a path shorter than 100 m, 0 for the truth itself on short segments.
-  EXPECT_EQ(count_of(evaluate(p, nullptr), "segments"), 0);
+  EXPECT_EQ(count_of(score_files(p, gt_path), "segments"), 0);
   p.segment_lengths = {0.1};
-  const auto short_segments = evaluate(p, nullptr);
+  const auto short_segments = score_files(p, gt_path);
   EXPECT_GT(count_of(short_segments, "segments"), 0);
   EXPECT_NEAR(metric_of(short_segments, "t_err"), 0.0, 1e-6);
   EXPECT_NEAR(metric_of(short_segments, "r_err"), 0.0, 1e-2);  // acos near 1: ~1e-8 rad of rounding
@@ -390,17 +394,16 @@ TEST(Protocols, PredictionsAndGroundTruthThatCannotBeRightAreRefusedOrCounted) {
   EvalOptions f;
   f.split = "kitti2015";
   f.data_root = root + "/world";
-  f.predictions = root + "/world/kitti2015/training/flow_occ";
+  const std::string occ_dir = root + "/world/kitti2015/training/flow_occ";
   const std::string noc = root + "/world/kitti2015/training/flow_noc/000000_10.png";
   const auto noc_gt = read_flow_png(noc);
   write_flow_png(noc, torch::zeros({2, 32, 104}), torch::ones({1, 32, 104}));
-  GEO_EXPECT_THROW_WITH(evaluate(f, nullptr), noc, "is 104x32", "flow_occ/000000_10.png is 208x64");
+  GEO_EXPECT_THROW_WITH(score_files(f, occ_dir), noc, "is 104x32", "flow_occ/000000_10.png is 208x64");
   write_flow_png(noc, noc_gt.flow, noc_gt.valid);
   const std::string second = root + "/world/kitti2015/training/image_2/000000_11.png";
   write_image(second, torch::zeros({3, 32, 104}));
   Predictor untrained(parse_config("model: {encoder_depth: 18}\ndata: {height: 64, width: 208}\n"), "cpu");
-  f.predictions.clear();
-  GEO_EXPECT_THROW_WITH(evaluate(f, &untrained), second, "must have one size");
+  GEO_EXPECT_THROW_WITH(evaluate(f, untrained), second, "must have one size");
 }
 
 // Depth at an unknown scale (the dense truth x 0.3) gets its metres back from the camera's height
@@ -420,12 +423,12 @@ TEST(Protocols, CameraHeightScalingRecoversTheScaleWithoutGroundTruth) {
   EvalOptions e;
   e.split = "eigen";
   e.data_root = root + "/world";
-  e.predictions = root + "/depth";
-  const auto median = evaluate(e, nullptr);
+  const std::string scaled = root + "/depth";
+  const auto median = score_files(e, scaled);
   EXPECT_EQ(median.scaling, "median");
   EXPECT_NEAR(metric_of(median, "scale_ratio_median"), 1 / 0.3, 0.05);
   e.scaling = DepthScaling::kCameraHeight;
-  const auto height = evaluate(e, nullptr);
+  const auto height = score_files(e, scaled);
   EXPECT_EQ(count_of(height, "images_without_road_plane"), 0);
   EXPECT_NEAR(metric_of(height, "scale_agreement_median"), 1.0, 0.02);
   // Not worse than median scaling by more than 10% (here better: the height gives the exact 1/0.3,
@@ -438,13 +441,13 @@ TEST(Protocols, CameraHeightScalingRecoversTheScaleWithoutGroundTruth) {
   // The height comes from the world's record (geo_synth's camera_height.txt) unless given.
   EXPECT_EQ(test::read_file(root + "/world/camera_height.txt"), "1.65\n");
   test::write_text(root + "/world/camera_height.txt", "3.3\n");
-  EXPECT_NEAR(metric_of(evaluate(e, nullptr), "scale_agreement_median"), 2 * metric_of(height, "scale_agreement_median"),
+  EXPECT_NEAR(metric_of(score_files(e, scaled), "scale_agreement_median"), 2 * metric_of(height, "scale_agreement_median"),
               1e-9);
   e.camera_height = 1.65;
-  EXPECT_NEAR(metric_of(evaluate(e, nullptr), "scale_agreement_median"), metric_of(height, "scale_agreement_median"),
+  EXPECT_NEAR(metric_of(score_files(e, scaled), "scale_agreement_median"), metric_of(height, "scale_agreement_median"),
               1e-12);
   e.scaling = DepthScaling::kNone;
-  EXPECT_GT(metric_of(evaluate(e, nullptr), "abs_rel"), 0.6);  // 1 - 0.3, before the clamp
+  EXPECT_GT(metric_of(score_files(e, scaled), "abs_rel"), 0.6);  // 1 - 0.3, before the clamp
 }
 
 // GeoNet trains each table's model on data disjoint from its test set. geo_eval reads the training
@@ -469,7 +472,7 @@ TEST(Protocols, AModelTrainedOnTestDrivesIsWarnedAndRecorded) {
   e.split = "odometry";
   e.data_root = root + "/odometry";
   Predictor depth_model(checkpoint_of("split: eigen_zhou", "eigen_zhou"), "cpu");
-  const auto leaky = evaluate(e, &depth_model);
+  const auto leaky = evaluate(e, depth_model);
   EXPECT_EQ(leaky.test_drives, std::vector<std::string>{"2011_09_30_drive_0033"});
   EXPECT_EQ(leaky.test_drives_in_training, std::vector<std::string>{"2011_09_30_drive_0033"});
   EXPECT_NE(leaky.json().find("\"test_drives_in_training\": [\"2011_09_30_drive_0033\"]"), std::string::npos)
@@ -479,15 +482,15 @@ TEST(Protocols, AModelTrainedOnTestDrivesIsWarnedAndRecorded) {
   EXPECT_NE(format_results({leaky}, {"leaky"}).find("trained on 1 of the 1 test drives: 2011_09_30_drive_0033"),
             std::string::npos);
   Predictor pose_model(checkpoint_of("split: odometry", "odometry"), "cpu");
-  const auto clean = evaluate(e, &pose_model);
+  const auto clean = evaluate(e, pose_model);
   EXPECT_TRUE(clean.test_drives_in_training.empty());
   EXPECT_TRUE(clean.training_drives_unknown.empty());
   // A geo_synth world's odometry/ and kitti2015/ scenes are no raw drive: nothing to compare.
   e.data_root = world;
-  EXPECT_TRUE(evaluate(e, &depth_model).test_drives.empty());
+  EXPECT_TRUE(evaluate(e, depth_model).test_drives.empty());
   // An untrained model (no training config) says it cannot tell.
   Predictor untrained(parse_config("model: {encoder_depth: 18}\ndata: {height: 64, width: 208}\n"), "cpu");
-  EXPECT_FALSE(evaluate(e, &untrained).training_drives_unknown.empty());
+  EXPECT_FALSE(evaluate(e, untrained).training_drives_unknown.empty());
 }
 
 }  // namespace

@@ -93,7 +93,7 @@ StepRecord step_record(int64_t stage, const std::string& name, int64_t it, doubl
 
 TEST(CsvSink, RowsAndResumeTrimming) {
   const auto dir = test::fresh_dir("csv");
-  CsvSink csv(dir);
+  CsvSink csv{RunFolder(dir)};
   for (int64_t it = 1; it <= 3; ++it) csv.on_step(step_record(0, "s1", it, it));
   for (int64_t it = 1; it <= 2; ++it) csv.on_step(step_record(1, "s2", it, 10 + it));
   ValidationRecord v;
@@ -121,7 +121,7 @@ TEST(CsvSink, RowsAndResumeTrimming) {
 TEST(TensorBoardSink, LossesLrAndValidationAgainstTheGlobalStep) {
   const auto dir = test::fresh_dir("tbsink");
   {
-    TensorBoardSink tb(dir, 12);
+    TensorBoardSink tb(RunFolder(dir), 12);
     tb.on_step(step_record(1, "s2", 3, 2.5));
     ValidationRecord v;
     v.global_step = 13;
@@ -178,7 +178,7 @@ TrainState state_of(const std::string& path) {
 TEST(CheckpointManager, RotationKeepsBestFilesAndLatest) {
   const auto dir = test::fresh_dir("ckpt");
   {
-    CheckpointManager m(dir, 2);
+    CheckpointManager m(RunFolder(dir), 2);
     EXPECT_EQ(m.latest(), "");
     m.save("s1", 1, true, [](auto& a) { fill_state(a, 0, 1); });
     m.save("s1", 2, false, [](auto& a) { fill_state(a, 0, 2); });
@@ -193,7 +193,7 @@ TEST(CheckpointManager, RotationKeepsBestFilesAndLatest) {
   EXPECT_EQ(state_of(dir + "/checkpoints/best-s1.pt").iteration, 1);
   EXPECT_EQ(resolve_checkpoint(dir), dir + "/checkpoints/best-s2.pt");
   // A resumed manager continues the rotation from the files present.
-  CheckpointManager again(dir, 2);
+  CheckpointManager again(RunFolder(dir), 2);
   again.save("s2", 3, false, [](auto& a) { fill_state(a, 1, 3); });
   EXPECT_FALSE(fs::exists(dir + "/checkpoints/s2-00000001.pt"));
   EXPECT_TRUE(fs::exists(dir + "/checkpoints/s2-00000002.pt"));
@@ -219,7 +219,7 @@ TEST(CheckpointManager, NamesDecideWhatRotatesAndWhatIsATemporaryFile) {
   for (const char* f : {"notes.tmp.txt", "s1-00000002.pt.tmp.1234", "best-s1.pt.tmp"})
     test::write_text(dir + "/checkpoints/" + f, "x");
   {
-    CheckpointManager m(dir, 2);
+    CheckpointManager m(RunFolder(dir), 2);
     for (int64_t it = 1; it <= 3; ++it)
       m.save("best_fit", it, it == 1, [it](auto& a) { fill_state(a, 0, it); });
   }
@@ -232,7 +232,7 @@ TEST(CheckpointManager, NamesDecideWhatRotatesAndWhatIsATemporaryFile) {
 
 TEST(CheckpointManager, AFailedWriteKeepsTheLastCheckpointAndLatest) {
   const auto dir = test::fresh_dir("ckpt_full");
-  CheckpointManager m(dir, 3);
+  CheckpointManager m(RunFolder(dir), 3);
   m.save("s1", 1, true, [](auto& a) { fill_state(a, 0, 1); });
   // The disk is full for the next checkpoint (its temporary file is a link to /dev/full).
   const std::string next = dir + "/checkpoints/s1-00000002.pt";
@@ -248,7 +248,7 @@ TEST(CheckpointManager, AFailedWriteKeepsTheLastCheckpointAndLatest) {
 
 TEST(CheckpointManager, ATruncatedLatestNamesTheNewestReadableCheckpoint) {
   const auto dir = test::fresh_dir("ckpt_trunc");
-  CheckpointManager m(dir, 5);
+  CheckpointManager m(RunFolder(dir), 5);
   m.save("s1", 1, false, [](auto& a) { fill_state(a, 0, 1); });
   const std::string last = m.save("s1", 2, false, [](auto& a) { fill_state(a, 0, 2); });
   EXPECT_NO_THROW(m.check_resumable(last));
@@ -265,7 +265,7 @@ TEST(ResolveCheckpoint, FilesFoldersAndErrors) {
   const std::string missing = dir + "/nothing";
   GEO_EXPECT_THROW_WITH(resolve_checkpoint(missing), missing.c_str(), "does not exist");
   GEO_EXPECT_THROW_WITH(resolve_checkpoint(dir), "has no checkpoint");
-  CheckpointManager m(dir, 3);
+  CheckpointManager m(RunFolder(dir), 3);
   m.save("s1", 4, true, [](auto& a) { fill_state(a, 0, 4); });
   m.save("s2", 1, false, [](auto& a) { fill_state(a, 1, 1); });
   // The last stage has no best yet (no validation): its latest checkpoint, not stage 1's best.

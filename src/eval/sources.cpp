@@ -1,0 +1,244 @@
+#include "eval/sources.h"
+
+#include "core/files.h"
+#include "core/progress.h"
+#include "data/calib.h"
+#include "data/image_io.h"
+#include "data/text_io.h"
+#include "geometry/road_plane.h"
+
+#include <algorithm>
+#include <deque>
+#include <filesystem>
+#include <stdexcept>
+
+namespace fs = std::filesystem;
+
+namespace geo {
+
+void require_file(const std::string& path, const std::string& what) {
+  if (!fs::exists(path)) throw std::runtime_error(what + " not found: '" + path + "'");
+}
+
+void require_finite(const torch::Tensor& t, const std::string& what) {
+  const auto bad = (~torch::isfinite(t)).sum().item<int64_t>();
+  if (bad > 0)
+    throw std::runtime_error(what + " holds " + std::to_string(bad) + " non-finite value(s) (NaN/Inf) of " +
+                             std::to_string(t.numel()) + ": nothing was scored");
+}
+
+void require_same_size(const std::string& a, int64_t ha, int64_t wa, const std::string& b, int64_t hb, int64_t wb) {
+  if (ha != hb || wa != wb)
+    throw std::runtime_error(a + " is " + std::to_string(wa) + "x" + std::to_string(ha) + " but " + b + " is " +
+                             std::to_string(wb) + "x" + std::to_string(hb) + ": they must have one size; nothing was scored");
+}
+
+namespace {
+
+// The test image's size, read from the image itself (the ground truth is projected at it).
+std::pair<int64_t, int64_t> image_size(const std::string& path) {
+  const auto img = read_image(path);
+  return {img.size(1), img.size(2)};
+}
+
+class ModelSource : public PredictionSource {
+ public:
+  explicit ModelSource(Predictor& model) : m_(model) {}
+  std::string name() const override { return m_.path(); }
+  Predictor* model() override { return &m_; }
+
+  DepthAnswer depth(const DepthQuery& q) override {
+    DepthAnswer a;
+    a.depth = m_.depth(input(q.image, &a.height, &a.width))[0][0].cpu();
+    return a;
+  }
+
+  FlowAnswer flow(const FlowQuery& q) override {
+    FlowAnswer out;
+    int64_t H = 0, W = 0, H2 = 0, W2 = 0;
+    const auto a = input(q.tgt, &H, &W), b = input(q.src, &H2, &W2);
+    require_same_size(q.src, H2, W2, q.tgt, H, W);
+    out.frame_height = H, out.frame_width = W;
+    auto K = q.K.to(torch::kFloat64).clone();
+    K[0] *= static_cast<double>(m_.width()) / static_cast<double>(W);
+    K[1] *= static_cast<double>(m_.height()) / static_cast<double>(H);
+    // The frame before the pair (KITTI 2015's multi-view extension, image_2/%06d_09.png) gives the
+    // PoseNet its real snippet (09, 10, 11), as GeoNet; without it (tgt, tgt, src).
+    torch::Tensor prev;
+    if (!q.prev.empty() && fs::exists(q.prev)) {
+      int64_t H0 = 0, W0 = 0;
+      prev = input(q.prev, &H0, &W0);
+      require_same_size(q.prev, H0, W0, q.tgt, H, W);
+      out.used_previous = true;
+    }
+    const auto parts = m_.flow(a, b, K.to(torch::kFloat32).unsqueeze(0), prev);
+    out.full = parts.full[0].cpu();
+    if (m_.has_flow()) out.rigid = parts.rigid[0].cpu();
+    return out;
+  }
+
+  // The trajectory chained from the PoseNet's steps over the snippet around each frame (frames
+  // clamped at the sequence's ends), reading each frame once and holding only the snippet's frames.
+  TrajectoryAnswer trajectory(const SequenceQuery& q) override {
+    const int64_t n = q.frames, L = m_.seq_length(), k = (L - 1) / 2;
+    const std::string extra = q.folder + "/image_2/" + zero_padded(n, 6) + ".png";
+    if (fs::exists(extra))
+      throw std::runtime_error(q.gt_path + " holds " + std::to_string(n) + " poses but " + q.folder +
+                               "/image_2 has more images (" + extra + " exists): the ground truth does not match");
+    int64_t image_h = 0, image_w = 0;
+    std::deque<torch::Tensor> window;  // frames first..first+size-1
+    int64_t first = 0;
+    auto frame = [&](int64_t f) {
+      f = std::clamp<int64_t>(f, 0, n - 1);
+      while (first + static_cast<int64_t>(window.size()) <= f) {
+        const std::string p = q.folder + "/image_2/" + zero_padded(first + static_cast<int64_t>(window.size()), 6) + ".png";
+        require_file(p, "odometry image");
+        window.push_back(input(p, &image_h, &image_w));
+      }
+      return window[static_cast<size_t>(f - first)];
+    };
+    torch::Tensor K;  // the network's intrinsics, for the road plane
+    std::vector<double> scales;
+    TrajectoryAnswer out;
+    out.snippet_poses.resize(static_cast<size_t>(n));
+    std::vector<torch::Tensor> cam_to_world = {torch::eye(4, torch::kFloat64)}, steps;
+    Progress progress("odometry " + q.name, n, 0, "frames");
+    for (int64_t j = 0; j < n; ++j) {
+      while (first < j - k) {  // frames no snippet needs any more
+        window.pop_front();
+        ++first;
+      }
+      std::vector<torch::Tensor> srcs;
+      for (int64_t m = k; m >= 1; --m) srcs.push_back(frame(j - m));
+      for (int64_t m = 1; m <= k; ++m) srcs.push_back(frame(j + m));
+      const auto tgt = frame(j);
+      const auto src_from_tgt = m_.pose(tgt, srcs)[0].cpu().to(torch::kFloat64);  // [L-1,4,4]
+      if (j + 1 < n) {  // T_{j+1 <- j}: the first source after the target, chained into the trajectory
+        steps.push_back(torch::inverse(src_from_tgt[k]));
+        cam_to_world.push_back(cam_to_world.back().matmul(steps.back()));
+      }
+      if (L == 5 && j >= 2 && j + 2 < n) {
+        std::vector<torch::Tensor> in_target;
+        for (int64_t m = 0; m < 4; ++m) in_target.push_back(torch::inverse(src_from_tgt[m]));
+        in_target.insert(in_target.begin() + 2, torch::eye(4, torch::kFloat64));
+        out.snippet_poses[static_cast<size_t>(j)] = torch::stack(in_target);  // frames j-2..j+2
+      }
+      if (q.camera_height > 0) {
+        if (!K.defined()) {
+          K = read_odometry_calib(q.folder + "/calib.txt").P[2].slice(1, 0, 3).clone();
+          K[0] *= static_cast<double>(m_.width()) / static_cast<double>(image_w);
+          K[1] *= static_cast<double>(m_.height()) / static_cast<double>(image_h);
+        }
+        const auto plane = fit_road_plane(m_.depth(tgt)[0][0].cpu(), K);
+        scales.push_back(camera_height_scale(plane, q.camera_height));
+        out.frames_with_road += plane.found;
+      }
+      progress.update(j + 1);
+    }
+    out.trajectory = torch::stack(cam_to_world);
+    if (q.camera_height > 0) {
+      // Each step at its frame's metric scale: the road plane of the frame's predicted depth,
+      // smoothed over 11 frames (as geo_infer --camera-height).
+      scales = smooth_scales(scales, 5);
+      std::vector<torch::Tensor> metric = {torch::eye(4, torch::kFloat64)};
+      for (size_t j = 0; j < steps.size(); ++j) {
+        if (!(scales[j] > 0))
+          throw std::runtime_error("--scaling camera-height: no road plane in any frame near frame " + std::to_string(j) +
+                                   " of sequence " + q.name + ": a metric trajectory needs a road in front of the camera");
+        auto step = steps[j].clone();
+        step.slice(0, 0, 3).select(1, 3).mul_(scales[j]);
+        metric.push_back(metric.back().matmul(step));
+      }
+      out.metric = torch::stack(metric);
+    }
+    return out;
+  }
+
+ private:
+  torch::Tensor input(const std::string& path, int64_t* H, int64_t* W) const {
+    return read_image_resized(path, m_.height(), m_.width(), H, W).unsqueeze(0);
+  }
+  Predictor& m_;
+};
+
+class FileSource : public PredictionSource {
+ public:
+  explicit FileSource(std::string path) : path_(std::move(path)) {}
+  std::string name() const override { return path_; }
+
+  DepthAnswer depth(const DepthQuery& q) override {
+    DepthAnswer a;
+    std::tie(a.height, a.width) = image_size(q.image);
+    const bool npy = path_.size() > 4 && path_.substr(path_.size() - 4) == ".npy";
+    if (npy && !npy_.defined()) {
+      npy_ = read_npy(path_);
+      if (npy_.numel() == 0)
+        throw std::runtime_error(path_ + ": the array has a zero dimension " + c10::str(npy_.sizes()) +
+                                 ": no depth to score");
+      if (npy_.dim() != 3 || npy_.size(0) != static_cast<int64_t>(q.count))
+        throw std::runtime_error(path_ + ": expected [" + std::to_string(q.count) + ",H,W] depths (one per line of " +
+                                 q.list + "), got " + c10::str(npy_.sizes()));
+    }
+    if (npy) {
+      a.depth = npy_[static_cast<int64_t>(q.index)];
+    } else {
+      const std::string p = path_ + "/" + zero_padded(static_cast<long long>(q.index), 6) + ".png";
+      require_file(p, "prediction for line " + std::to_string(q.index + 1));
+      a.depth = read_depth_png(p)[0];
+    }
+    return a;
+  }
+
+  FlowAnswer flow(const FlowQuery& q) override {
+    const std::string p = path_ + "/" + q.name + "_10.png";
+    require_file(p, "flow prediction");
+    FlowAnswer a;
+    a.full = read_flow_png(p).flow;
+    a.meant_at_ground_truth_size = true;
+    return a;
+  }
+
+  TrajectoryAnswer trajectory(const SequenceQuery& q) override {
+    TrajectoryAnswer a;
+    a.trajectory = read_poses(path_);
+    if (a.trajectory.size(0) != q.frames)
+      throw std::runtime_error(path_ + ": " + std::to_string(a.trajectory.size(0)) + " poses, the sequence has " +
+                               std::to_string(q.frames));
+    a.snippet_poses.resize(static_cast<size_t>(q.frames));
+    return a;
+  }
+
+ private:
+  std::string path_;
+  torch::Tensor npy_;
+};
+
+class TrivialSource : public PredictionSource {
+ public:
+  std::string name() const override { return "trivial baseline"; }
+  DepthAnswer depth(const DepthQuery& q) override {
+    DepthAnswer a;
+    std::tie(a.height, a.width) = image_size(q.image);
+    a.depth = torch::ones({a.height, a.width});  // any constant: median scaling makes it the best constant
+    return a;
+  }
+  FlowAnswer flow(const FlowQuery&) override {
+    FlowAnswer a;
+    a.full = torch::zeros({2, 1, 1});
+    return a;
+  }
+  TrajectoryAnswer trajectory(const SequenceQuery& q) override {
+    TrajectoryAnswer a;
+    a.trajectory = torch::eye(4, torch::kFloat64).repeat({q.frames, 1, 1});
+    a.snippet_poses.resize(static_cast<size_t>(q.frames));
+    return a;
+  }
+};
+
+}  // namespace
+
+std::unique_ptr<PredictionSource> model_source(Predictor& model) { return std::make_unique<ModelSource>(model); }
+std::unique_ptr<PredictionSource> file_source(const std::string& path) { return std::make_unique<FileSource>(path); }
+std::unique_ptr<PredictionSource> trivial_source() { return std::make_unique<TrivialSource>(); }
+
+}  // namespace geo
