@@ -3,8 +3,7 @@
 // TensorBoard, console), PNG summaries, exact resumption, NaN/Inf steps skipped and counted, and
 // SIGINT/SIGTERM -> checkpoint and exit 130.
 //
-// Run folder: config.yaml (resolved), train.log, metrics.csv (one row per iteration), val.csv,
-// tb/events.out.tfevents.* (TensorBoard), checkpoints/ (checkpoints.h), summaries/*.png.
+// The run folder's layout: pipeline/run_folder.h.
 #pragma once
 
 #include "core/config.h"

@@ -338,6 +338,23 @@ TEST(Protocols, ModelsOnTheOdometryAndFlowProtocols) {
   EXPECT_NE(metric_of(r3, "rigid_epe_all"), metric_of(r3, "epe_all"));
   EXPECT_TRUE(std::isfinite(metric_of(r3, "rigid_epe_bg")));
   const std::string images = root + "/world/odometry/sequences/09/image_2/";
+  {  // The streamed trajectory (the protocol holds the frames of one snippet) is the chain of the
+     // PoseNet's steps over snippets (j-1, j, j+1), clamped at the ends, computed here from all frames.
+    EvalOptions q = options_for("odometry", root);
+    q.output_poses = root + "/streamed.txt";
+    evaluate(q, three);
+    const auto streamed = read_poses(q.output_poses);
+    ASSERT_EQ(streamed.size(0), 8);
+    std::vector<torch::Tensor> frames;
+    for (int64_t f = 0; f < 8; ++f) frames.push_back(read_image_resized(images + zero_padded(f, 6) + ".png", 64, 208).unsqueeze(0));
+    auto chained = torch::eye(4, torch::kFloat64);
+    EXPECT_TRUE(torch::allclose(streamed[0], chained));
+    for (int64_t j = 0; j + 1 < 8; ++j) {
+      const auto next_from_j = three.pose(frames[j], {frames[std::max<int64_t>(j - 1, 0)], frames[j + 1]})[0][1];
+      chained = chained.matmul(torch::inverse(next_from_j.cpu().to(torch::kFloat64)));
+      EXPECT_TRUE(torch::allclose(streamed[j + 1], chained, 1e-5, 1e-6)) << "frame " << j + 1;
+    }
+  }
   std::filesystem::copy_file(images + "000007.png", images + "000008.png");
   GEO_EXPECT_THROW_WITH(evaluate(p, three), "09.txt holds 8 poses", "000008.png exists");
 }
