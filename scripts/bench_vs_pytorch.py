@@ -124,6 +124,8 @@ def main():
     ap.add_argument("--platforms", default="d12,d13")
     ap.add_argument("--rows", default="depth,step")
     ap.add_argument("--only", default="", help="run only variants whose name contains this")
+    ap.add_argument("--merge", action="store_true",
+                    help="the table also holds the variants not run now, from earlier runs in OUT/runs.jsonl")
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
     platforms = a.platforms.split(",")
@@ -131,6 +133,7 @@ def main():
     for platform, version in (("d12", "1.13"), ("d13", "2.6")):
         if platform in platforms:
             variants += pytorch_variants(platform, version) + geo_variants(platform, version)
+    all_variants = list(variants)
     variants = [v for v in variants if a.only in v["name"]]
     torch_ceilings = []
     for platform, version in (("d12", "1.13"), ("d13", "2.6")):
@@ -144,7 +147,7 @@ def main():
             c = json.loads(line[-1])
             torch_ceilings.append(f"- PyTorch {c['torch']}'s `torch.mm` (the same product): "
                                   f"{c['ceiling_gflops_fp32']:.0f} GFLOP/s fp32, {c['ceiling_gflops_bf16']:.0f} GFLOP/s bf16.")
-    results, commands = {}, {}
+    results, commands, earlier = {}, {}, {}
     log = open(os.path.join(a.out, "runs.jsonl"), "a")
     for r in range(1, a.rounds + 1):
         for row in a.rows.split(","):
@@ -160,6 +163,17 @@ def main():
                 log.write(json.dumps({"round": r, "row": row, "variant": v["name"], **res}) + "\n")
                 log.flush()
 
+    if a.merge and os.path.exists(os.path.join(a.out, "runs.jsonl")):
+        by_name = {v["name"]: v for v in all_variants}
+        for line in open(os.path.join(a.out, "runs.jsonl")):
+            x = json.loads(line)
+            key = (x["variant"], x["row"])
+            if key in results or x["variant"] not in by_name:
+                continue
+            earlier.setdefault(key, []).append({k: v for k, v in x.items() if k not in ("round", "row", "variant")})
+        for key, res in earlier.items():
+            results[key] = res
+            commands[key] = " ".join(command(by_name[key[0]], key[1], a, "r1")[0])
     lines = [f"Measured {time.strftime('%Y-%m-%d')} on {cpu()}; {a.threads} threads; 128x416, FR off "
              f"(GeoNet's networks); {a.rounds} round(s), each variant in its own process, median of {a.iters} "
              f"DepthNet calls after 5 warm-ups / {a.step_iters} training steps after 2.",
