@@ -110,9 +110,7 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, PredictionS
     image_eo.median_scaling = o.scaling == DepthScaling::kMedian;
     if (o.scaling == DepthScaling::kCameraHeight) {
       // The intrinsics of the prediction's size; the road plane fitted to the prediction alone.
-      auto K = calib.K().to(torch::kFloat64).clone();
-      K[0] *= static_cast<double>(depth.size(1)) / static_cast<double>(W);
-      K[1] *= static_cast<double>(depth.size(0)) / static_cast<double>(H);
+      const auto K = resized_intrinsics(calib.K(), H, W, depth.size(0), depth.size(1));
       const auto plane = fit_road_plane(depth.clamp_min(1e-3), K);
       if (!plane.found) {
         without_plane.push_back(image + " (" + plane.why + ")");

@@ -33,6 +33,13 @@ void require_same_size(const std::string& a, int64_t ha, int64_t wa, const std::
                              std::to_string(wb) + "x" + std::to_string(hb) + ": they must have one size; nothing was scored");
 }
 
+torch::Tensor resized_intrinsics(const torch::Tensor& K, int64_t from_h, int64_t from_w, int64_t to_h, int64_t to_w) {
+  auto out = K.to(torch::kFloat64).clone();
+  out[0] *= static_cast<double>(to_w) / static_cast<double>(from_w);
+  out[1] *= static_cast<double>(to_h) / static_cast<double>(from_h);
+  return out;
+}
+
 namespace {
 
 // The test image's size, read from the image itself (the ground truth is projected at it).
@@ -59,9 +66,7 @@ class ModelSource : public PredictionSource {
     const auto a = input(q.tgt, &H, &W), b = input(q.src, &H2, &W2);
     require_same_size(q.src, H2, W2, q.tgt, H, W);
     out.frame_height = H, out.frame_width = W;
-    auto K = q.K.to(torch::kFloat64).clone();
-    K[0] *= static_cast<double>(m_.width()) / static_cast<double>(W);
-    K[1] *= static_cast<double>(m_.height()) / static_cast<double>(H);
+    const auto K = resized_intrinsics(q.K, H, W, m_.height(), m_.width());
     // The frame before the pair (KITTI 2015's multi-view extension, image_2/%06d_09.png) gives the
     // PoseNet its real snippet (09, 10, 11), as GeoNet; without it (tgt, tgt, src).
     torch::Tensor prev;
@@ -125,9 +130,8 @@ class ModelSource : public PredictionSource {
       }
       if (q.camera_height > 0) {
         if (!K.defined()) {
-          K = read_odometry_calib(q.folder + "/calib.txt").P[2].slice(1, 0, 3).clone();
-          K[0] *= static_cast<double>(m_.width()) / static_cast<double>(image_w);
-          K[1] *= static_cast<double>(m_.height()) / static_cast<double>(image_h);
+          K = resized_intrinsics(read_odometry_calib(q.folder + "/calib.txt").P[2].slice(1, 0, 3), image_h, image_w,
+                                 m_.height(), m_.width());
         }
         const auto plane = fit_road_plane(m_.depth(tgt)[0][0].cpu(), K);
         scales.push_back(camera_height_scale(plane, q.camera_height));
