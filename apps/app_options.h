@@ -3,9 +3,10 @@
 
 #include <CLI/CLI.hpp>
 
+#include "core/config.h"
+
 #include <cmath>
 #include <cstdlib>
-#include <regex>
 #include <string>
 #include <vector>
 
@@ -43,12 +44,11 @@ inline CLI::Option* add_config_options(CLI::App& app, std::string& config, std::
 
 // --device auto|cpu|cuda|cuda:N, checked when parsed; `unset` says what leaving it out means.
 inline CLI::Option* add_device_option(CLI::App& app, std::string& device, const std::string& unset) {
-  static const std::regex device_re("auto|cpu|cuda(:[0-9]+)?");
   return app
       .add_option("--device", device, "auto (CUDA when available), cpu, cuda or cuda:N (an error without CUDA); " + unset)
       ->check(CLI::Validator(
           [](std::string& value) -> std::string {
-            return std::regex_match(value, device_re) ? "" : "must be auto, cpu, cuda or cuda:N (got '" + value + "')";
+            return is_device_name(value) ? "" : "must be auto, cpu, cuda or cuda:N (got '" + value + "')";
           },
           "DEVICE"));
 }

@@ -51,6 +51,9 @@ PACKAGES=(
   libgtest-dev libgmock-dev
   cmake g++ make ccache
 )
+# Ninja builds several targets at once (make builds the targets it is given one after another); one
+# already on the PATH (a PyTorch image's) will do.
+command -v ninja >/dev/null || PACKAGES+=(ninja-build)
 if [ "$TORCH" = system ]; then
   PACKAGES+=(
     libtorch-dev
@@ -89,6 +92,7 @@ if [ -n "$TORCH_PREFIX" ]; then CONFIGURE+=("-DCMAKE_PREFIX_PATH=$TORCH_PREFIX")
 echo "geo setup: LibTorch $TORCH${TORCH_PREFIX:+ ($TORCH_PREFIX)}, OpenCV $OPENCV, build folder $BUILD_DIR"
 if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
   [ -n "${GEO_UNITY:-}" ] || CONFIGURE+=(-DGEO_UNITY_BUILD=ON)
+  CONFIGURE+=(-G Ninja)  # a new build folder; an existing one keeps its generator
   cmake -S . -B "$BUILD_DIR" "${CONFIGURE[@]}"
 elif [ -n "${GEO_TORCH:-}${GEO_OPENCV:-}" ]; then
   cmake -S . -B "$BUILD_DIR" "${CONFIGURE[@]}" >/dev/null  # asked for explicitly: apply to an existing build

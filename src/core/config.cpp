@@ -580,13 +580,17 @@ void LoggingConfig::validate(Checker& c) const {
   c.require(max_bad_steps >= 1 && max_bad_steps <= 1000000, "max_bad_steps", max_bad_steps, "must be in 1..1000000");
 }
 
+bool is_device_name(const std::string& name) {
+  const bool cuda_n = name.rfind("cuda:", 0) == 0 && name.size() > 5 &&
+                      name.find_first_not_of("0123456789", 5) == std::string::npos;
+  return one_of(name, {"auto", "cpu", "cuda"}) || cuda_n;
+}
+
 void RunConfig::validate(Checker& c) const {
   c.require(!name.empty(), "name", name, "must not be empty");
   c.require(!dir.empty(), "dir", dir, "must not be empty");
   c.require(seed >= 0, "seed", seed, "must be >= 0");
-  const bool cuda_n = device.rfind("cuda:", 0) == 0 && device.size() > 5 &&
-                      device.find_first_not_of("0123456789", 5) == std::string::npos;
-  c.require(one_of(device, {"auto", "cpu", "cuda"}) || cuda_n, "device", device, "must be auto, cpu, cuda or cuda:N");
+  c.require(is_device_name(device), "device", device, "must be auto, cpu, cuda or cuda:N");
   c.require(threads >= 0 && threads <= 1024, "threads", threads, "must be in 0..1024 (0 = all cores)");
   Checker::Scope s(c, "distributed");
   distributed.validate(c);

@@ -336,6 +336,9 @@ struct DistributedConfig {
   void validate(Checker& c) const;
 };
 
+// A device name as geo's options and configs take it: auto, cpu, cuda or cuda:N (N digits).
+bool is_device_name(const std::string& name);
+
 struct RunConfig {
   std::string name = "geo";     // run folder prefix
   std::string dir = "runs";     // parent folder of run folders
