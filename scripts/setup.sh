@@ -5,9 +5,10 @@
 #   GEO_BUILD_DIR   build folder (default: build)
 #   GEO_JOBS        parallel compile jobs (default: number of cores)
 #   GEO_WERROR=1    compiler warnings in geo's own code are errors (CI sets it)
-#   GEO_UNITY       1: unity build, each target's sources compiled in batches of 4 so that what
-#                   LibTorch's headers instantiate is compiled once per batch (a fresh build in ~70% of
-#                   the time; an edit recompiles its batch); 0: one translation unit per source.
+#   GEO_UNITY       1: unity build, each library's sources compiled as one translation unit and the
+#                   tests' in batches of 4, so that what LibTorch's headers instantiate is compiled
+#                   once per batch (a fresh build in ~70% of the time; an edit recompiles its batch);
+#                   0: one translation unit per source.
 #                   Default: 1 for a new build folder, an existing one keeps its setting.
 #   GEO_SETUP_PACKAGES_ONLY=1  install the packages, build nothing (scripts/fuzz.sh)
 #   GEO_TARGETS     build only these targets (space-separated, e.g. "geo_train geo_eval"; default: all,
