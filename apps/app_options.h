@@ -48,7 +48,7 @@ inline CLI::Option* add_device_option(CLI::App& app, std::string& device, const 
       .add_option("--device", device, "auto (CUDA when available), cpu, cuda or cuda:N (an error without CUDA); " + unset)
       ->check(CLI::Validator(
           [](std::string& value) -> std::string {
-            return is_device_name(value) ? "" : "must be auto, cpu, cuda or cuda:N (got '" + value + "')";
+            return is_device_name(value) ? "" : std::string(kDeviceNameRule) + " (got '" + value + "')";
           },
           "DEVICE"));
 }

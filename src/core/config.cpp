@@ -590,7 +590,7 @@ void RunConfig::validate(Checker& c) const {
   c.require(!name.empty(), "name", name, "must not be empty");
   c.require(!dir.empty(), "dir", dir, "must not be empty");
   c.require(seed >= 0, "seed", seed, "must be >= 0");
-  c.require(is_device_name(device), "device", device, "must be auto, cpu, cuda or cuda:N");
+  c.require(is_device_name(device), "device", device, kDeviceNameRule);
   c.require(threads >= 0 && threads <= 1024, "threads", threads, "must be in 0..1024 (0 = all cores)");
   Checker::Scope s(c, "distributed");
   distributed.validate(c);

@@ -336,8 +336,10 @@ struct DistributedConfig {
   void validate(Checker& c) const;
 };
 
-// A device name as geo's options and configs take it: auto, cpu, cuda or cuda:N (N digits).
+// A device name as geo's options and configs take it: auto, cpu, cuda or cuda:N (N digits), and
+// what their errors say otherwise.
 bool is_device_name(const std::string& name);
+inline constexpr const char* kDeviceNameRule = "must be auto, cpu, cuda or cuda:N";
 
 struct RunConfig {
   std::string name = "geo";     // run folder prefix
