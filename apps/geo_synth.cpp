@@ -11,6 +11,7 @@
 #include "core/logging.h"
 #include "core/runtime.h"
 #include "data/synth_writer.h"
+#include "data/video/video_clips.h"
 #include "app_options.h"
 
 int main(int argc, char** argv) {
@@ -22,6 +23,7 @@ int main(int argc, char** argv) {
   int drives = -1, test_drives = -1, flow_pairs = -1, threads = 0;
   int64_t frames = -1, odometry_frames = -1;
   bool force = false;
+  std::string video;
   app.add_option("--preset", preset, "tiny (64x208, for CI and tests) or kitti (375x1242, KITTI intrinsics)")
       ->check(CLI::IsMember({"tiny", "kitti"}));
   app.add_option("--seed", seed, "world seed (0 .. 2^63-1): the same seed writes the same files")
@@ -34,6 +36,9 @@ int main(int argc, char** argv) {
   app.add_option("--odometry-frames", odometry_frames, "frames of odometry sequence 09 (default: preset's)")->check(CLI::Range(5, 100000));
   app.add_option("--threads", threads, "render threads (0 = all cores)")->check(geo::app::non_negative());
   app.add_flag("--force", force, "write into a non-empty --out");
+  app.add_option("--video", video,
+                 "also write the first training drive as a Motion-JPEG AVI at 10 fps (train on it with "
+                 "data.videos and the camera printed at the end)");
   CLI11_PARSE(app, argc, argv);
   geo::keep_freed_memory();
   try {
@@ -65,6 +70,14 @@ int main(int argc, char** argv) {
     const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     spdlog::info("done in {:.1f} s: {}/raw (train with data.root={}/raw), {}/kitti2015, {}/odometry",
                  s, out, out, out, out);
+    if (!video.empty()) {
+      const std::string frames = out + "/raw/" + geo::kSynthDate + "/" + geo::synth_drive_folder(1) + "/image_02/data";
+      geo::write_video_file(geo::frame_files(frames), video, 10.0);
+      const auto& k = o.intrinsics;
+      spdlog::info("video: {} ({} frames of {}, 10 fps): train with --set data.videos=[{}] "
+                   "--set data.camera.intrinsics=[{},{},{},{}]",
+                   video, o.frames_per_drive, frames, video, k.fx, k.fy, k.cx, k.cy);
+    }
     return 0;
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());

@@ -20,8 +20,18 @@ std::string join(const std::string& prefix, const std::string& key) {
   return prefix.empty() ? key : prefix + "." + key;
 }
 
-// Formats a double with the fewest digits that read back to the same value.
+// Formats a double with the fewest digits that read back to the same value; plain decimals (700,
+// 0.0002) where up to 6 decimals do, never 7e+02.
 std::string format_double(double v) {
+  if (std::isfinite(v) && std::fabs(v) < 1e15 && (v == 0 || std::fabs(v) >= 1e-4)) {
+    for (int decimals = 0; decimals <= 6; ++decimals) {
+      std::ostringstream os;
+      os.setf(std::ios::fixed);
+      os.precision(decimals);
+      os << v;
+      if (std::stod(os.str()) == v) return os.str();
+    }
+  }
   for (int precision = 1; precision <= 17; ++precision) {
     std::ostringstream os;
     os.precision(precision);
@@ -48,6 +58,11 @@ std::string to_text(const std::string& v) { return "'" + v + "'"; }
 std::string to_text(const std::vector<std::string>& v) {
   std::string s = "[";
   for (size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + v[i];
+  return s + "]";
+}
+std::string to_text(const std::vector<double>& v) {
+  std::string s = "[";
+  for (size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + format_double(v[i]);
   return s + "]";
 }
 std::string to_text(const NetworkSet& v) { return to_text(v.names()); }
@@ -453,8 +468,47 @@ void DataConfig::validate(Checker& c) const {
     Checker::Scope s(c, "augment");
     augment.validate(c);
   }
-  Checker::Scope s(c, "synthetic");
-  synthetic.validate(c);
+  {
+    Checker::Scope s(c, "synthetic");
+    synthetic.validate(c);
+  }
+  c.require(format != DataFormat::kVideo || !videos.empty(), "videos", videos,
+            "must name at least one video file or frame folder when data.format is video");
+  {
+    Checker::Scope s(c, "camera");
+    camera.validate(c);
+  }
+  Checker::Scope s(c, "video");
+  video.validate(c);
+}
+
+void CameraConfig::validate(Checker& c) const {
+  const int given = !intrinsics.empty() + !calib_file.empty() + (fov_deg != 0);
+  c.require(given <= 1, "intrinsics", intrinsics, "give one of camera.intrinsics, camera.calib_file or camera.fov_deg, not several");
+  if (!intrinsics.empty()) {
+    c.require(intrinsics.size() == 4, "intrinsics", intrinsics, "must be [fx, fy, cx, cy] in pixels of the original frames");
+    if (intrinsics.size() == 4) {
+      c.require(std::isfinite(intrinsics[0]) && std::isfinite(intrinsics[1]) && intrinsics[0] > 0 && intrinsics[1] > 0 &&
+                    intrinsics[0] < 1e5 && intrinsics[1] < 1e5,
+                "intrinsics", intrinsics, "fx and fy must be in (0, 1e5) pixels");
+      c.require(std::isfinite(intrinsics[2]) && std::isfinite(intrinsics[3]) && intrinsics[2] >= 0 && intrinsics[3] >= 0,
+                "intrinsics", intrinsics, "cx and cy must be finite and >= 0 (pixels of the original frames)");
+    }
+  }
+  c.require(std::isfinite(fov_deg) && fov_deg >= 0 && fov_deg < 180, "fov_deg", fov_deg,
+            "must be a horizontal field of view in (0, 180) degrees (0 = not given)");
+}
+
+void VideoDataConfig::validate(Checker& c) const {
+  c.require(std::isfinite(fps) && fps >= 0 && fps <= 1000, "fps", fps, "must be in [0, 1000] (0 = every frame)");
+  c.require(std::isfinite(source_fps) && source_fps >= 0 && source_fps <= 1000, "source_fps", source_fps,
+            "must be in [0, 1000] (0 = unknown)");
+  c.require(std::isfinite(static_threshold) && static_threshold >= 0 && static_threshold < 1, "static_threshold",
+            static_threshold, "must be in [0, 1) (a fraction of changed pixels; 0 keeps every frame)");
+  c.require(std::isfinite(val_fraction) && val_fraction >= 0 && val_fraction <= 0.5, "val_fraction", val_fraction,
+            "must be in [0, 0.5]");
+  c.require(val_block >= 3 && val_block <= 1000000, "val_block", val_block, "must be in 3..1000000 frames");
+  c.require(std::isfinite(crop_y) && crop_y >= 0 && crop_y <= 1, "crop_y", crop_y, "must be in [0, 1]");
 }
 
 void SynthDataConfig::validate(Checker& c) const {
@@ -474,9 +528,7 @@ void LossConfig::validate(Checker& c) const {
   const bool range_ok = image_range.size() == 2 &&
                         ((image_range[0] == -1.0 && image_range[1] == 1.0) ||
                          (image_range[0] == 0.0 && image_range[1] == 1.0));
-  std::string shown = "[";
-  for (size_t i = 0; i < image_range.size(); ++i) shown += (i ? ", " : "") + format_double(image_range[i]);
-  c.require(range_ok, "image_range", shown + "]", "must be [-1, 1] (GeoNet) or [0, 1]");
+  c.require(range_ok, "image_range", image_range, "must be [-1, 1] (GeoNet) or [0, 1]");
 }
 
 void LossWeights::validate(Checker& c) const {
@@ -506,7 +558,7 @@ const std::vector<EnumName<LrScheduleKind>>& enum_names(LrScheduleKind) {
 const std::vector<EnumName<DataFormat>>& enum_names(DataFormat) {
   static const std::vector<EnumName<DataFormat>> n{
       {DataFormat::kAuto, "auto"}, {DataFormat::kKittiRaw, "kitti_raw"}, {DataFormat::kPacked, "packed"},
-      {DataFormat::kSynthetic, "synthetic"}};
+      {DataFormat::kSynthetic, "synthetic"}, {DataFormat::kVideo, "video"}};
   return n;
 }
 const std::vector<EnumName<Precision>>& enum_names(Precision) {

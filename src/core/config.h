@@ -29,7 +29,7 @@ template <class E> struct EnumName {
 };
 enum class Upsample { kNearest, kBilinear };
 enum class LrScheduleKind { kConstant, kStep };
-enum class DataFormat { kAuto, kKittiRaw, kPacked, kSynthetic };
+enum class DataFormat { kAuto, kKittiRaw, kPacked, kSynthetic, kVideo };
 enum class Precision { kFp32, kTf32, kBf16 };
 enum class BadSample { kStop, kSkip };
 enum class Sampler { kZeros, kBorder };
@@ -136,6 +136,47 @@ struct SynthDataConfig {
   void validate(Checker& c) const;
 };
 
+// The camera of data.videos, in pixels of the original frames: one of intrinsics, calib_file or
+// fov_deg (none: the error says which to give). Resizes and crops are applied to it by geo.
+struct CameraConfig {
+  std::vector<double> intrinsics;    // [fx, fy, cx, cy] in pixels of the original frames
+  std::string calib_file;            // KITTI raw calib_cam_to_cam.txt (P_rect_02) or odometry calib.txt (P2)
+  double fov_deg = 0;                // horizontal field of view in degrees (fx = fy, principal point centred)
+
+  template <class V> void fields(V& v) {
+    v("intrinsics", intrinsics);
+    v("calib_file", calib_file);
+    v("fov_deg", fov_deg);
+  }
+  bool given() const { return !intrinsics.empty() || !calib_file.empty() || fov_deg != 0; }
+  void validate(Checker& c) const;
+};
+
+// How frames of data.videos become training snippets (data/video/frame_selection.h).
+struct VideoDataConfig {
+  double fps = 10;                   // target frame rate (KITTI's 10 fps); 0 = every frame
+  double source_fps = 0;             // frame folders: their frame rate (0 = unknown: no rate subsampling)
+  // A frame is static when the fraction of its pixels that changed (by more than 4/255 in a blurred
+  // grey thumbnail) since the last kept frame is below this: parked, waiting at lights, a frozen
+  // stream. Static frames are left out (GeoNet's static-frame list does so for KITTI); 0 keeps all.
+  double static_threshold = 0.05;
+  double val_fraction = 0.1;         // frames held out for validation, as whole time blocks (GeoNet: 10%)
+  int val_block = 100;               // frames per validation block (10 s at 10 fps)
+  bool crop = true;                  // crop to the training aspect ratio before resizing (else stretch)
+  double crop_y = 0.5;               // vertical position of the crop: 0 top, 0.5 centre, 1 bottom
+
+  template <class V> void fields(V& v) {
+    v("fps", fps);
+    v("source_fps", source_fps);
+    v("static_threshold", static_threshold);
+    v("val_fraction", val_fraction);
+    v("val_block", val_block);
+    v("crop", crop);
+    v("crop_y", crop_y);
+  }
+  void validate(Checker& c) const;
+};
+
 struct DataConfig {
   std::string root;                   // dataset root (KITTI raw, packed cache or a geo_synth world)
   DataFormat format = DataFormat::kAuto;  // auto | kitti_raw | packed | synthetic (no files; data.synthetic)
@@ -158,6 +199,11 @@ struct DataConfig {
   BadSample on_bad_sample = BadSample::kStop;  // stop | skip
   AugmentConfig augment;
   SynthDataConfig synthetic;          // data.format synthetic only
+  // data.format video (or auto with videos given): video files (anything OpenCV's VideoCapture
+  // reads) and folders of frames (any names, natural sort), one clip each.
+  std::vector<std::string> videos;
+  CameraConfig camera;                // the clips' camera (data.videos)
+  VideoDataConfig video;              // frame rate, static frames, validation blocks (data.videos)
 
   template <class V> void fields(V& v) {
     v("root", root);
@@ -174,6 +220,9 @@ struct DataConfig {
     v("on_bad_sample", on_bad_sample);
     v("augment", augment);
     v("synthetic", synthetic);
+    v("videos", videos);
+    v("camera", camera);
+    v("video", video);
   }
   void validate(Checker& c) const;
 };

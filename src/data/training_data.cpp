@@ -7,6 +7,7 @@
 #include "data/synth_snippets.h"
 #ifdef GEO_WITH_OPENCV
 #include "data/sequence_dataset.h"
+#include "data/video/video_clips.h"
 #endif
 
 #include <spdlog/spdlog.h>
@@ -132,10 +133,33 @@ TrainingData open_synthetic(const DataConfig& d) {
   return out;
 }
 
+TrainingData open_videos(const DataConfig& d) {
+#ifndef GEO_WITH_OPENCV
+  (void)d;
+  throw ConfigError("data.videos: this geo was built without OpenCV (-DGEO_WITH_OPENCV=OFF), so it cannot decode "
+                    "videos or image files: pack the clips into a cache with geo_prepare on a machine with OpenCV");
+#else
+  auto clips = open_video_clips(d);
+  for (const auto& line : clips.report) spdlog::info("{}", line);
+  TrainingData out;
+  out.root = join_list(d.videos, ",");
+  out.format = "video";
+  out.train = clips.train;
+  out.val = clips.val;
+  out.train_list = "data.videos [" + out.root + "]";
+  return out;
+#endif
+}
+
 }  // namespace
 
 TrainingData open_training_data(const DataConfig& d) {
   if (d.format == DataFormat::kSynthetic) return open_synthetic(d);
+  if (d.format == DataFormat::kVideo || (d.format == DataFormat::kAuto && !d.videos.empty())) {
+    if (!d.root.empty())
+      throw ConfigError("data.root '" + d.root + "' and data.videos are both set: train from one of them");
+    return open_videos(d);
+  }
   if (d.root.empty())
     throw ConfigError("data.root is empty: set it in the config or with --set data.root=DIR "
                       "(a KITTI raw folder, a geo_prepare cache or a geo_synth world's raw/ folder), or "

@@ -12,6 +12,7 @@
 #include "eval/metrics.h"
 #include "eval/sources.h"
 #include "geometry/pose.h"
+#include "geometry/camera.h"
 #include "geometry/road_plane.h"
 
 #include <spdlog/spdlog.h>

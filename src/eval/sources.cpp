@@ -5,6 +5,7 @@
 #include "data/calib.h"
 #include "data/image_io.h"
 #include "data/text_io.h"
+#include "geometry/camera.h"
 #include "geometry/road_plane.h"
 
 #include <algorithm>
@@ -31,13 +32,6 @@ void require_same_size(const std::string& a, int64_t ha, int64_t wa, const std::
   if (ha != hb || wa != wb)
     throw std::runtime_error(a + " is " + std::to_string(wa) + "x" + std::to_string(ha) + " but " + b + " is " +
                              std::to_string(wb) + "x" + std::to_string(hb) + ": they must have one size; nothing was scored");
-}
-
-torch::Tensor resized_intrinsics(const torch::Tensor& K, int64_t from_h, int64_t from_w, int64_t to_h, int64_t to_w) {
-  auto out = K.to(torch::kFloat64).clone();
-  out[0] *= static_cast<double>(to_w) / static_cast<double>(from_w);
-  out[1] *= static_cast<double>(to_h) / static_cast<double>(from_h);
-  return out;
 }
 
 namespace {

@@ -78,8 +78,6 @@ void require_file(const std::string& path, const std::string& what);
 // Predictions must be finite: a NaN would otherwise turn into a nan metric (or, through a mask, a
 // perfect-looking 0) with exit code 0.
 void require_finite(const torch::Tensor& t, const std::string& what);
-// K [3,3] of frames `from_h` x `from_w` for the same camera at `to_h` x `to_w` (float64).
-torch::Tensor resized_intrinsics(const torch::Tensor& K, int64_t from_h, int64_t from_w, int64_t to_h, int64_t to_w);
 // Frames of one pair or snippet, and ground truth and its frame, must have one size.
 void require_same_size(const std::string& a, int64_t ha, int64_t wa, const std::string& b, int64_t hb, int64_t wb);
 

@@ -1,5 +1,8 @@
 #include "geometry/camera.h"
 
+#include <algorithm>
+#include <cmath>
+
 #include "core/tensor_checks.h"
 
 namespace geo {
@@ -10,6 +13,39 @@ torch::Tensor scale_intrinsics(const torch::Tensor& K, int scale) {
   auto factor = torch::ones({1, 3, 1}, K.options());
   factor.narrow(1, 0, 2).fill_(1.0 / static_cast<double>(int64_t{1} << scale));
   return K * factor;  // rows 0 and 1 (fx, 0, cx / 0, fy, cy) scale; row 2 stays (0, 0, 1)
+}
+
+torch::Tensor resized_intrinsics(const torch::Tensor& K, int64_t from_h, int64_t from_w, int64_t to_h, int64_t to_w) {
+  TORCH_CHECK(K.dim() == 2 && K.size(0) == 3 && K.size(1) == 3, "K must be [3,3], got ", K.sizes());
+  TORCH_CHECK(from_h > 0 && from_w > 0 && to_h > 0 && to_w > 0, "sizes must be positive, got ", from_w, "x", from_h,
+              " -> ", to_w, "x", to_h);
+  auto out = K.to(torch::kFloat64).clone();
+  out[0] *= static_cast<double>(to_w) / static_cast<double>(from_w);
+  out[1] *= static_cast<double>(to_h) / static_cast<double>(from_h);
+  return out;
+}
+
+CropWindow crop_to_aspect(int64_t width, int64_t height, int64_t to_w, int64_t to_h, double y_position) {
+  TORCH_CHECK(width > 0 && height > 0 && to_w > 0 && to_h > 0, "sizes must be positive, got ", width, "x", height,
+              " -> ", to_w, "x", to_h);
+  CropWindow w{0, 0, width, height};
+  // Compare width/height with to_w/to_h in integers: width * to_h vs height * to_w.
+  if (width * to_h > height * to_w) {  // wider than the target: keep every row, centre the columns
+    w.width = std::max<int64_t>(1, (height * to_w + to_h / 2) / to_h);
+    w.x0 = (width - w.width) / 2;
+  } else if (width * to_h < height * to_w) {  // taller: keep every column, rows at y_position
+    w.height = std::max<int64_t>(1, (width * to_h + to_w / 2) / to_w);
+    w.y0 = static_cast<int64_t>(std::lround(static_cast<double>(height - w.height) * std::clamp(y_position, 0.0, 1.0)));
+  }
+  return w;
+}
+
+torch::Tensor cropped_resized_intrinsics(const torch::Tensor& K, const CropWindow& window, int64_t to_h, int64_t to_w) {
+  TORCH_CHECK(K.dim() == 2 && K.size(0) == 3 && K.size(1) == 3, "K must be [3,3], got ", K.sizes());
+  auto shifted = K.to(torch::kFloat64).clone();
+  shifted[0][2] -= static_cast<double>(window.x0);
+  shifted[1][2] -= static_cast<double>(window.y0);
+  return resized_intrinsics(shifted, window.height, window.width, to_h, to_w);
 }
 
 std::vector<torch::Tensor> intrinsics_pyramid(const torch::Tensor& K, int num_scales) {

@@ -12,6 +12,21 @@ namespace geo {
 // Intrinsics at pyramid scale s: fx, fy, cx, cy divided by 2^s (GeoNet). K: [B,3,3].
 torch::Tensor scale_intrinsics(const torch::Tensor& K, int scale);
 
+// K [3,3] of frames `from_h` x `from_w` for the same camera at `to_h` x `to_w` (float64): fx, cx
+// scale with the width, fy, cy with the height.
+torch::Tensor resized_intrinsics(const torch::Tensor& K, int64_t from_h, int64_t from_w, int64_t to_h, int64_t to_w);
+
+// A window of a frame: columns x0..x0+width-1, rows y0..y0+height-1.
+struct CropWindow {
+  int64_t x0 = 0, y0 = 0, width = 0, height = 0;
+};
+// The largest window of a width x height frame with the aspect ratio of to_w x to_h: centred in x,
+// at `y_position` in y (0 top, 0.5 centre, 1 bottom); the whole frame when it already has it.
+CropWindow crop_to_aspect(int64_t width, int64_t height, int64_t to_w, int64_t to_h, double y_position = 0.5);
+// K [3,3] of a frame cropped to `window` then resized to to_h x to_w (float64): the principal point
+// moves with the window's corner, then everything scales with the resize.
+torch::Tensor cropped_resized_intrinsics(const torch::Tensor& K, const CropWindow& window, int64_t to_h, int64_t to_w);
+
 // [K at scale 0, 1, ..., num_scales-1].
 std::vector<torch::Tensor> intrinsics_pyramid(const torch::Tensor& K, int num_scales);
 

@@ -68,7 +68,7 @@ TEST(Config, GeoNetSwitchesParseRoundTripAndAreValidated) {
   const std::string msg = error_of([] {
     geo::parse_config("loss: {image_range: [0, 255]}\nmodel: {bn_momentum: 0}\n");
   });
-  for (const char* want : {"'loss.image_range' = '[0, 255]' (line 1): must be [-1, 1] (GeoNet) or [0, 1]",
+  for (const char* want : {"'loss.image_range' = [0, 255] (line 1): must be [-1, 1] (GeoNet) or [0, 1]",
                            "'model.bn_momentum' = 0 (line 2)"})
     EXPECT_NE(msg.find(want), std::string::npos) << want << "\n" << msg;
   // Enumerations are checked while parsing, naming the valid names.
@@ -269,6 +269,39 @@ TEST(Config, ShippedConfigsParseWithThePapersSchedule) {
   EXPECT_EQ(flow.data.split, "kitti_raw_stereo");
   EXPECT_EQ(flow.stages[0].train.names(), std::vector<std::string>{"flow"});
   EXPECT_EQ(flow.loss.flow_mask, geo::FlowMask::kConsistency);
+}
+
+TEST(Config, VideoConfigNeedsClipsAndTakesOneCamera) {
+  const auto path = geo::resolve_config_path("video.yaml");
+  std::string msg;
+  try {
+    geo::load_config(path);
+  } catch (const ConfigError& e) {
+    msg = e.what();
+  }
+  EXPECT_NE(msg.find("key 'data.videos' = [] (line"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("must name at least one video file or frame folder"), std::string::npos) << msg;
+  const Config v = geo::load_config(path, {"data.videos=[drive.mp4, frames/]", "data.camera.fov_deg=90"});
+  EXPECT_EQ(v.data.format, geo::DataFormat::kVideo);
+  EXPECT_EQ(v.data.videos, (std::vector<std::string>{"drive.mp4", "frames/"}));
+  EXPECT_DOUBLE_EQ(v.data.camera.fov_deg, 90);
+  EXPECT_TRUE(v.loss.min_reprojection);
+  EXPECT_TRUE(v.loss.automask);
+  // Round trip of the new sections.
+  EXPECT_EQ(geo::to_yaml(geo::parse_config(geo::to_yaml(v))), geo::to_yaml(v));
+  // Two cameras, an absurd one, bad video settings: each names its key and value.
+  msg.clear();
+  try {
+    geo::load_config(path, {"data.videos=[a.mp4]", "data.camera.fov_deg=90", "data.camera.intrinsics=[0,700,640,360]",
+                            "data.video.static_threshold=1.5", "data.video.crop_y=-1"});
+  } catch (const ConfigError& e) {
+    msg = e.what();
+  }
+  for (const char* want : {"key 'data.camera.intrinsics' = [0, 700, 640, 360] (from --set): give one of",
+                           "key 'data.camera.intrinsics' = [0, 700, 640, 360] (from --set): fx and fy must be in (0, 1e5)",
+                           "key 'data.video.static_threshold' = 1.5 (from --set): must be in [0, 1)",
+                           "key 'data.video.crop_y' = -1 (from --set): must be in [0, 1]"})
+    EXPECT_NE(msg.find(want), std::string::npos) << want << "\n" << msg;
 }
 
 TEST(Config, ResolveNamesEveryPlaceTried) {

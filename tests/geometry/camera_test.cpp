@@ -4,6 +4,10 @@
 
 #include "geometry/pose.h"
 
+#include <array>
+#include <utility>
+#include <vector>
+
 namespace {
 
 
@@ -81,3 +85,56 @@ TEST(Camera, MalformedShapesNameTheArgument) {
 }
 
 }  // namespace
+
+namespace {
+
+// A camera point's pixel in a frame, (u, v) = (fx x/z + cx, fy y/z + cy).
+std::pair<double, double> pixel_of(const torch::Tensor& K, double x, double y, double z) {
+  return {K[0][0].item<double>() * x / z + K[0][2].item<double>(), K[1][1].item<double>() * y / z + K[1][2].item<double>()};
+}
+
+}  // namespace
+
+TEST(Camera, CropToAspectKeepsTheLargestWindowOfTheTrainingShape) {
+  // 1920x1080 (16:9) for 416x128: every column, 1920*128/416 = 590.8 -> 591 rows, centred:
+  // (1080 - 591) / 2 = 244.5 -> 245.
+  const auto w = geo::crop_to_aspect(1920, 1080, 416, 128);
+  EXPECT_EQ(w.x0, 0);
+  EXPECT_EQ(w.width, 1920);
+  EXPECT_EQ(w.height, 591);
+  EXPECT_EQ(w.y0, 245);
+  EXPECT_EQ(geo::crop_to_aspect(1920, 1080, 416, 128, 0.0).y0, 0);
+  EXPECT_EQ(geo::crop_to_aspect(1920, 1080, 416, 128, 1.0).y0, 1080 - 591);
+  // Wider than the target (3000x500 for 416x128 = 3.25): 500*416/128 = 1625 columns, centred.
+  const auto v = geo::crop_to_aspect(3000, 500, 416, 128);
+  EXPECT_EQ(v.width, 1625);
+  EXPECT_EQ(v.x0, (3000 - 1625) / 2);
+  EXPECT_EQ(v.height, 500);
+  // Already the shape: the whole frame.
+  const auto same = geo::crop_to_aspect(832, 256, 416, 128);
+  EXPECT_EQ(same.x0, 0);
+  EXPECT_EQ(same.y0, 0);
+  EXPECT_EQ(same.width, 832);
+  EXPECT_EQ(same.height, 256);
+}
+
+TEST(Camera, CroppedResizedIntrinsicsProjectWherePixelsGo) {
+  const auto K = intrinsics(1000, 990, 955, 530)[0];
+  const geo::CropWindow w{10, 245, 1900, 591};
+  const auto Kc = geo::cropped_resized_intrinsics(K, w, 128, 416);
+  const double sx = 416.0 / 1900, sy = 128.0 / 591;
+  EXPECT_NEAR(Kc[0][0].item<double>(), 1000 * sx, 1e-12);
+  EXPECT_NEAR(Kc[1][1].item<double>(), 990 * sy, 1e-12);
+  EXPECT_NEAR(Kc[0][2].item<double>(), (955 - 10) * sx, 1e-12);
+  EXPECT_NEAR(Kc[1][2].item<double>(), (530 - 245) * sy, 1e-12);
+  // Any point: its pixel in the training frame is its original pixel moved by the crop, then scaled.
+  for (const auto& p : std::vector<std::array<double, 3>>{{1.0, -0.5, 7.0}, {-3.0, 1.2, 20.0}, {0.1, 0.3, 2.5}}) {
+    const auto [u, v] = pixel_of(K, p[0], p[1], p[2]);
+    const auto [uc, vc] = pixel_of(Kc, p[0], p[1], p[2]);
+    EXPECT_NEAR(uc, (u - 10) * sx, 1e-9);
+    EXPECT_NEAR(vc, (v - 245) * sy, 1e-9);
+  }
+  // A plain resize is the no-crop window.
+  const auto Kr = geo::resized_intrinsics(K, 1080, 1920, 128, 416);
+  EXPECT_TRUE(torch::allclose(Kr, geo::cropped_resized_intrinsics(K, {0, 0, 1920, 1080}, 128, 416)));
+}

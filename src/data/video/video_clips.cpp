@@ -1,0 +1,294 @@
+#include "data/video/video_clips.h"
+
+#include "data/video/clip_camera.h"
+#include "data/video/frame_selection.h"
+#include "geometry/camera.h"
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <stdexcept>
+
+namespace fs = std::filesystem;
+
+namespace geo {
+
+namespace {
+
+constexpr int kJpegQuality = 95;  // frames of videos kept in memory: visually lossless, ~25 KB at 128x416
+
+// One clip's chosen frames at the training size.
+struct Clip {
+  std::string path;
+  std::vector<std::string> files;    // frame folder: the chosen frames' files
+  std::vector<std::vector<uchar>> jpeg;  // video: the chosen frames, cropped and resized, as JPEG
+  std::vector<int64_t> index;        // decoding-order number of each chosen frame
+  CropWindow window;
+  int64_t height = 0, width = 0;     // training size
+  torch::Tensor K;                   // [3,3] float32 at the training size
+};
+
+// BGR frame -> the training frame [3,H,W] float32 in [0,1]: crop to `window`, resize to H x W.
+cv::Mat crop_resize(const cv::Mat& bgr, const CropWindow& w, int64_t height, int64_t width) {
+  cv::Mat roi = bgr(cv::Rect(static_cast<int>(w.x0), static_cast<int>(w.y0), static_cast<int>(w.width),
+                             static_cast<int>(w.height)));
+  cv::Mat out;
+  const bool shrink = w.width > width || w.height > height;
+  cv::resize(roi, out, cv::Size(static_cast<int>(width), static_cast<int>(height)), 0, 0,
+             shrink ? cv::INTER_AREA : cv::INTER_LINEAR);
+  return out;
+}
+
+torch::Tensor to_tensor(const cv::Mat& bgr) {
+  cv::Mat rgb;
+  cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
+  return torch::from_blob(rgb.data, {rgb.rows, rgb.cols, 3}, torch::kUInt8)
+      .permute({2, 0, 1})
+      .to(torch::kFloat32)
+      .div_(255.0)
+      .contiguous();
+}
+
+cv::Mat read_colour(const std::string& path) {
+  cv::Mat m = cv::imread(path, cv::IMREAD_COLOR);
+  if (m.empty()) throw std::runtime_error("cannot read image '" + path + "' (missing, empty or not an image)");
+  return m;
+}
+
+torch::Tensor clip_frame(const Clip& c, size_t i) {
+  if (!c.jpeg.empty()) {
+    cv::Mat m = cv::imdecode(c.jpeg.at(i), cv::IMREAD_COLOR);
+    if (m.empty()) throw std::runtime_error("clip '" + c.path + "': frame " + std::to_string(c.index.at(i)) + " cannot be decoded");
+    return to_tensor(m);
+  }
+  return to_tensor(crop_resize(read_colour(c.files.at(i)), c.window, c.height, c.width));
+}
+
+class ClipSnippets : public SnippetSource {
+ public:
+  struct Item {
+    size_t clip;
+    std::vector<int64_t> positions;  // chosen-frame positions in the clip, target in the middle
+  };
+  ClipSnippets(std::shared_ptr<const std::vector<Clip>> clips, std::vector<Item> items, int64_t seq_length)
+      : clips_(std::move(clips)), items_(std::move(items)), seq_length_(seq_length) {}
+  size_t size() const override { return items_.size(); }
+  int64_t seq_length() const override { return seq_length_; }
+  std::string id(size_t index) const override {
+    const auto& it = items_.at(index);
+    const Clip& c = clips_->at(it.clip);
+    const auto target = static_cast<size_t>(it.positions[it.positions.size() / 2]);
+    // A folder's frame by its file, a video's by its number in decoding order (from 0).
+    return c.files.empty() ? c.path + " frame " + std::to_string(c.index.at(target)) : c.files.at(target);
+  }
+  Snippet get(size_t index) const override {
+    const auto& it = items_.at(index);
+    const Clip& c = clips_->at(it.clip);
+    std::vector<torch::Tensor> frames;
+    for (int64_t p : it.positions) frames.push_back(clip_frame(c, static_cast<size_t>(p)));
+    return {torch::stack(frames), c.K, id(index)};
+  }
+
+ private:
+  std::shared_ptr<const std::vector<Clip>> clips_;
+  std::vector<Item> items_;
+  int64_t seq_length_;
+};
+
+bool is_image_name(const fs::path& p) {
+  auto ext = p.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
+  for (const char* e : {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp"})
+    if (ext == e) return true;
+  return false;
+}
+
+std::string ordinal(int64_t n) {
+  if (n == 1) return "every frame";
+  const int64_t m100 = n % 100, m10 = n % 10;
+  const char* suffix = (m100 >= 11 && m100 <= 13) ? "th" : m10 == 1 ? "st" : m10 == 2 ? "nd" : m10 == 3 ? "rd" : "th";
+  return "every " + std::to_string(n) + suffix + " frame";
+}
+
+std::string fixed(double v, int digits) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.*f", digits, v);
+  return buf;
+}
+
+// Decodes one clip in a stream and chooses its frames.
+Clip read_clip(const std::string& path, const DataConfig& d, std::string* report) {
+  Clip c;
+  c.path = path;
+  c.height = d.height;
+  c.width = d.width;
+  const auto& v = d.video;
+  int64_t H0 = 0, W0 = 0;
+  std::string first;  // the frame that fixed the size, for messages
+  auto check_size = [&](const cv::Mat& m, const std::string& what) {
+    if (first.empty()) {
+      first = what;
+      H0 = m.rows;
+      W0 = m.cols;
+      c.window = v.crop ? crop_to_aspect(W0, H0, d.width, d.height, v.crop_y) : CropWindow{0, 0, W0, H0};
+      // The camera is checked before the clip is decoded further.
+      c.K = cropped_resized_intrinsics(clip_camera(d.camera, W0, H0, path), c.window, d.height, d.width)
+                .to(torch::kFloat32);
+    } else if (m.rows != H0 || m.cols != W0) {
+      throw std::runtime_error("clip '" + path + "': " + what + " is " + std::to_string(m.cols) + "x" +
+                               std::to_string(m.rows) + " but " + first + " is " + std::to_string(W0) + "x" +
+                               std::to_string(H0) + ": the frames of one clip must have one size");
+    }
+  };
+  double source_fps = v.source_fps;
+  std::unique_ptr<FrameSelector> selector;
+  const bool folder = fs::is_directory(path);
+  int64_t total = 0;
+  if (folder) {
+    const auto files = frame_files(path);
+    if (files.empty())
+      throw std::runtime_error("clip '" + path + "': the folder holds no image files (png, jpg, jpeg, bmp, tif, webp)");
+    selector = std::make_unique<FrameSelector>(frame_rate_stride(source_fps, v.fps), v.static_threshold);
+    for (size_t i = 0; i < files.size(); ++i) {
+      const auto idx = static_cast<int64_t>(i);
+      if (!selector->wants(idx)) {
+        selector->offer(idx, {});
+        continue;
+      }
+      const cv::Mat m = read_colour(files[i]);
+      check_size(m, "'" + files[i] + "'");
+      const auto frame = to_tensor(crop_resize(m, c.window, d.height, d.width));
+      if (selector->offer(idx, motion_thumbnail(frame))) {
+        c.files.push_back(files[i]);
+        c.index.push_back(idx);
+      }
+    }
+    total = static_cast<int64_t>(files.size());
+  } else {
+    if (!fs::exists(path)) throw std::runtime_error("clip '" + path + "' does not exist (data.videos)");
+    // OpenCV's FFmpeg back-end (Debian's OpenCV has it); the GStreamer one prints pages of errors for
+    // a file it cannot read.
+    cv::VideoCapture cap(path, cv::CAP_FFMPEG);
+    if (!cap.isOpened())
+      throw std::runtime_error("clip '" + path + "': OpenCV cannot open it as a video (not a video, or a codec "
+                               "this OpenCV lacks); a folder of its frames works too");
+    const double fps = cap.get(cv::CAP_PROP_FPS);
+    if (source_fps == 0 && std::isfinite(fps) && fps > 0 && fps < 1000) source_fps = fps;
+    selector = std::make_unique<FrameSelector>(frame_rate_stride(source_fps, v.fps), v.static_threshold);
+    cv::Mat m;
+    int64_t idx = 0;
+    while (cap.read(m)) {
+      if (m.empty()) break;
+      if (!selector->wants(idx)) {
+        selector->offer(idx++, {});
+        continue;
+      }
+      check_size(m, "frame " + std::to_string(idx));
+      const cv::Mat small = crop_resize(m, c.window, d.height, d.width);
+      if (selector->offer(idx, motion_thumbnail(to_tensor(small)))) {
+        c.jpeg.emplace_back();
+        cv::imencode(".jpg", small, c.jpeg.back(), {cv::IMWRITE_JPEG_QUALITY, kJpegQuality});
+        c.index.push_back(idx);
+      }
+      ++idx;
+    }
+    total = idx;
+    if (total == 0) throw std::runtime_error("clip '" + path + "': no frame could be decoded (an empty or damaged video)");
+  }
+  const auto kept = static_cast<int64_t>(c.index.size());
+  if (total < d.seq_length)
+    throw std::runtime_error("clip '" + path + "' has " + std::to_string(total) + " frame" + (total == 1 ? "" : "s") +
+                             ": a training snippet needs " + std::to_string(d.seq_length) + " (data.seq_length)");
+  if (kept < d.seq_length)
+    throw std::runtime_error(
+        "clip '" + path + "': only " + std::to_string(kept) + " of its " + std::to_string(total) +
+        " frames move (at most " + fixed(100 * selector->largest_change(), 1) + "% of the pixels changed between the " +
+        "frames looked at; data.video.static_threshold is " + fixed(100 * v.static_threshold, 1) + "%): a clip without " +
+        "camera motion teaches neither depth nor motion. Lower data.video.static_threshold if the camera does move");
+  char fps_text[32];
+  std::snprintf(fps_text, sizeof fps_text, "%.4g fps", source_fps);
+  const std::string rate = source_fps > 0 ? fps_text : "rate unknown";
+  const int64_t stride = frame_rate_stride(source_fps, v.fps);
+  *report = "clip '" + path + "': " + std::to_string(total) + " frames (" + std::to_string(W0) + "x" + std::to_string(H0) +
+            ", " + rate + "); " + ordinal(stride) + (stride > 1 ? " for " + fixed(v.fps, 0) + " fps" : "") + ", " +
+            std::to_string(selector->skipped_static()) + " static frames left out (under " +
+            fixed(100 * v.static_threshold, 1) + "% of the pixels changed): " + std::to_string(kept) + " kept";
+  if (c.window.width != W0 || c.window.height != H0)
+    *report += "; cropped to " + std::to_string(c.window.width) + "x" + std::to_string(c.window.height) + " at (" +
+               std::to_string(c.window.x0) + ", " + std::to_string(c.window.y0) + ")";
+  *report += "; camera " + describe_camera(c.K.to(torch::kFloat64), d.width, d.height);
+  return c;
+}
+
+}  // namespace
+
+std::vector<std::string> frame_files(const std::string& folder) {
+  std::vector<std::string> files;
+  for (const auto& e : fs::directory_iterator(folder))
+    if (e.is_regular_file() && is_image_name(e.path())) files.push_back(e.path().string());
+  std::sort(files.begin(), files.end(), [](const std::string& a, const std::string& b) {
+    return natural_less(fs::path(a).filename().string(), fs::path(b).filename().string());
+  });
+  return files;
+}
+
+void write_video_file(const std::vector<std::string>& frames, const std::string& path, double fps) {
+  if (frames.empty()) throw std::runtime_error("video '" + path + "': no frames to write");
+  const cv::Mat first = read_colour(frames.front());
+  const std::string tmp = path + ".tmp.avi";
+  cv::VideoWriter writer(tmp, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), fps, first.size());
+  if (!writer.isOpened()) throw std::runtime_error("cannot write video '" + path + "' (Motion-JPEG AVI)");
+  for (const auto& f : frames) {
+    const cv::Mat m = read_colour(f);
+    if (m.size() != first.size())
+      throw std::runtime_error("'" + f + "' is " + std::to_string(m.cols) + "x" + std::to_string(m.rows) + " but '" +
+                               frames.front() + "' is " + std::to_string(first.cols) + "x" + std::to_string(first.rows));
+    writer.write(m);
+  }
+  writer.release();
+  fs::rename(tmp, path);
+}
+
+VideoData open_video_clips(const DataConfig& d) {
+  if (d.videos.empty()) throw ConfigError("data.videos is empty: name video files or frame folders");
+  auto clips = std::make_shared<std::vector<Clip>>();
+  std::vector<ClipSnippets::Item> train, val;
+  VideoData out;
+  for (const auto& path : d.videos) {
+    std::string line;
+    clips->push_back(read_clip(path, d, &line));
+    const size_t ci = clips->size() - 1;
+    const auto n = static_cast<int64_t>(clips->back().index.size());
+    const auto runs = split_clip(n, d.video.val_fraction, d.video.val_block, d.seq_length);
+    size_t n_train = 0, n_val = 0;
+    for (auto* set : {&runs.train, &runs.val}) {
+      auto& items = set == &runs.train ? train : val;
+      for (const auto& [r, p] : snippet_targets(*set, d.seq_length)) {
+        ClipSnippets::Item item{ci, {}};
+        for (int64_t o = -d.seq_length / 2; o <= d.seq_length / 2; ++o) item.positions.push_back((*set)[r][static_cast<size_t>(p + o)]);
+        items.push_back(std::move(item));
+        (set == &runs.train ? n_train : n_val)++;
+      }
+    }
+    line += "; " + std::to_string(n_train) + " training snippets";
+    if (n_val > 0)
+      line += ", " + std::to_string(n_val) + " validation snippets in " + std::to_string(runs.val.size()) + " block" +
+              (runs.val.size() == 1 ? "" : "s") + " (" + std::to_string(runs.edge_dropped) + " frames left out at their edges)";
+    else
+      line += ", no validation block (clip too short for data.video.val_fraction " + fixed(d.video.val_fraction, 2) + ")";
+    out.report.push_back(line);
+  }
+  if (train.empty())
+    throw ConfigError("data.videos: no training snippet of " + std::to_string(d.seq_length) + " frames in " +
+                      std::to_string(d.videos.size()) + " clip(s): " + out.report.front());
+  out.train = std::make_shared<ClipSnippets>(clips, std::move(train), d.seq_length);
+  if (!val.empty()) out.val = std::make_shared<ClipSnippets>(clips, std::move(val), d.seq_length);
+  return out;
+}
+
+}  // namespace geo
