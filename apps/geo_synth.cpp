@@ -71,7 +71,7 @@ int main(int argc, char** argv) {
     spdlog::info("done in {:.1f} s: {}/raw (train with data.root={}/raw), {}/kitti2015, {}/odometry",
                  s, out, out, out, out);
     if (!video.empty()) {
-      const std::string frames = out + "/raw/" + geo::kSynthDate + "/" + geo::synth_drive_folder(1) + "/image_02/data";
+      const std::string frames = out + "/raw/" + geo::synth_drive_folder(1) + "/image_02/data";
       geo::write_video_file(geo::frame_files(frames), video, 10.0);
       const auto& k = o.intrinsics;
       spdlog::info("video: {} ({} frames of {}, 10 fps): train with --set data.videos=[{}] "
