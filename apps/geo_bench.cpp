@@ -336,10 +336,12 @@ std::vector<Row> training_rows(const geo::Config& config, const std::vector<geo:
   return rows;
 }
 
-// The data loader's throughput on `o.data_root`.
+// The data loader's throughput on `o.data_root`, or on the config's data.videos (decoded once when
+// opened; the row times the snippets read from them).
 Row loader_row(const geo::Config& config, const Options& o) {
   geo::DataConfig d = config.data;
-  d.root = o.data_root;
+  if (!o.data_root.empty()) d.root = o.data_root;
+  const std::string where = o.data_root.empty() ? "data.videos" : o.data_root;
   std::shared_ptr<const geo::SnippetSource> source;
   std::string kind = "packed";
 #ifdef GEO_BENCH_PNG
@@ -353,7 +355,7 @@ Row loader_row(const geo::Config& config, const Options& o) {
   source = std::make_shared<geo::PackedSnippets>(o.data_root + "/train");
 #endif
   const auto lo = geo::loader_options(d, o.train_batch > 0 ? o.train_batch : config.stages.front().batch_size);
-  spdlog::info("loader on {} ({}), batch {}, {} worker(s) ...", o.data_root, kind, lo.batch_size, lo.workers);
+  spdlog::info("loader on {} ({}), batch {}, {} worker(s) ...", where, kind, lo.batch_size, lo.workers);
   Row r{"loader", "loader (" + kind + ")", "-", lo.batch_size};
   const geo::bench::Memory mem(torch::kCPU);
   mem.reset();
@@ -419,7 +421,7 @@ int main(int argc, char** argv) {
         spdlog::info("gradient all-reduce of {} between 2 ranks (Gloo, 127.0.0.1) ...", stage.name);
         rows.push_back(time_allreduce(config, stage, frs.front(), 2, o.train_warmup, o.train_iters));
       }
-    if (!o.summary && !o.data_root.empty()) rows.push_back(loader_row(config, o));
+    if (!o.summary && (!o.data_root.empty() || !config.data.videos.empty())) rows.push_back(loader_row(config, o));
 
     geo::bench::print_table(rows, ceiling);
     if (!o.markdown_path.empty()) {
