@@ -336,7 +336,13 @@ TEST(Fuzz, YamlConfigs) {
   const auto dir = test::fresh_dir("fuzz_yaml");
   std::vector<std::string> seeds;
   for (const auto& e : fs::directory_iterator(shipped_config_dir()))
-    if (e.path().extension() == ".yaml") seeds.push_back(test::read_file(e.path().string()));
+    if (e.path().extension() == ".yaml") {
+      // video.yaml leaves the clips to the command line (data.videos=[...]); a seed names one.
+      auto text = test::read_file(e.path().string());
+      const auto at = text.find("videos: []");
+      if (at != std::string::npos) text.replace(at, 10, "videos: [drive.mp4]");
+      seeds.push_back(text);
+    }
   std::sort(seeds.begin(), seeds.end());
   // Anchors and aliases, as users write them to share values between stages.
   seeds.push_back("stages:\n  - {name: a, iterations: &n 3, batch_size: 1, train: &t [depth, pose]}\n"
