@@ -127,6 +127,17 @@ int main(int argc, char** argv) {
       K = torch::tensor({intrinsics[0] * sx, 0.0, intrinsics[2] * sx, 0.0, intrinsics[1] * sy, intrinsics[3] * sy,
                          0.0, 0.0, 1.0}).view({1, 3, 3});
     }
+    if (intrinsics.size() != 4 && model.spec().learns_intrinsics) {
+      // The camera the model learned: the mean of its prediction over the first pairs.
+      std::vector<torch::Tensor> Ks;
+      for (size_t i = 0; i < std::min<size_t>(frames.size(), 10); ++i)
+        Ks.push_back(model.intrinsics(frames[i].second[0], frames[std::min(i + 1, frames.size() - 1)].second[0]));
+      K = torch::stack(Ks).mean(0).unsqueeze(0);
+      const double sx = static_cast<double>(W0) / w, sy = static_cast<double>(H0) / h;
+      spdlog::info("learned camera: fx {:.1f} fy {:.1f} cx {:.1f} cy {:.1f} (pixels of the {}x{} input; give --intrinsics to "
+                   "use another)", K[0][0][0].item<double>() * sx, K[0][1][1].item<double>() * sy,
+                   K[0][0][2].item<double>() * sx, K[0][1][2].item<double>() * sy, W0, H0);
+    }
     K = K.to(torch::kFloat32)[0];
     // Metric scale per frame from the road plane, smoothed over the sequence.
     std::vector<double> scales(frames.size(), 1.0);

@@ -53,6 +53,8 @@ struct ModelSpec {
   bool feature_refinement = false; // FR attention blocks (the paper)
   bool has_flow = false;           // a FlowNet (else flow() is the rigid flow of depth and motion)
   std::string source;              // the file it was loaded from
+  bool learns_intrinsics = false;  // its PoseNet predicts the camera (intrinsics() and the default
+                                   // of every `intrinsics` argument below)
   std::string precision = "fp32";  // fp32 or bf16 (LoadOptions::precision resolved)
 };
 
@@ -103,6 +105,10 @@ class Model {
   };
   FlowParts flow_parts(const torch::Tensor& from, const torch::Tensor& to, const torch::Tensor& intrinsics = {},
                        const torch::Tensor& previous = {}) const;
+  // The camera a model with spec().learns_intrinsics predicts for the pair (from, to), in pixels of
+  // the given images: [3,3] ([B,3,3] for batches). Models that learn it use it wherever an
+  // `intrinsics` argument is left out; others throw geo::Error (they assume KITTI's proportions).
+  torch::Tensor intrinsics(const torch::Tensor& from, const torch::Tensor& to) const;
 
   // Writes the weights only (no optimiser, no training config) with the spec: geo_export.
   // `half`: weights stored as float16 (half the size; loaded back as float32).

@@ -48,7 +48,8 @@ template <class Fn> auto guarded(const std::string& what, Fn&& f) -> decltype(f(
 }
 
 ModelSpec public_spec(const NetworkSpec& s, bool has_flow, const std::string& source) {
-  return ModelSpec{s.height, s.width, s.seq_length, s.model.encoder_depth, s.model.use_fr, has_flow, source};
+  return ModelSpec{s.height, s.width, s.seq_length, s.model.encoder_depth, s.model.use_fr, has_flow, source,
+                   s.model.learn_intrinsics};
 }
 
 // LoadOptions::precision.
@@ -96,10 +97,12 @@ torch::Tensor prepare(const Model::Impl& m, const torch::Tensor& image, int64_t*
   return x.contiguous();
 }
 
-// [B,3,3] intrinsics at the network's size from ones at H x W (or KITTI's proportions).
+// [B,3,3] intrinsics at the network's size from ones at H x W (or KITTI's proportions); undefined
+// when none are given to a model that learns them (predict_pair then uses the learned ones).
 torch::Tensor network_K(const Model::Impl& m, const torch::Tensor& K, int64_t B, int64_t H, int64_t W) {
   const double h = static_cast<double>(m.spec.height), w = static_cast<double>(m.spec.width);
   torch::Tensor k;
+  if (!K.defined() && m.spec.learns_intrinsics) return {};
   if (!K.defined()) {
     k = kitti_like_intrinsics(m.spec.height, m.spec.width);
   } else {
@@ -205,7 +208,10 @@ torch::Tensor Model::metric_depth(const torch::Tensor& image, double camera_heig
     const int64_t B = batched ? depth.size(0) : 1, H = depth.size(-2), W = depth.size(-1);
     if (intrinsics.defined() && intrinsics.sizes() != torch::IntArrayRef{3, 3})
       throw Error("intrinsics must be [3,3] (pixels of the given image), got " + c10::str(intrinsics.sizes()));
-    const auto K = intrinsics.defined() ? intrinsics.to(torch::kCPU, torch::kFloat64) : kitti_like_intrinsics(H, W);
+    // Not given: the learned camera (a batch's mean), else KITTI's proportions.
+    const auto K = intrinsics.defined()         ? intrinsics.to(torch::kCPU, torch::kFloat64)
+                   : spec().learns_intrinsics ? (batched ? this->intrinsics(image, image).mean(0) : this->intrinsics(image, image))
+                                              : kitti_like_intrinsics(H, W);
     auto out = depth.clone();
     if (scale) scale->clear();
     for (int64_t b = 0; b < B; ++b) {
@@ -303,6 +309,27 @@ Model::FlowParts Model::flow_parts(const torch::Tensor& from, const torch::Tenso
       return batched ? f : f[0];
     };
     return FlowParts{at_image_size(p.flow), at_image_size(p.rigid_flow)};
+  });
+}
+
+torch::Tensor Model::intrinsics(const torch::Tensor& from, const torch::Tensor& to) const {
+  return guarded("geo::Model::intrinsics", [&] {
+    if (!impl_->spec.learns_intrinsics)
+      throw Error("this model does not learn the camera (trained with model.learn_intrinsics off): give the intrinsics");
+    torch::InferenceMode guard;
+    int64_t H = 0, W = 0, H2 = 0, W2 = 0;
+    bool batched = false, batched2 = false;
+    const auto a = prepare(*impl_, from, &H, &W, &batched, "intrinsics (from)");
+    const auto b = prepare(*impl_, to, &H2, &W2, &batched2, "intrinsics (to)");
+    if (H != H2 || W != W2 || a.size(0) != b.size(0))
+      throw Error("the two images differ in size: " + c10::str(from.sizes()) + " and " + c10::str(to.sizes()));
+    const auto L = impl_->spec.seq_length, k = L / 2;
+    std::vector<torch::Tensor> srcs;  // as relative_pose: `from` repeated before the target, `to` after
+    for (int64_t i = 0; i < L - 1; ++i) srcs.push_back(i < k ? a : b);
+    auto K = impl_->nets.pose->predict(a, srcs).K.to(torch::kCPU, torch::kFloat64);  // network pixels
+    K.select(1, 0).mul_(static_cast<double>(W) / static_cast<double>(impl_->spec.width));
+    K.select(1, 1).mul_(static_cast<double>(H) / static_cast<double>(impl_->spec.height));
+    return batched ? K : K[0];
   });
 }
 

@@ -719,6 +719,9 @@ Config parse_config(const std::string& yaml_text, const std::string& source,
   } catch (const YAML::Exception& e) {  // anything the checks above did not foresee, with the file
     throw ConfigError(source + (e.mark.is_null() ? "" : " line " + std::to_string(e.mark.line + 1)) + ": " + e.msg);
   }
+  // Footage without a camera: the camera is learned (the resolved config, written into the run
+  // folder, says so).
+  if (!config.data.videos.empty() && !config.data.camera.given()) config.model.learn_intrinsics = true;
   config.validate();
   return config;
 }

@@ -79,6 +79,11 @@ struct ModelConfig {
   // flow is the rigid flow until the residual learns); GeoNet: Xavier, a random residual of a few
   // pixels that stage 2 first has to unlearn (docs/geonet_fidelity.md).
   bool flow_zero_init = false;
+  // A head on the PoseNet predicts the camera (fx, fy, cx, cy) and the rigid warp uses it instead of
+  // the data's intrinsics ("Depth from Videos in the Wild", Gordon et al., ICCV 2019): for footage
+  // nobody calibrated. Off: the paper and GeoNet use the calibration. On by itself for data.videos
+  // without data.camera.
+  bool learn_intrinsics = false;
 
   template <class V> void fields(V& v) {
     v("encoder_depth", encoder_depth);
@@ -93,6 +98,7 @@ struct ModelConfig {
     v("bn_momentum", bn_momentum);
     v("bn_scale", bn_scale);
     v("flow_zero_init", flow_zero_init);
+    v("learn_intrinsics", learn_intrinsics);
   }
   void validate(Checker& c) const;
 };

@@ -12,6 +12,16 @@ namespace geo {
 struct PoseNetOptions {
   int seq_length = 3;          // target + 2 sources (depth training); 5 for odometry
   double output_scale = 0.01;  // pose = 0.01 * mean over pixels (GeoNet)
+  // The camera from the images (Gordon et al., ICCV 2019: a 1x1 convolution on the motion network's
+  // spatially averaged bottleneck): fx = softplus(a) W, fy = softplus(b) W (square pixels start
+  // equal), cx = (c + 0.5) W, cy = (d + 0.5) H. Zero-initialised: fx = fy = ln 2 W = 0.69 W (KITTI:
+  // 0.58 W) and the principal point at the centre.
+  bool learn_intrinsics = false;
+};
+
+struct PoseOutput {
+  torch::Tensor poses;  // [B, num_sources, 6] as forward()
+  torch::Tensor K;      // [B,3,3] float32 at the input's size when learn_intrinsics, else undefined
 };
 
 struct PoseNetImpl : torch::nn::Module {
@@ -20,6 +30,8 @@ struct PoseNetImpl : torch::nn::Module {
   // tgt [B,3,H,W] and seq_length-1 sources, RGB in [0,1] -> [B, num_sources, 6] pose vectors
   // [tx,ty,tz,rx,ry,rz], src_from_tgt (geometry/pose.h).
   torch::Tensor forward(const torch::Tensor& tgt, const std::vector<torch::Tensor>& srcs);
+  // The poses and, with learn_intrinsics, the camera of the snippet.
+  PoseOutput predict(const torch::Tensor& tgt, const std::vector<torch::Tensor>& srcs);
 
   int num_sources() const { return options.seq_length - 1; }
 
@@ -27,6 +39,7 @@ struct PoseNetImpl : torch::nn::Module {
   torch::Dtype compute_dtype = torch::kFloat32;  // as DepthNetImpl::compute_dtype
   std::vector<ConvBn> convs;     // conv1..conv7: 16 (7x7), 32 (5x5), 64, 128, 256, 256, 256 (3x3), /2
   torch::nn::Conv2d pred{nullptr};  // 1x1 to 6 * num_sources, no BN / activation
+  torch::nn::Conv2d intrinsics{nullptr};  // learn_intrinsics: 1x1, 256 -> 4 on the averaged conv7 output
 };
 TORCH_MODULE(PoseNet);
 

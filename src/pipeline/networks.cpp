@@ -36,6 +36,7 @@ FlowNetOptions flow_net_options(const ModelConfig& m) {
 PoseNetOptions pose_net_options(const NetworkSpec& spec) {
   PoseNetOptions o;
   o.seq_length = spec.seq_length;
+  o.learn_intrinsics = spec.model.learn_intrinsics;
   return o;
 }
 
@@ -153,6 +154,7 @@ std::string architecture_difference(const NetworkSpec& trained, const NetworkSpe
     cmp("model.fr_spatial_bn", a.fr_spatial_bn, b.fr_spatial_bn);
   }
   cmp("model.bn_scale", a.bn_scale, b.bn_scale);
+  cmp("model.learn_intrinsics", a.learn_intrinsics, b.learn_intrinsics);
   cmp("data.seq_length", trained.seq_length, wanted.seq_length);
   return out;
 }
@@ -190,8 +192,12 @@ PairPrediction predict_pair(Networks& nets, const torch::Tensor& tgt, const torc
   for (int64_t i = 0; i < L - 1; ++i) snippet.push_back(i < before ? (prev.defined() ? prev : tgt) : src);
   PairPrediction p;
   p.disp = nets.depth->forward(tgt).disp[0];
-  p.src_from_tgt = pose_vec_to_matrix(nets.pose->forward(tgt, snippet).select(1, before));
-  p.rigid_flow = rigid_flow(1.0 / p.disp, p.src_from_tgt, K);
+  const auto pose = nets.pose->predict(tgt, snippet);
+  p.src_from_tgt = pose_vec_to_matrix(pose.poses.select(1, before));
+  // The given camera, else the one the PoseNet learned (model.learn_intrinsics).
+  p.K = K.defined() ? K : pose.K;
+  TORCH_CHECK(p.K.defined(), "predict_pair: no intrinsics given and the model does not learn them");
+  p.rigid_flow = rigid_flow(1.0 / p.disp, p.src_from_tgt, p.K);
   p.flow = p.rigid_flow;
   if (nets.flow)
     p.flow = p.rigid_flow +

@@ -80,7 +80,8 @@ struct Networks {
 // (zero motion before the target, the pair after it; a 5-frame model sees (tgt, tgt, tgt, src, src)),
 // the rigid flow tgt -> src at full resolution, and, when a FlowNet exists, its residual added (its
 // input built with nets.spec.flow_input, as in training).
-// tgt, src [B,3,H,W], K [B,3,3] on the networks' device; call under NoGradGuard/InferenceMode.
+// tgt, src [B,3,H,W], K [B,3,3] on the networks' device (undefined: the PoseNet's learned camera,
+// for models with model.learn_intrinsics); call under NoGradGuard/InferenceMode.
 // The FlowNet's input for the pair tgt <- src (both [B,3,H,W] in [0,1]) from the rigid step at full
 // scale: the rigid flow tgt -> src, the source warped by it and the L2 norm over colour channels of
 // the warp's photometric error (loss range, as rigid_terms computes them: pass them when at hand,
@@ -94,6 +95,7 @@ struct PairPrediction {
   torch::Tensor src_from_tgt;  // [B,4,4]
   torch::Tensor rigid_flow;    // [B,2,H,W]
   torch::Tensor flow;          // [B,2,H,W] full flow (= rigid_flow without a FlowNet)
+  torch::Tensor K;             // [B,3,3] the camera used: the given one, else the learned one
 };
 // `prev` (optional): the frame before tgt; the PoseNet then sees (prev.., tgt, src..) instead of
 // repeating tgt before it.

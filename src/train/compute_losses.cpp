@@ -44,7 +44,10 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
   {
     std::optional<torch::NoGradGuard> frozen;
     if (!stage.trains(Net::kPose)) frozen.emplace();
-    in.poses = network_pass(config, tgt.device(), [&] { return nets.pose->forward(tgt, src_list); });
+    auto pose = network_pass(config, tgt.device(), [&] { return nets.pose->predict(tgt, src_list); });
+    in.poses = pose.poses;
+    // model.learn_intrinsics: every warp uses the camera the PoseNet predicts; the data's is ignored.
+    if (pose.K.defined()) in.K = pose.K;
   }
   StepOutput out;
   out.tgt_disp = in.tgt_disp;

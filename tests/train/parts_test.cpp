@@ -404,6 +404,48 @@ TEST(ComputeLosses, FullFlowEqualsInferencesFlow) {
   EXPECT_GT((trained - out.rigid.fwd_flow[1][0]).abs().max().item<double>(), 1e-3 * scale);
 }
 
+// model.learn_intrinsics: the warp uses the PoseNet's camera. The data's K changes nothing, the
+// camera starts at fx = fy = ln 2 W with the principal point centred, and the loss trains the head.
+TEST(ComputeLosses, LearnedIntrinsicsReplaceTheDataCamera) {
+  torch::manual_seed(13);
+  Config c = parse_config("model: {encoder_depth: 18, num_scales: 2, learn_intrinsics: true}\n");
+  Networks n = Networks::create(NetworkSpec::of(c), false);
+  n.set_trainable(c.stages[0]);
+  n.set_modes(c.stages[0]);
+  const auto tgt = torch::rand({2, 3, 64, 128}), srcs = torch::rand({2, 2, 3, 64, 128});
+  {
+    // Move the pose away from identity so that the camera matters to the warp.
+    torch::NoGradGuard no_grad;
+    n.pose->pred->bias.fill_(3.0);
+  }
+  const auto K1 = torch::tensor({60.f, 0.f, 64.f, 0.f, 60.f, 32.f, 0.f, 0.f, 1.f}).view({1, 3, 3}).repeat({2, 1, 1});
+  const auto K2 = K1 * torch::tensor({3.f, 3.f, 1.f}).view({1, 3, 1});
+  const auto a = compute_losses(n, tgt, srcs, K1, c.stages[0], c);
+  const auto b = compute_losses(n, tgt, srcs, K2, c.stages[0], c);
+  EXPECT_DOUBLE_EQ(a.losses.total.item<double>(), b.losses.total.item<double>());
+  const auto K = n.pose->predict(tgt, {srcs.select(1, 0), srcs.select(1, 1)}).K;
+  ASSERT_TRUE(K.defined());
+  EXPECT_NEAR(K[0][0][0].item<double>(), std::log(2.0) * 128, 1e-4);
+  EXPECT_NEAR(K[0][1][1].item<double>(), std::log(2.0) * 128, 1e-4);
+  EXPECT_NEAR(K[0][0][2].item<double>(), 64, 1e-4);
+  EXPECT_NEAR(K[0][1][2].item<double>(), 32, 1e-4);
+  a.losses.total.backward();
+  ASSERT_TRUE(n.pose->intrinsics->weight.grad().defined());
+  EXPECT_GT(n.pose->intrinsics->weight.grad().abs().sum().item<double>(), 0);
+  // Without learning, the data's camera is used: the two K give different losses.
+  Config plain = parse_config("model: {encoder_depth: 18, num_scales: 2}\n");
+  torch::manual_seed(13);
+  Networks m = Networks::create(NetworkSpec::of(plain), false);
+  m.set_modes(plain.stages[0]);
+  {
+    torch::NoGradGuard no_grad;
+    m.pose->pred->bias.fill_(3.0);
+  }
+  torch::NoGradGuard no_grad;
+  EXPECT_NE(compute_losses(m, tgt, srcs, K1, plain.stages[0], plain).losses.total.item<double>(),
+            compute_losses(m, tgt, srcs, K2, plain.stages[0], plain).losses.total.item<double>());
+}
+
 }  // namespace
 }  // namespace geo
 

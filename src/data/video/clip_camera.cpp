@@ -51,7 +51,13 @@ torch::Tensor from_calib_file(const std::string& path, int64_t width, int64_t he
 
 }  // namespace
 
-torch::Tensor clip_camera(const CameraConfig& camera, int64_t width, int64_t height, const std::string& clip) {
+torch::Tensor clip_camera(const CameraConfig& camera, int64_t width, int64_t height, const std::string& clip,
+                          bool learned) {
+  if (learned && !camera.given()) {
+    CameraConfig nominal;
+    nominal.fov_deg = 90;
+    return clip_camera(nominal, width, height, clip);
+  }
   torch::Tensor K;
   std::string key;
   if (!camera.intrinsics.empty()) {
@@ -73,7 +79,8 @@ torch::Tensor clip_camera(const CameraConfig& camera, int64_t width, int64_t hei
   } else {
     throw ConfigError("data.camera: no camera given for '" + clip + "' (" + std::to_string(width) + "x" +
                       std::to_string(height) + "): set data.camera.intrinsics=[fx,fy,cx,cy] (pixels of the original " +
-                      "frames), data.camera.calib_file=<KITTI calib file> or data.camera.fov_deg=<horizontal field of view>");
+                      "frames), data.camera.calib_file=<KITTI calib file> or data.camera.fov_deg=<horizontal field of view>, "
+                      "or learn it: model.learn_intrinsics=true");
   }
   const double fx = K[0][0].item<double>(), fy = K[1][1].item<double>();
   const double cx = K[0][2].item<double>(), cy = K[1][2].item<double>();

@@ -16,7 +16,10 @@ namespace geo {
 // the clip: no camera given, a calibration file without P_rect_02/P2, a focal length outside
 // (0, 1e5) px or a principal point outside the frame. A calibration file whose S_rect_02 differs from
 // the frames is scaled to them (frames resized from KITTI's), with a warning.
-torch::Tensor clip_camera(const CameraConfig& camera, int64_t width, int64_t height, const std::string& clip);
+// With `learned` (model.learn_intrinsics) and no camera given, a nominal 90-degree camera: the
+// networks replace it with the one they learn.
+torch::Tensor clip_camera(const CameraConfig& camera, int64_t width, int64_t height, const std::string& clip,
+                          bool learned = false);
 
 // Short text for logs: "fx 721.5 fy 721.5 cx 609.6 cy 172.9 at 1242x375".
 std::string describe_camera(const torch::Tensor& K, int64_t width, int64_t height);

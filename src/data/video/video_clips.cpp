@@ -137,7 +137,9 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
       W0 = m.cols;
       c.window = v.crop ? crop_to_aspect(W0, H0, d.width, d.height, v.crop_y) : CropWindow{0, 0, W0, H0};
       // The camera is checked before the clip is decoded further.
-      c.K = cropped_resized_intrinsics(clip_camera(d.camera, W0, H0, path), c.window, d.height, d.width)
+      // No camera given: the networks learn it (model.learn_intrinsics, set by the config for such
+      // data); the snippets carry a nominal one.
+      c.K = cropped_resized_intrinsics(clip_camera(d.camera, W0, H0, path, !d.camera.given()), c.window, d.height, d.width)
                 .to(torch::kFloat32);
     } else if (m.rows != H0 || m.cols != W0) {
       throw std::runtime_error("clip '" + path + "': " + what + " is " + std::to_string(m.cols) + "x" +
@@ -221,7 +223,8 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
   if (c.window.width != W0 || c.window.height != H0)
     *report += "; cropped to " + std::to_string(c.window.width) + "x" + std::to_string(c.window.height) + " at (" +
                std::to_string(c.window.x0) + ", " + std::to_string(c.window.y0) + ")";
-  *report += "; camera " + describe_camera(c.K.to(torch::kFloat64), d.width, d.height);
+  *report += d.camera.given() ? "; camera " + describe_camera(c.K.to(torch::kFloat64), d.width, d.height)
+                              : "; camera not given: learned by the networks (model.learn_intrinsics)";
   return c;
 }
 

@@ -23,7 +23,8 @@ struct VideoData {
 
 // Opens data.videos with data.camera and data.video. Throws (ConfigError or std::runtime_error)
 // naming the clip and the value: an unreadable or empty video, a folder without images, frames of
-// changing size, fewer moving frames than one snippet, a camera that cannot be right.
+// changing size, fewer moving frames than one snippet, a camera that cannot be right. Without
+// data.camera the snippets carry a nominal 90-degree camera, for networks that learn theirs.
 VideoData open_video_clips(const DataConfig& data);
 
 // Encodes image files (all one size) as a Motion-JPEG AVI at `fps` (OpenCV's own encoder, present in
