@@ -50,6 +50,7 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
     if (pose.K.defined()) in.K = pose.K;
   }
   StepOutput out;
+  if (nets.pose->options.learn_intrinsics) out.K = in.K;
   out.tgt_disp = in.tgt_disp;
   out.rigid = rigid_terms(in, config.loss);
   if (!stage.uses_flow()) {

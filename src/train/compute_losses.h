@@ -18,6 +18,7 @@ struct StepOutput {
   RigidTerms rigid;
   std::optional<FlowTerms> flow;
   PerSourceScale<torch::Tensor> fwd_full;  // full flows (residual + rigid), when flow ran
+  torch::Tensor K;                         // [B,3,3] the learned camera (model.learn_intrinsics), else undefined
 };
 
 // tgt [B,3,H,W], srcs [B,N,3,H,W], K [B,3,3] on the networks' device. FlowNet inputs are detached

@@ -88,6 +88,8 @@ void TensorBoardSink::on_step(const StepRecord& r) {
   for (const auto& [name, value] : r.losses) writer_.add_scalar("loss/" + name, r.global_step, value);
   writer_.add_scalar("lr", r.global_step, r.lr);
   writer_.add_scalar("grad_norm", r.global_step, r.grad_norm);
+  static const char* camera_tags[] = {"camera/fx", "camera/fy", "camera/cx", "camera/cy"};
+  for (size_t i = 0; i < r.camera.size() && i < 4; ++i) writer_.add_scalar(camera_tags[i], r.global_step, r.camera[i]);
   const auto now = std::chrono::steady_clock::now();
   if (last_ && r.global_step > last_->first) {
     const double secs = std::chrono::duration<double>(now - last_->second).count();
@@ -127,6 +129,8 @@ void ProgressSink::on_step(const StepRecord& r) {
   std::string details;
   for (const auto& [name, value] : r.losses) details += fmt::format("{}{} {:.4f}", details.empty() ? "" : " ", name, value);
   if (r.skipped_steps) details += fmt::format(" ({} NaN/Inf steps skipped)", r.skipped_steps);
+  if (r.camera.size() == 4)
+    details += fmt::format(" | camera fx {:.1f} fy {:.1f} cx {:.1f} cy {:.1f}", r.camera[0], r.camera[1], r.camera[2], r.camera[3]);
   progress_->update(r.iteration, details);
 }
 

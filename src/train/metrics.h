@@ -29,6 +29,7 @@ struct StepRecord {
   double lr = 0;
   double grad_norm = 0;
   int64_t skipped_steps = 0;    // NaN/Inf steps skipped so far in this process
+  std::vector<double> camera;   // a learned camera (model.learn_intrinsics): fx, fy, cx, cy in training pixels
 };
 
 struct ValidationRecord {
@@ -76,7 +77,7 @@ class CsvSink : public MetricsSink {
   RunFolder folder_;
 };
 
-// Scalars "loss/<term>", "lr", "grad_norm", "iterations_per_s", "val/photometric", "val/flow",
+// Scalars "loss/<term>", "lr", "grad_norm", "camera/fx|fy|cx|cy" (a learned camera), "iterations_per_s", "val/photometric", "val/flow",
 // "val/score", and the summary images "<stage>/<tag>", against the global step.
 class TensorBoardSink : public MetricsSink {
  public:

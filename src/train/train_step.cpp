@@ -149,6 +149,10 @@ StepResult TrainStep::run(const torch::Tensor& tgt, const torch::Tensor& srcs, c
   // Two device-to-host copies per step: the loss terms (to skip backward on a non-finite loss:
   // grid_sample's CPU backward crashes on NaN coordinates), then the gradient norm.
   r.losses = r.out.losses.values();
+  if (r.out.K.defined()) {
+    const auto k = r.out.K.detach().mean(0).to(torch::kCPU, torch::kFloat64);
+    r.camera = {k[0][0].item<double>(), k[1][1].item<double>(), k[0][2].item<double>(), k[1][2].item<double>()};
+  }
   const bool loss_finite = std::isfinite(r.losses.back().second);  // the total
   if (overlap_) averager_->begin_step();
   if (loss_finite) r.out.losses.total.backward();

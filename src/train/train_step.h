@@ -44,6 +44,7 @@ struct StepResult {
   bool finite = false;    // false: NaN/Inf loss or gradient; weights and Adam state untouched
   double grad_norm = 0;   // global L2 norm of the gradients before clipping (when finite)
   std::vector<std::pair<std::string, double>> losses;  // LossTerms::values() of this step
+  std::vector<double> camera;  // model.learn_intrinsics: the batch's mean fx, fy, cx, cy (training pixels)
   StepOutput out;         // losses and intermediate maps (for logging and summaries)
 };
 

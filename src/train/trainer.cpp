@@ -260,6 +260,7 @@ class Run {
     rec.lr = lr;
     rec.grad_norm = r.grad_norm;
     rec.skipped_steps = skipped_;
+    rec.camera = r.camera;
     for (auto& sink : sinks_) sink->on_step(rec);
   }
 

@@ -32,6 +32,7 @@ test -f "$work/run_frames/checkpoints/stage1-00000002.pt"
 "$apps/geo_train" --config video.yaml --run-dir "$work/run_learned" --set "data.videos=[$frames]" \
   --set $small > "$work/learned.log" 2>&1 || { cat "$work/learned.log"; exit 1; }
 grep -q "camera not given: learned by the networks" "$work/learned.log" || { cat "$work/learned.log"; exit 1; }
+grep -q "stage1 2/2 .* | camera fx [0-9.]* fy [0-9.]* cx [0-9.]* cy [0-9.]*" "$work/learned.log" || { cat "$work/learned.log"; exit 1; }
 grep -q "learn_intrinsics: true" "$work/run_learned/config.yaml"
 test -f "$work/run_learned/checkpoints/stage1-00000002.pt"
 "$apps/geo_infer" --checkpoint "$work/run_learned" --input "$frames" --output "$work/infer_learned" --max-frames 3 \
