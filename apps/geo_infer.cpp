@@ -6,6 +6,9 @@
 // camera-to-world, chained from the PoseNet's relative poses). With --camera-height (metres above
 // the road, KITTI: 1.65) depth and trajectory are in metres: each frame's scale from the road plane
 // fitted to its depth, smoothed over 11 frames (frames without a road take their neighbours').
+// A sequence also gets trajectory.png (top view; with --ground-truth the KITTI pose file drawn
+// beside it, scale-aligned) and, from a video or with --videos, disp.avi and flow.avi; --ply writes
+// coloured point clouds of chosen frames.
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
@@ -15,12 +18,16 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <optional>
 
 #include "core/logging.h"
 #include "core/runtime.h"
 #include "data/calib.h"
 #include "data/image_io.h"
+#include "data/point_cloud.h"
 #include "data/text_io.h"
+#include "data/visual_outputs.h"
+#include "eval/metrics.h"
 #include "geometry/road_plane.h"
 #include "app_options.h"
 #include "geo/geo.h"
@@ -47,6 +54,19 @@ int main(int argc, char** argv) {
   app.add_option("--camera-height", camera_height,
                  "the camera's height above the road in metres (KITTI: 1.65): depth and trajectory in metres")
       ->check(geo::app::above_zero());
+  std::string ground_truth;
+  app.add_option("--ground-truth", ground_truth,
+                 "KITTI pose file of the input's frames (odometry poses/XX.txt): drawn in trajectory.png beside the "
+                 "estimate, scale-aligned")->check(CLI::ExistingFile);
+  bool videos = false;
+  app.add_flag("--videos", videos, "write disp.avi and flow.avi for a frame folder too (always for a video input)");
+  std::vector<int64_t> ply_frames;
+  app.add_option("--ply", ply_frames, "frame numbers (from 0) to write as coloured point clouds <name>.ply")
+      ->check(geo::app::non_negative());
+  double ply_max_depth = 0;
+  app.add_option("--ply-max-depth", ply_max_depth,
+                 "leave out points farther than this (default: 80 with --camera-height, else 20x the frame's median "
+                 "depth: the sky)")->check(geo::app::above_zero());
   CLI11_PARSE(app, argc, argv);
   geo::keep_freed_memory();
   try {
@@ -58,6 +78,7 @@ int main(int argc, char** argv) {
     const int64_t h = model.spec().height, w = model.spec().width;
     // Frames as (name, image [1,3,h,w]) in order; the original size is kept for the intrinsics.
     std::vector<std::pair<std::string, torch::Tensor>> frames;
+    double fps = 10;  // a frame folder's (KITTI's); a video's own
     int64_t H0 = 0, W0 = 0;
     std::string first_file;
     // One sequence, one camera: a frame of another size is refused (flow and motion across it mean
@@ -97,6 +118,8 @@ int main(int argc, char** argv) {
         cv::VideoCapture cap(input);
         if (!cap.isOpened()) throw std::runtime_error("cannot open '" + input + "' as an image or a video");
         cv::Mat bgr;
+        if (cap.get(cv::CAP_PROP_FPS) > 0) fps = cap.get(cv::CAP_PROP_FPS);
+        videos = true;
         while (cap.read(bgr) && (max_frames <= 0 || static_cast<int64_t>(frames.size()) < max_frames)) {
           H0 = bgr.rows;
           W0 = bgr.cols;
@@ -157,16 +180,35 @@ int main(int argc, char** argv) {
       spdlog::info("metric scale from the camera height {} m: road plane found in {} of {} frames", camera_height, found,
                    frames.size());
     }
+    for (const auto f : ply_frames)
+      if (f >= static_cast<int64_t>(frames.size()))
+        throw std::runtime_error("--ply " + std::to_string(f) + ": the input has " + std::to_string(frames.size()) +
+                                 " frames (numbered from 0)");
+    const bool sequence = frames.size() > 1;
+    std::optional<geo::VideoWriter> disp_video, flow_video;
+    if (videos && sequence) {
+      disp_video.emplace(output + "/disp.avi", fps);
+      if (model.spec().seq_length == 3) flow_video.emplace(output + "/flow.avi", fps);
+    }
     std::vector<torch::Tensor> trajectory = {torch::eye(4, torch::kFloat64)};
     for (size_t i = 0; i < frames.size(); ++i) {
       const auto& [name, img] = frames[i];
       const auto depth = model.depth(img[0]).cpu() * scales[i];
-      geo::write_image(output + "/" + name + "-disp.png", geo::colorize_disparity(1.0 / depth));
+      const auto disp_colour = geo::colorize_disparity(1.0 / depth);
+      geo::write_image(output + "/" + name + "-disp.png", disp_colour);
       geo::write_depth_png(output + "/" + name + "-depth.png", depth);
+      if (disp_video) disp_video->write(disp_colour);
+      if (std::find(ply_frames.begin(), ply_frames.end(), static_cast<int64_t>(i)) != ply_frames.end()) {
+        const double limit = ply_max_depth > 0 ? ply_max_depth : camera_height > 0 ? 80.0 : 20 * depth.median().item<double>();
+        const auto n = geo::write_point_cloud_ply(output + "/" + name + ".ply", depth, img[0].cpu(), K, limit);
+        spdlog::info("{}/{}.ply: {} points (depth up to {:.3g})", output, name, n, limit);
+      }
       if (i + 1 < frames.size()) {
         const auto& next = frames[i + 1].second;
         if (model.spec().seq_length == 3) {
-          geo::write_image(output + "/" + name + "-flow.png", geo::colorize_flow(model.flow(img[0], next[0], K).cpu()));
+          const auto flow_colour = geo::colorize_flow(model.flow(img[0], next[0], K).cpu());
+          geo::write_image(output + "/" + name + "-flow.png", flow_colour);
+          if (flow_video) flow_video->write(flow_colour);
           auto T = model.pose({i > 0 ? frames[i - 1].second[0] : img[0], img[0], next[0]})[1].cpu().to(torch::kFloat64);
           T.slice(0, 0, 3).select(1, 3).mul_(scales[i]);  // the motion at this frame's depth scale
           trajectory.push_back(trajectory.back().matmul(torch::inverse(T)));
@@ -174,9 +216,30 @@ int main(int argc, char** argv) {
       }
       if ((i + 1) % 10 == 0 || i + 1 == frames.size()) spdlog::info("  {}/{} frames", i + 1, frames.size());
     }
-    if (trajectory.size() == frames.size() && frames.size() > 1)
-      geo::write_poses(output + "/trajectory.txt", torch::stack(trajectory));
-    spdlog::info("done: {}/*-disp.png, *-depth.png{}", output, frames.size() > 1 ? ", *-flow.png, trajectory.txt" : "");
+    std::string written = "*-disp.png, *-depth.png";
+    if (trajectory.size() == frames.size() && sequence) {
+      auto poses = torch::stack(trajectory);
+      geo::write_poses(output + "/trajectory.txt", poses);
+      torch::Tensor truth;
+      if (!ground_truth.empty()) {
+        truth = geo::read_poses(ground_truth);
+        if (truth.size(0) < poses.size(0))
+          throw std::runtime_error("--ground-truth '" + ground_truth + "' has " + std::to_string(truth.size(0)) +
+                                   " poses for " + std::to_string(poses.size(0)) + " frames");
+        std::tie(truth, poses) = geo::align_trajectory_scale(truth.slice(0, 0, poses.size(0)), poses);
+      }
+      geo::write_image(output + "/trajectory.png", geo::trajectory_plot(poses, truth));
+      written += ", *-flow.png, trajectory.txt, trajectory.png";
+    }
+    if (disp_video) {
+      disp_video->close();
+      written += ", disp.avi";
+    }
+    if (flow_video) {
+      flow_video->close();
+      written += ", flow.avi";
+    }
+    spdlog::info("done: {}/{{{}}}", output, written);
     return 0;
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());

@@ -23,6 +23,7 @@ int main(int argc, char** argv) {
   int drives = -1, test_drives = -1, flow_pairs = -1, threads = 0;
   int64_t frames = -1, odometry_frames = -1;
   bool force = false;
+  double turns = 1.0;
   std::string video;
   app.add_option("--preset", preset, "tiny (64x208, for CI and tests) or kitti (375x1242, KITTI intrinsics)")
       ->check(CLI::IsMember({"tiny", "kitti"}));
@@ -35,6 +36,9 @@ int main(int argc, char** argv) {
   app.add_option("--flow-pairs", flow_pairs, "KITTI-2015-style flow pairs (default: preset's)")->check(geo::app::non_negative());
   app.add_option("--odometry-frames", odometry_frames, "frames of odometry sequence 09 (default: preset's)")->check(CLI::Range(5, 100000));
   app.add_option("--threads", threads, "render threads (0 = all cores)")->check(geo::app::non_negative());
+  app.add_option("--turns", turns, "how winding the road is: 1 gentle (~1 degree of heading per frame), "
+                 "2 four times the heading change (a learned camera needs rotation to pin its focal length)")
+      ->check(CLI::Range(0.1, 10.0));
   app.add_flag("--force", force, "write into a non-empty --out");
   app.add_option("--video", video,
                  "also write the first training drive as a Motion-JPEG AVI at 10 fps (train on it with "
@@ -46,6 +50,7 @@ int main(int argc, char** argv) {
     auto o = geo::SynthOptions::preset_named(preset);
     o.seed = seed;
     o.threads = threads;
+    o.turns = turns;
     if (drives > 0) o.train_drives = drives;
     if (test_drives > 0) o.test_drives = test_drives;
     if (frames > 0) o.frames_per_drive = frames;

@@ -1,4 +1,5 @@
 #include "data/image_io.h"
+#include "data/cv_tensor.h"
 
 #include "core/files.h"
 #include "core/tensor_checks.h"
@@ -44,13 +45,15 @@ void write_raw(const std::string& path, const cv::Mat& m) {
   write_file_atomic(path, bytes);
 }
 
+}  // namespace
+
 torch::Tensor mat_to_tensor(const cv::Mat& bgr_any, const std::string& path) {
-  cv::Mat m = bgr_any;
-  if (m.channels() == 1) cv::cvtColor(m, m, cv::COLOR_GRAY2RGB);
-  else if (m.channels() == 3) cv::cvtColor(m, m, cv::COLOR_BGR2RGB);
-  else if (m.channels() == 4) cv::cvtColor(m, m, cv::COLOR_BGRA2RGB);
+  cv::Mat m;  // a new buffer: the caller's image stays BGR
+  if (bgr_any.channels() == 1) cv::cvtColor(bgr_any, m, cv::COLOR_GRAY2RGB);
+  else if (bgr_any.channels() == 3) cv::cvtColor(bgr_any, m, cv::COLOR_BGR2RGB);
+  else if (bgr_any.channels() == 4) cv::cvtColor(bgr_any, m, cv::COLOR_BGRA2RGB);
   else
-    throw std::runtime_error("image '" + path + "' has " + std::to_string(m.channels()) +
+    throw std::runtime_error("image '" + path + "' has " + std::to_string(bgr_any.channels()) +
                              " channels; expected 1, 3 or 4");
   cv::Mat f;
   m.convertTo(f, CV_32FC3, m.depth() == CV_16U ? 1.0 / 65535.0 : 1.0 / 255.0);
@@ -69,7 +72,6 @@ cv::Mat tensor_to_bgr8(const torch::Tensor& image) {
   return bgr;
 }
 
-}  // namespace
 
 torch::Tensor read_image(const std::string& path) {
   return mat_to_tensor(read_raw(path, cv::IMREAD_UNCHANGED), path);

@@ -136,12 +136,13 @@ torch::Tensor RigidPose::matrix() const {
   return m;
 }
 
-SynthScene::SynthScene(uint64_t seed, int64_t frames) : seed_(seed) {
+SynthScene::SynthScene(uint64_t seed, int64_t frames, double turns) : seed_(seed) {
+  if (!(turns > 0 && turns <= 10)) throw std::invalid_argument("synthetic world: turns must be in (0, 10], got " + std::to_string(turns));
   std::mt19937_64 rng(mix(seed + 12345));
   auto U = [&](double a, double b) { return std::uniform_real_distribution<double>(a, b)(rng); };
   speed_ = U(0.8, 1.2);  // metres per frame (KITTI: about 1 m at 10 Hz)
   sway_amp_ = U(0.4, 1.0);
-  sway_period_ = U(40, 80);
+  sway_period_ = U(40, 80) / turns;
   sway_phase_ = U(0, 2 * M_PI);
   const double h = kCameraHeight;
   const double z_end = static_cast<double>(frames) * speed_ + 90;

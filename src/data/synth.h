@@ -37,6 +37,8 @@ struct SynthOptions {
   double lidar_azimuth_step_deg = 0.2;
   uint64_t seed = 1;
   int threads = 0;                // 0 = all cores
+  double turns = 1.0;             // how winding the road is: the sway's frequency x turns (heading
+                                  // change per frame x turns^2); rotation is what pins a learned focal length
 
   // "tiny" (64x208, CI) or "kitti" (375x1242, KITTI's intrinsics). Unknown names throw.
   static SynthOptions preset_named(const std::string& name);
@@ -67,7 +69,8 @@ inline constexpr double kSynthCameraHeight = 1.65;
 
 class SynthScene {
  public:
-  SynthScene(uint64_t seed, int64_t frames);
+  // `turns` > 0 scales the sway's frequency (1: gentle turns, up to ~1 degree of heading per frame).
+  SynthScene(uint64_t seed, int64_t frames, double turns = 1.0);
 
   RigidPose camera(int64_t frame) const;  // camera-to-world at `frame`
   const std::vector<SynthBox>& boxes() const { return boxes_; }

@@ -78,7 +78,7 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
   std::vector<std::string> train, val, test, test_scenes;
   for (int d = 0; d < drives; ++d) {
     const bool is_test = d >= o.train_drives;
-    const SynthScene scene(synth_drive_seed(o.seed, 0, d), o.frames_per_drive);
+    const SynthScene scene(synth_drive_seed(o.seed, 0, d), o.frames_per_drive, o.turns);
     const std::string folder = synth_drive_folder(d + 1), dir = raw + "/" + folder;
     for (const char* sub : {"/image_02/data", "/velodyne_points/data", "/proj_depth/groundtruth/image_02"})
       fs::create_directories(dir + sub);
@@ -108,7 +108,7 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
   for (const char* sub : {"/image_2", "/flow_occ", "/flow_noc", "/obj_map", "/calib_cam_to_cam", "/depth"})
     fs::create_directories(flow + sub);
   for (int i = 0; i < o.flow_pairs; ++i) {
-    const SynthScene scene(synth_drive_seed(o.seed, 1, i), 40);
+    const SynthScene scene(synth_drive_seed(o.seed, 1, i), 40, o.turns);
     const int64_t f = 5 + (i * 7) % 30;
     const std::string name = zero_padded(i, 6);
     const auto before = render_frame(scene, f - 1, o);  // KITTI 2015's multi-view frame 09
@@ -131,7 +131,7 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
   const std::string seq = root + "/odometry/sequences/09";
   fs::create_directories(seq + "/image_2");
   fs::create_directories(root + "/odometry/poses");
-  const SynthScene odo(synth_drive_seed(o.seed, 2, 9), o.odometry_frames);
+  const SynthScene odo(synth_drive_seed(o.seed, 2, 9), o.odometry_frames, o.turns);
   std::ostringstream times;
   for (int64_t f = 0; f < o.odometry_frames; ++f) {
     write_image(seq + "/image_2/" + zero_padded(f, 6) + ".png", render_frame(odo, f, o).image);

@@ -224,6 +224,24 @@ TEST(GeoInfer, WritesDepthFlowAndTrajectoryAndRefusesMixedFrameSizes) {
   const auto trajectory = read_poses(dir + "/out/trajectory.txt");
   EXPECT_EQ(trajectory.size(0), 3);
   EXPECT_TRUE(torch::allclose(trajectory[0], torch::eye(4, torch::kFloat64)));
+  EXPECT_EQ(read_image(dir + "/out/trajectory.png").size(1), 640);
+  EXPECT_FALSE(std::filesystem::exists(dir + "/out/disp.avi"));  // a folder: videos on request
+
+  // Videos, a point cloud and the ground truth in the plot; a pose file too short is refused.
+  write_poses(dir + "/gt.txt", trajectory);
+  ASSERT_EQ(std::system((tool + dir + "/frames --output " + dir + "/out3 --videos --ply 1 --ground-truth " + dir +
+                         "/gt.txt > " + dir + "/log 2>&1").c_str()), 0)
+      << test::read_file(dir + "/log");
+  for (const char* f : {"disp.avi", "flow.avi", "000001.ply", "trajectory.png"})
+    EXPECT_TRUE(std::filesystem::exists(dir + "/out3/" + f)) << f;
+  EXPECT_NE(test::read_file(dir + "/out3/000001.ply").find("element vertex "), std::string::npos);
+  write_poses(dir + "/short.txt", trajectory.slice(0, 0, 2));
+  EXPECT_NE(std::system((tool + dir + "/frames --output " + dir + "/out4 --ground-truth " + dir + "/short.txt > " + dir +
+                         "/log 2>&1").c_str()), 0);
+  EXPECT_NE(test::read_file(dir + "/log").find(dir + "/short.txt' has 2 poses for 3 frames"), std::string::npos)
+      << test::read_file(dir + "/log");
+  EXPECT_NE(std::system((tool + dir + "/frames --output " + dir + "/out5 --ply 3 > " + dir + "/log 2>&1").c_str()), 0);
+  EXPECT_NE(test::read_file(dir + "/log").find("--ply 3: the input has 3 frames"), std::string::npos);
 
   write_image(dir + "/frames/000003.png", image(32, 104));
   EXPECT_NE(std::system((tool + dir + "/frames --output " + dir + "/out2 > " + dir + "/log 2>&1").c_str()), 0);

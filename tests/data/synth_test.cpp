@@ -38,6 +38,20 @@ TEST(Synth, SameSeedSameImages) {
   EXPECT_FALSE(torch::equal(render_frame(a, 3, o).image, render_frame(c, 3, o).image));
 }
 
+// turns = 2 doubles the sway's frequency: at every frame the path's lateral speed is twice that
+// of turns = 1 at the doubled phase, so tan(heading) doubles at frame 0 (same phase) and the
+// forward positions agree. Anything else in the world stays as it is.
+TEST(Synth, TurnsScaleTheHeadingAndLeaveTheWorld) {
+  const SynthScene gentle(7, 20), winding(7, 20, 2.0);
+  const auto a = gentle.camera(0), b = winding.camera(0);
+  const double tan_a = a.R[2] / a.R[0], tan_b = b.R[2] / b.R[0];  // R = [c 0 s; 0 1 0; -s 0 c]
+  EXPECT_NEAR(tan_b, 2 * tan_a, 1e-12);
+  EXPECT_DOUBLE_EQ(gentle.camera(5).c.z, winding.camera(5).c.z);
+  ASSERT_EQ(gentle.boxes().size(), winding.boxes().size());
+  for (size_t i = 0; i < gentle.boxes().size(); ++i) EXPECT_DOUBLE_EQ(gentle.boxes()[i].lo.z, winding.boxes()[i].lo.z);
+  EXPECT_THROW(SynthScene(7, 20, 0.0), std::invalid_argument);
+}
+
 TEST(Synth, GroundTruthFlowWarpsNextFrameOntoThisOne) {
   const auto o = tiny();
   for (uint64_t seed : {1, 2, 3}) {

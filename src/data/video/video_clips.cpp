@@ -1,4 +1,7 @@
 #include "data/video/video_clips.h"
+#include "data/cv_tensor.h"
+#include "data/image_io.h"
+#include "data/visual_outputs.h"
 
 #include "data/video/clip_camera.h"
 #include "data/video/frame_selection.h"
@@ -44,16 +47,6 @@ cv::Mat crop_resize(const cv::Mat& bgr, const CropWindow& w, int64_t height, int
   return out;
 }
 
-torch::Tensor to_tensor(const cv::Mat& bgr) {
-  cv::Mat rgb;
-  cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
-  return torch::from_blob(rgb.data, {rgb.rows, rgb.cols, 3}, torch::kUInt8)
-      .permute({2, 0, 1})
-      .to(torch::kFloat32)
-      .div_(255.0)
-      .contiguous();
-}
-
 cv::Mat read_colour(const std::string& path) {
   cv::Mat m = cv::imread(path, cv::IMREAD_COLOR);
   if (m.empty()) throw std::runtime_error("cannot read image '" + path + "' (missing, empty or not an image)");
@@ -64,9 +57,9 @@ torch::Tensor clip_frame(const Clip& c, size_t i) {
   if (!c.jpeg.empty()) {
     cv::Mat m = cv::imdecode(c.jpeg.at(i), cv::IMREAD_COLOR);
     if (m.empty()) throw std::runtime_error("clip '" + c.path + "': frame " + std::to_string(c.index.at(i)) + " cannot be decoded");
-    return to_tensor(m);
+    return mat_to_tensor(m, c.path);
   }
-  return to_tensor(crop_resize(read_colour(c.files.at(i)), c.window, c.height, c.width));
+  return mat_to_tensor(crop_resize(read_colour(c.files.at(i)), c.window, c.height, c.width), c.files.at(i));
 }
 
 class ClipSnippets : public SnippetSource {
@@ -164,7 +157,7 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
       }
       const cv::Mat m = read_colour(files[i]);
       check_size(m, "'" + files[i] + "'");
-      const auto frame = to_tensor(crop_resize(m, c.window, d.height, d.width));
+      const auto frame = mat_to_tensor(crop_resize(m, c.window, d.height, d.width), path);
       if (selector->offer(idx, motion_thumbnail(frame))) {
         c.files.push_back(files[i]);
         c.index.push_back(idx);
@@ -192,7 +185,7 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
       }
       check_size(m, "frame " + std::to_string(idx));
       const cv::Mat small = crop_resize(m, c.window, d.height, d.width);
-      if (selector->offer(idx, motion_thumbnail(to_tensor(small)))) {
+      if (selector->offer(idx, motion_thumbnail(mat_to_tensor(small, path)))) {
         c.jpeg.emplace_back();
         cv::imencode(".jpg", small, c.jpeg.back(), {cv::IMWRITE_JPEG_QUALITY, kJpegQuality});
         c.index.push_back(idx);
@@ -242,19 +235,15 @@ std::vector<std::string> frame_files(const std::string& folder) {
 
 void write_video_file(const std::vector<std::string>& frames, const std::string& path, double fps) {
   if (frames.empty()) throw std::runtime_error("video '" + path + "': no frames to write");
-  const cv::Mat first = read_colour(frames.front());
-  const std::string tmp = path + ".tmp.avi";
-  cv::VideoWriter writer(tmp, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), fps, first.size());
-  if (!writer.isOpened()) throw std::runtime_error("cannot write video '" + path + "' (Motion-JPEG AVI)");
+  VideoWriter writer(path, fps);
   for (const auto& f : frames) {
-    const cv::Mat m = read_colour(f);
-    if (m.size() != first.size())
-      throw std::runtime_error("'" + f + "' is " + std::to_string(m.cols) + "x" + std::to_string(m.rows) + " but '" +
-                               frames.front() + "' is " + std::to_string(first.cols) + "x" + std::to_string(first.rows));
-    writer.write(m);
+    try {
+      writer.write(read_image(f));
+    } catch (const std::runtime_error& e) {
+      throw std::runtime_error("'" + f + "': " + e.what());
+    }
   }
-  writer.release();
-  fs::rename(tmp, path);
+  writer.close();
 }
 
 VideoData open_video_clips(const DataConfig& d) {

@@ -1,0 +1,16 @@
+// OpenCV images <-> tensors, for geo's OpenCV readers and writers (not part of the library's API).
+#pragma once
+
+#include <opencv2/core.hpp>
+#include <torch/torch.h>
+
+#include <string>
+
+namespace geo {
+
+// 1-, 3- or 4-channel BGR(A) 8- or 16-bit image -> float32 RGB [3,H,W] in [0,1]; `path` names it in errors.
+torch::Tensor mat_to_tensor(const cv::Mat& bgr_any, const std::string& path);
+// RGB [3,H,W] float in [0,1] (clamped) or uint8 -> 8-bit BGR.
+cv::Mat tensor_to_bgr8(const torch::Tensor& image);
+
+}  // namespace geo
