@@ -67,6 +67,8 @@ int main(int argc, char** argv) {
   app.add_option("--ply-max-depth", ply_max_depth,
                  "leave out points farther than this (default: 80 with --camera-height, else 20x the frame's median "
                  "depth: the sky)")->check(geo::app::above_zero());
+  bool force = false;
+  app.add_flag("--force", force, "write into a non-empty --output: geo_infer's earlier outputs there are removed first");
   CLI11_PARSE(app, argc, argv);
   geo::keep_freed_memory();
   try {
@@ -104,6 +106,11 @@ int main(int argc, char** argv) {
       }
       std::sort(files.begin(), files.end());
       if (files.empty()) throw std::runtime_error("no .png/.jpg images in '" + input + "'");
+      for (size_t i = 1; i < files.size(); ++i)  // sorted: a shared stem sits next to its twin
+        if (files[i].stem() == files[i - 1].stem())
+          throw std::runtime_error("'" + files[i - 1].string() + "' and '" + files[i].string() +
+                                   "' would write the same outputs (" + files[i].stem().string() +
+                                   "-*.png): keep one of them in '" + input + "'");
       for (const auto& f : files) {
         if (max_frames > 0 && static_cast<int64_t>(frames.size()) >= max_frames) break;
         add_file(f);
@@ -133,6 +140,29 @@ int main(int argc, char** argv) {
           frames.emplace_back(name, t);
         }
         if (frames.empty()) throw std::runtime_error("video '" + input + "' has no readable frames");
+      }
+    }
+    if (fs::exists(output)) {
+      std::error_code ec;
+      if (fs::is_directory(input) && fs::equivalent(input, output, ec))
+        throw std::runtime_error("--output '" + output + "' is the input folder: its outputs would be read as frames next time");
+      if (!fs::is_directory(output)) throw std::runtime_error("--output '" + output + "' exists and is not a folder");
+      if (!fs::is_empty(output)) {
+        if (!force)
+          throw std::runtime_error("--output '" + output + "' is not empty (--force replaces geo_infer's earlier outputs there)");
+        // Only what geo_infer writes: an earlier, longer run's frames and trajectory must not mix with this one's.
+        int64_t removed = 0;
+        for (const auto& e : fs::directory_iterator(output)) {
+          const auto name = e.path().filename().string();
+          auto ends = [&](const std::string& tail) {
+            return name.size() >= tail.size() && name.compare(name.size() - tail.size(), tail.size(), tail) == 0;
+          };
+          if (e.is_regular_file() && (ends("-disp.png") || ends("-depth.png") || ends("-flow.png") || ends(".ply") ||
+                                      name == "trajectory.txt" || name == "trajectory.png" || name == "disp.avi" ||
+                                      name == "flow.avi"))
+            removed += fs::remove(e.path()) ? 1 : 0;
+        }
+        spdlog::info("--force: {} earlier output file(s) removed from {}", removed, output);
       }
     }
     fs::create_directories(output);
@@ -176,6 +206,9 @@ int main(int argc, char** argv) {
       for (size_t i = 0; i < frames.size(); ++i)
         if (!(scales[i] > 0))
           throw std::runtime_error("--camera-height: no road plane in any frame near " + frames[i].first +
+                                   (intrinsics.empty() && !model.spec().learns_intrinsics
+                                        ? " (with the default KITTI-like camera: give the input's --intrinsics)"
+                                        : "") +
                                    ": metric scale needs a flat road in front of the camera");
       spdlog::info("metric scale from the camera height {} m: road plane found in {} of {} frames", camera_height, found,
                    frames.size());
@@ -191,12 +224,14 @@ int main(int argc, char** argv) {
       if (model.spec().seq_length == 3) flow_video.emplace(output + "/flow.avi", fps);
     }
     std::vector<torch::Tensor> trajectory = {torch::eye(4, torch::kFloat64)};
+    int64_t beyond_png = 0;  // depths that KITTI's 16-bit PNG (depth x 256) cannot hold
     for (size_t i = 0; i < frames.size(); ++i) {
       const auto& [name, img] = frames[i];
       const auto depth = model.depth(img[0]).cpu() * scales[i];
       const auto disp_colour = geo::colorize_disparity(1.0 / depth);
       geo::write_image(output + "/" + name + "-disp.png", disp_colour);
       geo::write_depth_png(output + "/" + name + "-depth.png", depth);
+      beyond_png += (depth > 255.99).sum().item<int64_t>();
       if (disp_video) disp_video->write(disp_colour);
       if (std::find(ply_frames.begin(), ply_frames.end(), static_cast<int64_t>(i)) != ply_frames.end()) {
         const double limit = ply_max_depth > 0 ? ply_max_depth : camera_height > 0 ? 80.0 : 20 * depth.median().item<double>();
@@ -216,6 +251,10 @@ int main(int argc, char** argv) {
       }
       if ((i + 1) % 10 == 0 || i + 1 == frames.size()) spdlog::info("  {}/{} frames", i + 1, frames.size());
     }
+    const double beyond = static_cast<double>(beyond_png) / (static_cast<double>(frames.size()) * h * w);
+    if (beyond > 0.01)
+      spdlog::warn("{:.0f}% of the depths are beyond 256, the most a KITTI depth PNG holds: *-depth.png saturates there{}",
+                   100 * beyond, camera_height > 0 ? fmt::format(" (is --camera-height {} in metres?)", camera_height) : "");
     std::string written = "*-disp.png, *-depth.png";
     if (trajectory.size() == frames.size() && sequence) {
       auto poses = torch::stack(trajectory);

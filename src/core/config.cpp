@@ -1,6 +1,7 @@
 #include "core/config.h"
 #include "core/paths.h"  // generated: GEO_SOURCE_DIR
 
+#include <spdlog/spdlog.h>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
@@ -757,21 +758,27 @@ std::string shipped_config_dir() {
 }
 
 std::string resolve_config_path(const std::string& name) {
-  std::vector<std::string> tried;
-  auto exists = [&](const fs::path& p) {
-    tried.push_back(p.string());
-    return fs::is_regular_file(p);
-  };
-  if (exists(name)) return name;
-  if (fs::is_directory(name)) throw ConfigError("config '" + name + "' is a folder, not a YAML file");
+  std::error_code ec;
+  if (fs::is_regular_file(name, ec)) {
+    spdlog::info("config {}", fs::absolute(name, ec).string());
+    return name;
+  }
+  if (fs::is_directory(name, ec)) throw ConfigError("config '" + name + "' is a folder, not a YAML file");
   const fs::path dir = shipped_config_dir();
-  const fs::path bare = fs::path(name).filename();
-  if (exists(dir / bare)) return (dir / bare).string();
-  if (bare.extension() != ".yaml" && exists(dir / (bare.string() + ".yaml")))
-    return (dir / (bare.string() + ".yaml")).string();
-  std::string msg = "config '" + name + "' not found; looked at:";
-  for (const auto& t : tried) msg += " " + t;
-  throw ConfigError(msg);
+  // Only a bare name means a shipped config: a path with a folder that does not exist is a typo,
+  // and silently training the shipped file of the same name would hide it.
+  if (fs::path(name).has_parent_path())
+    throw ConfigError("config '" + name + "' not found (a path with a folder is used as given; bare names such as "
+                      "stage1.yaml are looked up in " + dir.string() + ")");
+  std::vector<fs::path> candidates{dir / name};
+  if (fs::path(name).extension() != ".yaml") candidates.push_back(dir / (name + ".yaml"));
+  for (const auto& candidate : candidates)
+    if (fs::is_regular_file(candidate, ec)) {
+      spdlog::info("config {} (shipped)", candidate.string());
+      return candidate.string();
+    }
+  throw ConfigError("config '" + name + "' not found: not a file here, nor '" + (dir / name).string() +
+                    (fs::path(name).extension() == ".yaml" ? "" : "[.yaml]") + "' among the shipped configs");
 }
 
 std::string to_yaml(const Config& config) {

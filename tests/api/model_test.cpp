@@ -243,6 +243,33 @@ TEST(GeoInfer, WritesDepthFlowAndTrajectoryAndRefusesMixedFrameSizes) {
   EXPECT_NE(std::system((tool + dir + "/frames --output " + dir + "/out5 --ply 3 > " + dir + "/log 2>&1").c_str()), 0);
   EXPECT_NE(test::read_file(dir + "/log").find("--ply 3: the input has 3 frames"), std::string::npos);
 
+  // Nothing read is overwritten and nothing stale stays: a used --output needs --force, which clears
+  // geo_infer's earlier outputs (a single frame leaves no trajectory of an earlier sequence behind)
+  // and nothing else; the input folder is never the output; two frames of one name are refused.
+  auto run = [&](const std::string& args) {
+    return std::system((test::apps_dir() + "/geo_infer --checkpoint " + checkpoint() + " --device cpu " + args + " > " +
+                        dir + "/log 2>&1").c_str());
+  };
+  EXPECT_NE(run("--input " + dir + "/frames/000000.png --output " + dir + "/out3"), 0);
+  EXPECT_NE(test::read_file(dir + "/log").find("--output '" + dir + "/out3' is not empty (--force"), std::string::npos)
+      << test::read_file(dir + "/log");
+  test::write_text(dir + "/out3/notes.txt", "mine");
+  ASSERT_EQ(run("--input " + dir + "/frames/000000.png --output " + dir + "/out3 --force"), 0) << test::read_file(dir + "/log");
+  for (const char* gone : {"trajectory.txt", "trajectory.png", "disp.avi", "000001.ply", "000001-disp.png"})
+    EXPECT_FALSE(std::filesystem::exists(dir + "/out3/" + std::string(gone))) << gone;
+  EXPECT_TRUE(std::filesystem::exists(dir + "/out3/000000-disp.png"));
+  EXPECT_EQ(test::read_file(dir + "/out3/notes.txt"), "mine");
+  EXPECT_NE(run("--input " + dir + "/frames --output " + dir + "/frames/ --force"), 0);
+  EXPECT_NE(test::read_file(dir + "/log").find("is the input folder"), std::string::npos) << test::read_file(dir + "/log");
+  std::filesystem::create_directories(dir + "/twins");
+  write_image(dir + "/twins/000001.png", image(64, 208, 0.1));
+  write_image(dir + "/twins/000001.jpg", image(64, 208, 0.1));
+  EXPECT_NE(run("--input " + dir + "/twins --output " + dir + "/out6"), 0);
+  EXPECT_NE(test::read_file(dir + "/log").find("'" + dir + "/twins/000001.jpg' and '" + dir +
+                                               "/twins/000001.png' would write the same outputs"),
+            std::string::npos)
+      << test::read_file(dir + "/log");
+
   write_image(dir + "/frames/000003.png", image(32, 104));
   EXPECT_NE(std::system((tool + dir + "/frames --output " + dir + "/out2 > " + dir + "/log 2>&1").c_str()), 0);
   const std::string log = test::read_file(dir + "/log");

@@ -317,4 +317,17 @@ TEST(Config, ResolveNamesEveryPlaceTried) {
             "config '" + geo::shipped_config_dir() + "' is a folder, not a YAML file");
 }
 
+// A mistyped path is an error, never the shipped config of the same file name; bare names (with or
+// without .yaml) are the shipped ones.
+TEST(Config, OnlyBareNamesMeanShippedConfigs) {
+  const auto msg = error_of([] { geo::resolve_config_path("no_such_folder/stage1.yaml"); });
+  EXPECT_NE(msg.find("config 'no_such_folder/stage1.yaml' not found (a path with a folder is used as given"),
+            std::string::npos) << msg;
+  EXPECT_EQ(geo::resolve_config_path("stage1"), geo::shipped_config_dir() + "/stage1.yaml");
+  EXPECT_EQ(geo::resolve_config_path("stage1.yaml"), geo::shipped_config_dir() + "/stage1.yaml");
+  const auto dir = geo::test::fresh_dir("config_here");
+  geo::test::write_text(dir + "/stage1.yaml", "stages: [{name: mine, iterations: 3}]\n");
+  EXPECT_EQ(geo::resolve_config_path(dir + "/stage1.yaml"), dir + "/stage1.yaml");  // a file that exists: as given
+}
+
 }  // namespace
