@@ -379,9 +379,11 @@ int main(int argc, char** argv) {
   try {
     geo::setup_logging("info");
     if (!o.precision.empty()) o.overrides.push_back("run.precision=" + o.precision);
-    const geo::Config config = o.config_path.empty()
-                                   ? geo::parse_config("", "<defaults>", o.overrides)
-                                   : geo::load_config(geo::resolve_config_path(o.config_path), o.overrides);
+    const std::string config_file = o.config_path.empty() ? "" : geo::resolve_config_path(o.config_path);
+    const geo::Config config = config_file.empty() ? geo::parse_config("", "<defaults>", o.overrides)
+                                                   : geo::load_config(config_file, o.overrides);
+    geo::check_outputs({{"--json", o.json_path}, {"--markdown", o.markdown_path}},
+                       {config_file, o.data_root, config.data.root});
     const torch::Device device = geo::select_device(o.device_name);
     geo::RunConfig settings = config.run;  // as geo_train applies them, with --threads
     settings.threads = o.threads;

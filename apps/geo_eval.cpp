@@ -122,6 +122,10 @@ int main(int argc, char** argv) {
                    predictor->has_flow() ? "yes" : "no: rigid flow only");
       source = geo::model_source(*predictor);
     }
+    // Before minutes of evaluation: the outputs replace nothing this command reads (the model, the
+    // predictions, the data root's ground truth) and not each other.
+    geo::check_outputs({{"--output", output}, {"--output-poses", o.output_poses}},
+                       {predictor ? predictor->path() : checkpoint, predictions, o.data_root});
     geo::EvalResult r;
     if (!export_gt.empty()) {
       if (o.split != "eigen") throw std::runtime_error("--export-gt is for --split eigen (got " + o.split + ")");

@@ -10,6 +10,7 @@
 #include <cstring>
 #include <ctime>
 #include <filesystem>
+#include <fstream>
 #include <stdexcept>
 
 namespace geo {
@@ -172,6 +173,45 @@ std::string zero_padded(long long number, int digits) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%0*lld", digits, number);
   return buf;
+}
+
+namespace {
+
+bool is_zip_archive(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  char magic[4] = {};
+  return f.read(magic, 4) && magic[0] == 'P' && magic[1] == 'K' && magic[2] == 3 && magic[3] == 4;
+}
+
+}  // namespace
+
+void check_outputs(const std::vector<NamedPath>& outputs, const std::vector<std::string>& inputs, bool force) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  for (size_t i = 0; i < outputs.size(); ++i) {
+    const auto& [option, path] = outputs[i];
+    if (path.empty()) continue;
+    const auto where = fs::weakly_canonical(path, ec);
+    for (size_t j = 0; j < i; ++j)
+      if (!outputs[j].path.empty() && fs::weakly_canonical(outputs[j].path, ec) == where)
+        throw std::runtime_error(outputs[j].option + " and " + option + " name one file '" + path +
+                                 "': one of them would be lost");
+    if (!fs::exists(path, ec)) continue;
+    for (const auto& in : inputs) {
+      if (in.empty() || !fs::exists(in, ec)) continue;
+      if (fs::equivalent(path, in, ec))
+        throw std::runtime_error(option + " '" + path + "' is '" + in + "', which this command reads: refusing to replace it");
+      if (fs::is_directory(in, ec)) {
+        const auto dir = fs::weakly_canonical(in, ec);
+        const auto rel = where.lexically_relative(dir);
+        if (!rel.empty() && *rel.begin() != "..")
+          throw std::runtime_error(option + " '" + path + "' is a file inside '" + in +
+                                   "', which this command reads: refusing to replace it");
+      }
+    }
+    if (!force && fs::is_regular_file(path, ec) && is_zip_archive(path))
+      throw std::runtime_error(option + " '" + path + "' is a model or checkpoint (a zip archive): refusing to replace it");
+  }
 }
 
 }  // namespace geo

@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <functional>
 #include <string>
+#include <vector>
 
 namespace geo {
 
@@ -21,6 +22,15 @@ void write_file_durable(const std::string& path, const std::function<void(const 
 
 // write_file_durable of a string.
 void write_file_atomic(const std::string& path, const std::string& content);
+
+// The rule for every tool that writes results: never over a file the command reads (an input file,
+// or an existing file inside an input folder such as a data root), never two outputs on one path,
+// and never over a model or checkpoint (a zip archive) unless `force`. `outputs` pairs each option
+// with its path (empty paths are skipped); throws std::runtime_error naming the option and the path.
+struct NamedPath {
+  std::string option, path;
+};
+void check_outputs(const std::vector<NamedPath>& outputs, const std::vector<std::string>& inputs, bool force = false);
 
 // An exclusive lock on a folder (flock on <dir>/.lock, which holds the owner's PID and host): one
 // writer per run folder. The kernel releases it when the process ends, however it ends, so a crash

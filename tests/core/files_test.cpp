@@ -86,3 +86,31 @@ TEST(Files, OneLockHolderPerFolderAndReleasedWithIt) {
 
 }  // namespace
 }  // namespace geo
+
+namespace geo {
+namespace {
+
+// One rule for every tool that writes results (geo_eval, geo_bench): nothing it reads, no two
+// outputs on one path, no model or checkpoint without force; new files anywhere else are fine.
+TEST(CheckOutputs, NeverOverInputsOrEachOtherOrAModel) {
+  const auto dir = test::fresh_dir("check_outputs");
+  test::write_text(dir + "/model.pt", std::string("PK\x03\x04", 4) + "rest of a zip archive");
+  test::write_text(dir + "/data/poses/09.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n");
+  test::write_text(dir + "/old.json", "{}");
+  const std::vector<std::string> inputs{dir + "/model.pt", dir + "/data"};
+  EXPECT_NO_THROW(check_outputs({{"--output", dir + "/new.json"}, {"--output-poses", ""}}, inputs));
+  EXPECT_NO_THROW(check_outputs({{"--output", dir + "/old.json"}}, inputs));  // an earlier result: replaced
+  EXPECT_NO_THROW(check_outputs({{"--output", dir + "/data/results.json"}}, inputs));  // new, beside the data
+  GEO_EXPECT_THROW_WITH(check_outputs({{"--output", dir + "/a.json"}, {"--output-poses", dir + "/./a.json"}}, inputs),
+                        "--output and --output-poses name one file");
+  GEO_EXPECT_THROW_WITH(check_outputs({{"--output", dir + "/model.pt"}}, inputs),
+                        "--output '" + dir + "/model.pt' is '" + dir + "/model.pt', which this command reads");
+  GEO_EXPECT_THROW_WITH(check_outputs({{"--output-poses", dir + "/data/poses/09.txt"}}, inputs),
+                        "is a file inside '" + dir + "/data', which this command reads");
+  test::write_text(dir + "/other.pt", std::string("PK\x03\x04", 4));
+  GEO_EXPECT_THROW_WITH(check_outputs({{"--json", dir + "/other.pt"}}, inputs), "--json '" + dir + "/other.pt' is a model or checkpoint");
+  EXPECT_NO_THROW(check_outputs({{"--json", dir + "/other.pt"}}, inputs, true));
+}
+
+}  // namespace
+}  // namespace geo
