@@ -156,7 +156,8 @@ struct Options {
     app.add_option("--batch", batches, "inference batch sizes, e.g. 1,4")->delimiter(',')->check(geo::app::positive());
     geo::app::add_precision_option(app, precision, {"fp32", "tf32", "bf16"},
                                    "fp32, tf32 or bf16 (run.precision; default: the config's)");
-    app.add_option("--train-batch", train_batch, "training batch size (default: each stage's batch_size)");
+    app.add_option("--train-batch", train_batch, "training batch size (default: each stage's batch_size)")
+        ->check(geo::app::positive());
     app.add_option("--stage", stages, "time only these stages' training steps (names, e.g. stage1)")->delimiter(',');
     app.add_option("--fr", fr_mode, "feature refinement: both, on or off")->check(CLI::IsMember({"both", "on", "off"}));
     app.add_option("--warmup", warmup, "untimed inference runs before timing (fresh memory is slow to touch)")

@@ -34,7 +34,7 @@ int main(int argc, char** argv) {
   bool trivial = false;
   std::vector<std::string> compare;
   bool no_matlab = false;
-  app.add_option("--split", o.split, "eigen, kitti2015 or odometry")->check(CLI::IsMember({"eigen", "kitti2015", "odometry"}));
+  auto* split_opt = app.add_option("--split", o.split, "eigen, kitti2015 or odometry")->check(CLI::IsMember({"eigen", "kitti2015", "odometry"}));
   app.add_option("--data-root", o.data_root, "dataset root (default: $GEO_KITTI_ROOT, else ./data/kitti)");
   auto* checkpoint_opt = app.add_option("--checkpoint", checkpoint, "checkpoint file or run folder (default: newest run in --runs)");
   app.add_option("--runs", runs, "where to look for the newest run when --checkpoint is not given");
@@ -56,7 +56,7 @@ int main(int argc, char** argv) {
                  "above the road fitted to the prediction (no ground truth), or none; odometry: camera-height also "
                  "scores the trajectory in metres (metric_t_err, metric_r_err, metric_scale_error)")
       ->check(CLI::IsMember({"median", "camera-height", "none"}));
-  app.add_option("--camera-height", o.camera_height,
+  auto* height_opt = app.add_option("--camera-height", o.camera_height,
                  "eigen, odometry: the camera's height above the road in metres (default: the data root's camera_height.txt, "
                  "which geo_synth writes, else KITTI's 1.65)")
       ->check(geo::app::above_zero());
@@ -70,7 +70,9 @@ int main(int argc, char** argv) {
   app.add_option("--flow-resize", flow_resize, "kitti2015: resize predicted flow to the ground truth by nearest (GeoNet) or bilinear")
       ->check(CLI::IsMember({"nearest", "bilinear"}));
   app.add_flag("--exact-pixels", no_matlab, "eigen: project Velodyne points without the reference code's -1 pixel shift");
-  app.add_option("--compare", compare, "print these results JSON files side by side and exit")->expected(1, -1);
+  auto* compare_opt = app.add_option("--compare", compare, "print these results JSON files side by side and exit")->expected(1, -1);
+  // --compare only reads results: every option of an evaluation would be silently ignored beside it.
+  for (auto* other : {split_opt, checkpoint_opt, predictions_opt, untrained_opt, trivial_opt}) compare_opt->excludes(other);
   CLI11_PARSE(app, argc, argv);
   geo::keep_freed_memory();
   try {
@@ -86,6 +88,10 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (o.split.empty()) throw std::runtime_error("--split is required (eigen, kitti2015 or odometry); see --help");
+    if (scaling == "camera-height" && o.split == "kitti2015")
+      throw std::runtime_error("--scaling camera-height is for --split eigen and odometry: flow has no scale to set");
+    if (height_opt->count() > 0 && scaling != "camera-height")
+      throw std::runtime_error("--camera-height is used by --scaling camera-height only (the scaling is '" + scaling + "')");
     o.matlab_offset = !no_matlab;
     o.scaling = scaling == "camera-height" ? geo::DepthScaling::kCameraHeight
                 : scaling == "none"        ? geo::DepthScaling::kNone

@@ -27,8 +27,9 @@ int main(int argc, char** argv) {
                                                "YAML config (stage1.yaml, stage2.yaml, smoke.yaml or a path)");
   auto* res_opt = app.add_option("--resume", resume_dir, "continue the run in this folder from its latest checkpoint");
   cfg_opt->excludes(res_opt);
-  app.add_option("--run-dir", opts.run_dir, "run folder to create (default: <run.dir>/<run.name>-<time>)");
-  app.add_option("--init", opts.init, "start the first stage from this checkpoint or run folder");
+  auto* dir_opt = app.add_option("--run-dir", opts.run_dir, "run folder to create (default: <run.dir>/<run.name>-<time>)");
+  auto* init_opt = app.add_option("--init", opts.init, "start the first stage from this checkpoint or run folder");
+  res_opt->excludes(dir_opt)->excludes(init_opt);  // a resumed run keeps its folder and its weights
   geo::app::add_device_option(app, opts.device, "default: run.device");
   app.add_option("--master-addr", opts.master_addr,
                  "distributed under SLURM: the host of rank 0 when MASTER_ADDR is not set (torchrun sets it)");
