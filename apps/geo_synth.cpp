@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 
 #include "core/logging.h"
 #include "core/runtime.h"
@@ -57,8 +58,19 @@ int main(int argc, char** argv) {
     if (flow_pairs >= 0) o.flow_pairs = flow_pairs;
     if (odometry_frames > 0) o.odometry_frames = odometry_frames;
     namespace fs = std::filesystem;
-    if (fs::exists(out) && !fs::is_empty(out) && !force)
-      throw std::runtime_error("--out '" + out + "' exists and is not empty (use --force to write into it)");
+    if (fs::exists(out) && !fs::is_empty(out)) {
+      if (!force) throw std::runtime_error("--out '" + out + "' exists and is not empty (use --force to replace the world there)");
+      // A new world replaces the old one whole: files the new one does not write (more drives, pairs
+      // or frames before) would otherwise be scored with it. Only a world geo_synth wrote is removed.
+      std::ifstream readme(out + "/README.txt");
+      std::string first;
+      std::getline(readme, first);
+      if (first.rfind("Synthetic KITTI-format world written by geo_synth", 0) != 0)
+        throw std::runtime_error("--out '" + out + "' is not empty and holds no world written by geo_synth (no README.txt "
+                                 "of one): --force replaces only such a world; choose another --out");
+      for (const char* part : {"raw", "kitti2015", "odometry", "README.txt", "camera_height.txt"}) fs::remove_all(out + "/" + part);
+      spdlog::info("--force: the earlier world in {} removed", out);
+    }
     spdlog::info("geo_synth: preset {} ({}x{}), seed {}, {} training + {} test drives of {} frames, "
                  "{} flow pairs, {} odometry frames -> {}",
                  preset, o.width, o.height, seed, o.train_drives, o.test_drives, o.frames_per_drive,
