@@ -76,6 +76,16 @@ TrainingDrives training_drives(const DataConfig& d) {
   // The root as training resolves it (a geo_synth world's raw/), when it is on this machine.
   std::string root = d.root;
   if (!root.empty() && !fs::exists(root + "/splits") && fs::is_directory(root + "/raw/splits")) root += "/raw";
+  if (d.format == DataFormat::kVideo || !d.videos.empty()) {
+    out.unknown = "trained on video clips (data.videos), which geo cannot match to KITTI drives";
+    return out;
+  }
+  // Lists found at the root when training ran cannot be read from here: unknown, not "none".
+  if (d.train_list.empty() && !fs::is_directory(root)) {
+    out.unknown = "the training data root '" + d.root + "' is not a folder here (a relative root resolves from where "
+                  "geo_eval runs): the split lists training read cannot be checked";
+    return out;
+  }
   if (d.format == DataFormat::kPacked || (!root.empty() && is_packed_cache(root + "/train"))) {
     out.unknown = "trained from a packed cache (" + root + "), whose drives are not listed";
     return out;

@@ -475,9 +475,11 @@ TEST(Protocols, AModelTrainedOnTestDrivesIsWarnedAndRecorded) {
   const auto world = test::write_small_world("overlap_world", 4, 1, 6);
   // The world's odometry sequence outside the world (no geo_synth README): read as KITTI's 09.
   std::filesystem::copy(world + "/odometry", root + "/odometry", std::filesystem::copy_options::recursive);
-  auto checkpoint_of = [&](const std::string& data, const std::string& name) {
+  // A KITTI root without its own split lists: training used the shipped ones.
+  std::filesystem::create_directories(root + "/kitti_raw");
+  auto checkpoint_of = [&](const std::string& data, const std::string& name, const std::string& data_root = "/kitti_raw") {
     const Config c = parse_config("model: {encoder_depth: 18}\ndata: {height: 64, width: 208, root: " + root +
-                                      "/none, " + data + "}\n", name + ".yaml");
+                                      data_root + ", " + data + "}\n", name + ".yaml");
     torch::manual_seed(1);
     Networks nets = Networks::create(NetworkSpec::of(c), false);
     torch::serialize::OutputArchive a;
@@ -502,6 +504,12 @@ TEST(Protocols, AModelTrainedOnTestDrivesIsWarnedAndRecorded) {
   const auto clean = evaluate(e, pose_model);
   EXPECT_TRUE(clean.test_drives_in_training.empty());
   EXPECT_TRUE(clean.training_drives_unknown.empty());
+  // A root that is not here (a relative one from another folder): unknown, never "none".
+  Predictor elsewhere(checkpoint_of("split: eigen_zhou", "elsewhere", "/moved_away"), "cpu");
+  const auto unknown = evaluate(e, elsewhere);
+  EXPECT_TRUE(unknown.test_drives_in_training.empty());
+  EXPECT_NE(unknown.training_drives_unknown.find("the training data root '" + root + "/moved_away' is not a folder here"),
+            std::string::npos) << unknown.training_drives_unknown;
   // A geo_synth world's odometry/ and kitti2015/ scenes are no raw drive: nothing to compare.
   e.data_root = world;
   EXPECT_TRUE(evaluate(e, depth_model).test_drives.empty());
