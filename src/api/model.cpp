@@ -97,6 +97,23 @@ torch::Tensor prepare(const Model::Impl& m, const torch::Tensor& image, int64_t*
   return x.contiguous();
 }
 
+// Two images of one size (a pair for flow or the camera), prepared as prepare() does.
+struct PreparedPair {
+  torch::Tensor a, b;
+  int64_t H = 0, W = 0;
+  bool batched = false;
+};
+PreparedPair prepare_pair(const Model::Impl& m, const torch::Tensor& from, const torch::Tensor& to, const std::string& what) {
+  PreparedPair p;
+  int64_t H2 = 0, W2 = 0;
+  bool batched2 = false;
+  p.a = prepare(m, from, &p.H, &p.W, &p.batched, (what + " (from)").c_str());
+  p.b = prepare(m, to, &H2, &W2, &batched2, (what + " (to)").c_str());
+  if (p.H != H2 || p.W != W2 || p.a.size(0) != p.b.size(0))
+    throw Error("the two images differ in size: " + c10::str(from.sizes()) + " and " + c10::str(to.sizes()));
+  return p;
+}
+
 // [B,3,3] intrinsics at the network's size from ones at H x W (or KITTI's proportions); undefined
 // when none are given to a model that learns them (predict_pair then uses the learned ones).
 torch::Tensor network_K(const Model::Impl& m, const torch::Tensor& K, int64_t B, int64_t H, int64_t W) {
@@ -286,12 +303,11 @@ Model::FlowParts Model::flow_parts(const torch::Tensor& from, const torch::Tenso
                                    const torch::Tensor& previous) const {
   return guarded("geo::Model::flow", [&] {
     torch::InferenceMode guard;
-    int64_t H = 0, W = 0, H2 = 0, W2 = 0;
-    bool batched = false, batched2 = false;
-    const auto a = prepare(*impl_, from, &H, &W, &batched, "flow (from)");
-    const auto b = prepare(*impl_, to, &H2, &W2, &batched2, "flow (to)");
-    if (H != H2 || W != W2 || a.size(0) != b.size(0))
-      throw Error("the two images differ in size: " + c10::str(from.sizes()) + " and " + c10::str(to.sizes()));
+    const auto pair = prepare_pair(*impl_, from, to, "flow");
+    const auto& a = pair.a;
+    const auto& b = pair.b;
+    const int64_t H = pair.H, W = pair.W;  // (plain variables: the lambda below captures them)
+    const bool batched = pair.batched;
     const auto K = network_K(*impl_, intrinsics, a.size(0), H, W);
     torch::Tensor prev;
     if (previous.defined()) {
@@ -317,12 +333,7 @@ torch::Tensor Model::intrinsics(const torch::Tensor& from, const torch::Tensor& 
     if (!impl_->spec.learns_intrinsics)
       throw Error("this model does not learn the camera (trained with model.learn_intrinsics off): give the intrinsics");
     torch::InferenceMode guard;
-    int64_t H = 0, W = 0, H2 = 0, W2 = 0;
-    bool batched = false, batched2 = false;
-    const auto a = prepare(*impl_, from, &H, &W, &batched, "intrinsics (from)");
-    const auto b = prepare(*impl_, to, &H2, &W2, &batched2, "intrinsics (to)");
-    if (H != H2 || W != W2 || a.size(0) != b.size(0))
-      throw Error("the two images differ in size: " + c10::str(from.sizes()) + " and " + c10::str(to.sizes()));
+    const auto [a, b, H, W, batched] = prepare_pair(*impl_, from, to, "intrinsics");
     const auto L = impl_->spec.seq_length, k = L / 2;
     std::vector<torch::Tensor> srcs;  // as relative_pose: `from` repeated before the target, `to` after
     for (int64_t i = 0; i < L - 1; ++i) srcs.push_back(i < k ? a : b);

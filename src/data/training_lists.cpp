@@ -68,6 +68,10 @@ std::string odometry_raw_drive(const std::string& sequence) {
 TrainingDrives training_drives(const DataConfig& d) {
   TrainingDrives out;
   if (d.format == DataFormat::kSynthetic) return out;  // the world's own drives, none of KITTI's
+  if (d.format == DataFormat::kVideo || !d.videos.empty()) {
+    out.unknown = "trained on video clips (data.videos), which geo cannot match to KITTI drives";
+    return out;
+  }
   if (d.split == "odometry") {
     for (const auto& s : d.sequences)
       if (const auto drive = odometry_raw_drive(s); !drive.empty()) out.drives.insert(drive);
@@ -76,10 +80,6 @@ TrainingDrives training_drives(const DataConfig& d) {
   // The root as training resolves it (a geo_synth world's raw/), when it is on this machine.
   std::string root = d.root;
   if (!root.empty() && !fs::exists(root + "/splits") && fs::is_directory(root + "/raw/splits")) root += "/raw";
-  if (d.format == DataFormat::kVideo || !d.videos.empty()) {
-    out.unknown = "trained on video clips (data.videos), which geo cannot match to KITTI drives";
-    return out;
-  }
   // Lists found at the root when training ran cannot be read from here: unknown, not "none".
   if (d.train_list.empty() && !fs::is_directory(root)) {
     out.unknown = "the training data root '" + d.root + "' is not a folder here (a relative root resolves from where "
