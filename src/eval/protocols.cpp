@@ -21,6 +21,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <filesystem>
 #include <limits>
 #include <set>
@@ -491,6 +492,8 @@ EvalResult evaluate(const EvalOptions& o, PredictionSource& source) {
                                                    : "camera-height " + std::to_string(camera_height_of(o, root)) + " m";
   r.source = source.name();
   r.data_root = root;
+  if (o.split == "odometry") r.subset = "sequence " + o.sequence;
+  if (!o.split_file.empty()) r.subset += (r.subset.empty() ? "list " : ", list ") + o.split_file;
   if (!is_synth_world(o.data_root, root)) {
     // Real KITTI: the 200 KITTI 2015 pairs come from the 29 raw drives of stereo/test_scenes_stereo.txt,
     // an odometry sequence 00-10 from one raw drive.
@@ -516,6 +519,7 @@ std::string EvalResult::json() const {
   };
   s << "{\n  \"split\": " << q(split) << ",\n  \"source\": " << q(source) << ",\n  \"data_root\": " << q(data_root);
   if (!scaling.empty()) s << ",\n  \"scaling\": " << q(scaling);
+  if (!subset.empty()) s << ",\n  \"subset\": " << q(subset);
   s << ",\n  \"metrics\": {";
   for (size_t i = 0; i < metrics.size(); ++i) {  // JSON has no NaN/Inf: a non-finite metric is null
     s << (i ? ", " : "") << q(metrics[i].first) << ": ";
@@ -544,11 +548,20 @@ EvalResult read_result(const std::string& path) {
   } catch (const std::exception& e) {
     throw std::runtime_error("cannot read results '" + path + "': " + e.what());
   }
+  const auto not_results = [&](const std::string& why) {
+    return std::runtime_error("'" + path + "' is not a geo_eval results file (--output of geo_eval): " + why);
+  };
+  if (!n.IsMap()) throw not_results("not a JSON object");
+  for (const char* key : {"split", "metrics", "counts"})
+    if (!n[key]) throw not_results(std::string("no '") + key + "'");
   EvalResult r;
-  r.split = n["split"].as<std::string>("");
-  r.source = n["source"].as<std::string>("");
-  r.scaling = n["scaling"].as<std::string>("");
   try {
+    r.split = n["split"].as<std::string>();
+    r.source = n["source"].as<std::string>("");
+    r.data_root = n["data_root"].as<std::string>("");
+    r.scaling = n["scaling"].as<std::string>("");
+    r.subset = n["subset"].as<std::string>("");
+    if (!n["metrics"].IsMap() || !n["counts"].IsMap()) throw std::runtime_error("'metrics' and 'counts' must be objects");
     for (const auto& kv : n["metrics"])
       r.metrics.emplace_back(kv.first.as<std::string>(),
                              kv.second.IsNull() ? std::numeric_limits<double>::quiet_NaN() : kv.second.as<double>());
@@ -557,8 +570,11 @@ EvalResult read_result(const std::string& path) {
     for (const auto& d : n["test_drives_in_training"]) r.test_drives_in_training.push_back(d.as<std::string>());
     r.training_drives_unknown = n["training_drives_unknown"].as<std::string>("");
   } catch (const std::exception& e) {
-    throw std::runtime_error("results '" + path + "': not a geo_eval results file (" + e.what() + ")");
+    throw not_results(e.what());
   }
+  if (r.split != "eigen" && r.split != "kitti2015" && r.split != "odometry")
+    throw not_results("unknown split '" + r.split + "'");
+  if (r.metrics.empty() || r.counts.empty()) throw not_results("no metrics or no counts");
   return r;
 }
 
@@ -568,8 +584,9 @@ std::string format_results(const std::vector<EvalResult>& results, const std::ve
   for (const auto& r : results)
     for (const auto& m : r.metrics)
       if (std::find(keys.begin(), keys.end(), m.first) == keys.end()) keys.push_back(m.first);
+  const auto column = [](const std::string& n) { return fmt::format(" {:>14}", n.size() > 14 ? n.substr(n.size() - 14) : n); };
   s << fmt::format("{:<22}", "metric");
-  for (const auto& n : names) s << fmt::format(" {:>14}", n.size() > 14 ? n.substr(n.size() - 14) : n);
+  for (const auto& n : names) s << column(n);
   s << "\n";
   for (const auto& k : keys) {
     s << fmt::format("{:<22}", k);
@@ -579,14 +596,48 @@ std::string format_results(const std::vector<EvalResult>& results, const std::ve
     }
     s << "\n";
   }
+  // What each column scored: the protocol's first count (images, pairs, snippets).
+  const auto scored = [](const EvalResult& r) { return r.counts.empty() ? std::string("-") : std::to_string(r.counts[0].second) + " " + r.counts[0].first; };
+  s << fmt::format("{:<22}", "scored");
+  for (const auto& r : results) s << column(scored(r));
+  s << "\n";
   for (size_t i = 0; i < results.size(); ++i) {
     s << names[i] << ":";
     for (const auto& c : results[i].counts) s << " " << c.first << " " << c.second;
     if (!results[i].test_drives_in_training.empty())
       s << " -- trained on " << results[i].test_drives_in_training.size() << " of the "
         << results[i].test_drives.size() << " test drives: " << join_list(results[i].test_drives_in_training, ", ");
+    if (!results[i].training_drives_unknown.empty())
+      s << " -- whether it trained on test drives is unknown: " << results[i].training_drives_unknown;
     s << "\n";
   }
+  // Every difference other than the model, as a note: a column can only be read beside another
+  // when they scored the same things the same way.
+  const auto differ = [&](const std::string& what, const std::function<std::string(const EvalResult&)>& of) {
+    bool same = true;
+    for (const auto& r : results) same = same && of(r) == of(results[0]);
+    if (same) return;
+    s << "note: the columns differ in " << what << ":";
+    for (size_t i = 0; i < results.size(); ++i) {
+      const auto v = of(results[i]);
+      s << (i ? "," : "") << " " << names[i] << " " << (v.empty() ? "(none)" : v);
+    }
+    s << "\n";
+  };
+  differ("split", [](const EvalResult& r) { return r.split; });
+  differ("data root", [](const EvalResult& r) { return r.data_root; });
+  differ("scaling", [](const EvalResult& r) { return r.scaling; });
+  differ("subset", [](const EvalResult& r) { return r.subset; });
+  std::vector<std::string> count_keys;
+  for (const auto& r : results)
+    for (const auto& c : r.counts)
+      if (std::find(count_keys.begin(), count_keys.end(), c.first) == count_keys.end()) count_keys.push_back(c.first);
+  for (const auto& k : count_keys)
+    differ("'" + k + "' (the metrics average over different sets)", [&](const EvalResult& r) {
+      for (const auto& c : r.counts)
+        if (c.first == k) return std::to_string(c.second);
+      return std::string();
+    });
   return s.str();
 }
 

@@ -42,6 +42,9 @@ struct EvalOptions {
 struct EvalResult {
   std::string split, source, data_root;
   std::string scaling;  // eigen: median, camera-height (at camera_height m) or none
+  // What of the split was scored when not all of it: "sequence 09" (odometry), "list FILE" (a
+  // split file other than the standard one).
+  std::string subset;
   std::vector<std::pair<std::string, double>> metrics;
   std::vector<std::pair<std::string, int64_t>> counts;
   // The KITTI raw drives the test set comes from ("2011_09_26_drive_0002"; none for a geo_synth
@@ -67,10 +70,12 @@ EvalResult export_eigen_ground_truth(const EvalOptions& options, const std::stri
 // "<root>/raw", "<root>/kitti2015" or "<root>/odometry" when `root` is a geo_synth world, else root.
 std::string split_root(const std::string& split, const std::string& root);
 
-// One table, one column per result (results of the same split side by side).
+// One table, one column per result, with the number each column scored (images, pairs, snippets),
+// and a note for every way the columns differ other than the model (split, data root, scaling,
+// subset, counts, training-drive leaks): results side by side are compared, unlike ones must say so.
 std::string format_results(const std::vector<EvalResult>& results, const std::vector<std::string>& names);
 
-// Reads a results JSON written by EvalResult::json().
+// Reads a results JSON written by EvalResult::json(); any other file (JSON or not) is an error naming it.
 EvalResult read_result(const std::string& path);
 
 }  // namespace geo

@@ -13,6 +13,9 @@
 
 #include <cmath>
 #include <filesystem>
+#include <tuple>
+
+#include <spdlog/fmt/fmt.h>
 
 #include "synth_world.h"
 
@@ -316,6 +319,47 @@ TEST(Protocols, OdometryTrajectoryOfTheTruthScoresPerfectly) {
   const auto back = read_result(root + "/r.json");
   EXPECT_EQ(back.split, "odometry");
   EXPECT_NEAR(back.metrics[0].second, pose.metrics[0].second, 1e-9);
+  EXPECT_EQ(back.data_root, pose.data_root);
+  EXPECT_EQ(back.subset, "sequence 09");
+}
+
+// --compare prints what each column scored and a note for every difference other than the model;
+// a file that is not a results file is refused by name.
+TEST(Protocols, ComparisonsSayHowTheColumnsDiffer) {
+  EvalResult a;
+  a.split = "eigen";
+  a.data_root = "/data/a";
+  a.scaling = "median";
+  a.metrics = {{"abs_rel", 0.25}};
+  a.counts = {{"images", 40}, {"pixels", 1000}};
+  EvalResult b = a;
+  b.metrics = {{"abs_rel", 0.2}};
+  const auto alike = format_results({a, b}, {"a", "b"});
+  EXPECT_EQ(alike.find("note:"), std::string::npos) << alike;
+  EXPECT_NE(alike.find(fmt::format("{:<22} {:>14} {:>14}\n", "scored", "40 images", "40 images")), std::string::npos) << alike;
+  b.scaling = "camera-height 1.650000 m";
+  b.counts = {{"images", 23}, {"pixels", 1000}};
+  b.data_root = "/data/b";
+  b.training_drives_unknown = "no training config";
+  const auto unlike = format_results({a, b}, {"a", "b"});
+  EXPECT_NE(unlike.find("note: the columns differ in scaling: a median, b camera-height 1.650000 m\n"), std::string::npos)
+      << unlike;
+  EXPECT_NE(unlike.find("note: the columns differ in data root: a /data/a, b /data/b\n"), std::string::npos);
+  EXPECT_NE(unlike.find("note: the columns differ in 'images' (the metrics average over different sets): a 40, b 23\n"),
+            std::string::npos);
+  EXPECT_EQ(unlike.find("differ in 'pixels'"), std::string::npos);
+  EXPECT_NE(unlike.find("whether it trained on test drives is unknown: no training config"), std::string::npos);
+  const std::string root = test::fresh_dir("compare_files");
+  for (const auto& [name, text, why] :
+       std::vector<std::tuple<std::string, std::string, std::string>>{
+           {"list.json", "[1, 2]", "not a JSON object"},
+           {"config.json", "{\"model\": {\"use_fr\": true}}", "no 'split'"},
+           {"other.json", "{\"split\": \"cityscapes\", \"metrics\": {\"x\": 1}, \"counts\": {\"n\": 1}}", "unknown split 'cityscapes'"},
+           {"empty.json", "{\"split\": \"eigen\", \"metrics\": {}, \"counts\": {}}", "no metrics or no counts"},
+           {"scalar.json", "{\"split\": \"eigen\", \"metrics\": 3, \"counts\": {\"n\": 1}}", "must be objects"}}) {
+    test::write_text(root + "/" + name, text);
+    GEO_EXPECT_THROW_WITH(read_result(root + "/" + name), root + "/" + name + "' is not a geo_eval results file", why);
+  }
 }
 
 // Untrained models: a 5-frame PoseNet is evaluated on odometry snippets (GeoNet's protocol), a
