@@ -44,8 +44,10 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (out.empty()) throw std::runtime_error("give --out DIR (or --throughput)");
+    // One identifier for train/ and val/: the trainer refuses a val/ left by another run.
+    const std::string pack_id = geo::new_pack_id();
     auto pack = [&](const std::shared_ptr<geo::SnippetSource>& src, const std::string& dir) {
-      geo::PackedWriter w(dir, cfg.data.height, cfg.data.width, cfg.data.seq_length);
+      geo::PackedWriter w(dir, cfg.data.height, cfg.data.width, cfg.data.seq_length, pack_id);
       geo::Progress progress(dir, static_cast<int64_t>(src->size()), 500, "snippets");
       for (size_t i = 0; i < src->size(); ++i) {
         w.add(src->get(i));
@@ -54,7 +56,12 @@ int main(int argc, char** argv) {
       w.finish();
     };
     pack(data.train, out + "/train");
-    if (data.val) pack(data.val, out + "/val");
+    if (data.val) {
+      pack(data.val, out + "/val");
+    } else if (geo::has_packed_cache_files(out + "/val")) {  // an earlier run's: no longer this cache's
+      for (const char* f : {"/index.txt", "/frames.bin", "/frames.bin.tmp"}) std::filesystem::remove(out + "/val" + f);
+      spdlog::info("removed {}/val: an earlier geo_prepare's validation set (this config has none)", out);
+    }
     spdlog::info("cache written: train with --set data.root={}", out);
     return 0;
   } catch (const std::exception& e) {

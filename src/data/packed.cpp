@@ -4,9 +4,11 @@
 #include "data/text_io.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <limits>
+#include <random>
 #include <sstream>
 #include <stdexcept>
 
@@ -36,8 +38,18 @@ void check_packed_cache_complete(const std::string& dir) {
                              " but no index.txt (geo_prepare did not finish): re-run geo_prepare, or remove the folder");
 }
 
-PackedWriter::PackedWriter(const std::string& dir, int64_t height, int64_t width, int64_t seq_length)
-    : dir_(dir), height_(height), width_(width), seq_length_(seq_length) {
+std::string new_pack_id() {
+  std::random_device rd;
+  const auto now = std::chrono::system_clock::now().time_since_epoch().count();
+  std::ostringstream s;
+  s << std::hex << now << "-" << rd() << rd();
+  return s.str();
+}
+
+PackedWriter::PackedWriter(const std::string& dir, int64_t height, int64_t width, int64_t seq_length, std::string pack)
+    : dir_(dir), pack_(pack.empty() ? new_pack_id() : std::move(pack)), height_(height), width_(width), seq_length_(seq_length) {
+  if (pack_.find_first_of(" \t\r\n") != std::string::npos)
+    throw std::invalid_argument("packed cache identifier '" + pack_ + "' holds white space");
   fs::create_directories(dir);
   frames_.open(dir + "/frames.bin.tmp", std::ios::binary | std::ios::trunc);
   if (!frames_) throw std::runtime_error(dir + "/frames.bin.tmp: cannot open for writing");
@@ -63,7 +75,7 @@ void PackedWriter::finish() {
   std::ostringstream idx;
   idx.precision(10);
   idx << "geo-packed " << kPackedFormatVersion << "\nheight " << height_ << "\nwidth " << width_ << "\nseq_length "
-      << seq_length_ << "\ncount " << ids_.size() << "\n";
+      << seq_length_ << "\ncount " << ids_.size() << "\npack " << pack_ << "\n";
   for (size_t i = 0; i < ids_.size(); ++i)
     idx << intrinsics_[i][0] << " " << intrinsics_[i][1] << " " << intrinsics_[i][2] << " "
         << intrinsics_[i][3] << " " << ids_[i] << "\n";
@@ -76,6 +88,7 @@ PackedSnippets::PackedSnippets(const std::string& dir) : dir_(dir) {
   const std::string index = dir + "/index.txt";
   std::istringstream in(read_text_file(index));
   std::string line, key;
+  int format_version = 0;
   std::getline(in, line);
   if (line.rfind("geo-packed", 0) != 0)
     throw std::runtime_error(index + ": not a geo packed cache (first line '" + line + "')");
@@ -86,9 +99,11 @@ PackedSnippets::PackedSnippets(const std::string& dir) : dir_(dir) {
     if (!(ls >> version) || (ls >> rest))
       throw std::runtime_error(index + ": malformed first line '" + line + "' (expected 'geo-packed " +
                                std::to_string(kPackedFormatVersion) + "')");
-    if (version != kPackedFormatVersion)
-      throw std::runtime_error(index + ": packed cache format version " + std::to_string(version) + ", this geo reads " +
-                               std::to_string(kPackedFormatVersion) + " (re-run geo_prepare with this geo)");
+    if (version != 1 && version != kPackedFormatVersion)
+      throw std::runtime_error(index + ": packed cache format version " + std::to_string(version) +
+                               ", this geo reads 1 and " + std::to_string(kPackedFormatVersion) +
+                               " (re-run geo_prepare with this geo)");
+    format_version = version;
   }
   int64_t count = -1;
   const char* keys[] = {"height", "width", "seq_length", "count"};
@@ -107,6 +122,14 @@ PackedSnippets::PackedSnippets(const std::string& dir) : dir_(dir) {
                              std::to_string(width_) + ", seq_length " + std::to_string(seq_length_) + ", count " +
                              std::to_string(count) + ")");
   int line_no = 5;
+  if (format_version >= 2) {
+    std::getline(in, line);
+    std::istringstream ls(line);
+    std::string rest;
+    if (!(ls >> key >> pack_) || key != "pack" || (ls >> rest))
+      throw std::runtime_error(index + ": malformed header line '" + line + "' (expected 'pack ID')");
+    ++line_no;
+  }
   while (std::getline(in, line)) {
     ++line_no;
     if (trim(line).empty()) continue;

@@ -27,15 +27,28 @@ TrainingData open_at(const DataConfig& d, TrainingData out) {
       d.format == DataFormat::kPacked || (d.format == DataFormat::kAuto && has_packed_cache_files(d.root + "/train"));
   if (packed) {
     out.format = "packed";
+    // train/ and val/ each hold what the config asks for, and come from one geo_prepare run: a val/
+    // left by an earlier run (another size, or a run killed before it rewrote val/) would choose
+    // best-<stage>.pt on stale frames.
+    const auto check = [&](const PackedSnippets& p, const std::string& part) {
+      if (p.height() != d.height || p.width() != d.width || p.seq_length() != d.seq_length)
+        throw ConfigError("packed cache '" + d.root + "/" + part + "' holds " + std::to_string(p.seq_length()) +
+                          "-frame snippets at " + std::to_string(p.width()) + "x" + std::to_string(p.height()) +
+                          " but data.width/height/seq_length ask for " + std::to_string(d.seq_length) + " frames at " +
+                          std::to_string(d.width) + "x" + std::to_string(d.height) + " (re-run geo_prepare)");
+    };
     auto train = std::make_shared<PackedSnippets>(d.root + "/train");
-    if (train->height() != d.height || train->width() != d.width || train->seq_length() != d.seq_length)
-      throw ConfigError("packed cache '" + d.root + "' holds " + std::to_string(train->seq_length()) +
-                        "-frame snippets at " + std::to_string(train->width()) + "x" +
-                        std::to_string(train->height()) + " but data.width/height/seq_length ask for " +
-                        std::to_string(d.seq_length) + " frames at " + std::to_string(d.width) + "x" +
-                        std::to_string(d.height) + " (re-run geo_prepare)");
+    check(*train, "train");
     out.train = train;
-    if (has_packed_cache_files(d.root + "/val")) out.val = std::make_shared<PackedSnippets>(d.root + "/val");
+    if (has_packed_cache_files(d.root + "/val")) {
+      auto val = std::make_shared<PackedSnippets>(d.root + "/val");
+      check(*val, "val");
+      if (val->pack() != train->pack())
+        throw ConfigError("packed cache '" + d.root + "': val/ was written by another geo_prepare run than train/ (pack '" +
+                          val->pack() + "', train/ '" + train->pack() + "'): a stale validation set; re-run geo_prepare --out " +
+                          d.root + ", or remove " + d.root + "/val to train without validation");
+      out.val = val;
+    }
     out.train_list = d.root + "/train";
     return out;
   }

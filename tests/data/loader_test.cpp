@@ -183,16 +183,19 @@ TEST(Packed, RoundTripAndCorruptionMessages) {
   }
   // The index's first line carries the format version: another version is refused, by number.
   const std::string index = test::read_file(dir + "/cache/index.txt");
-  ASSERT_EQ(index.rfind("geo-packed 1\n", 0), 0u);
-  test::write_text(dir + "/cache/index.txt", "geo-packed 2\n" + index.substr(13));
-  GEO_EXPECT_THROW_WITH(PackedSnippets(dir + "/cache"), "format version 2", "this geo reads 1");
+  ASSERT_EQ(index.rfind("geo-packed 2\n", 0), 0u);
+  EXPECT_FALSE(p.pack().empty());
+  test::write_text(dir + "/cache/index.txt", "geo-packed 3\n" + index.substr(13));
+  GEO_EXPECT_THROW_WITH(PackedSnippets(dir + "/cache"), "format version 3", "this geo reads 1 and 2");
   test::write_text(dir + "/cache/index.txt", "geo-packed one\n" + index.substr(13));
   GEO_EXPECT_THROW_WITH(PackedSnippets(dir + "/cache"), "index.txt", "malformed first line");
   // Header values whose record size would overflow are refused before any arithmetic.
-  test::write_text(dir + "/cache/index.txt", "geo-packed 1\nheight 16384\nwidth 16384\nseq_length 64\ncount 9000000000\n");
+  test::write_text(dir + "/cache/index.txt", "geo-packed 2\nheight 16384\nwidth 16384\nseq_length 64\ncount 9000000000\n");
   GEO_EXPECT_THROW_WITH(PackedSnippets(dir + "/cache"), "index.txt", "implausible header");
-  test::write_text(dir + "/cache/index.txt", "geo-packed 1\nwidth 8\nheight 16\nseq_length 3\ncount 3\n");
+  test::write_text(dir + "/cache/index.txt", "geo-packed 2\nwidth 8\nheight 16\nseq_length 3\ncount 3\n");
   GEO_EXPECT_THROW_WITH(PackedSnippets(dir + "/cache"), "'width 8'", "expected 'height N'");
+  test::write_text(dir + "/cache/index.txt", "geo-packed 2\nheight 8\nwidth 16\nseq_length 3\ncount 3\npack a b\n");
+  GEO_EXPECT_THROW_WITH(PackedSnippets(dir + "/cache"), "'pack a b'", "expected 'pack ID'");
   test::write_text(dir + "/cache/index.txt", index);
   std::filesystem::resize_file(dir + "/cache/frames.bin", 100);
   GEO_EXPECT_THROW_WITH(PackedSnippets(dir + "/cache"), "frames.bin", "wrong size");

@@ -47,7 +47,7 @@ const std::vector<std::string>& text_dictionary() {
       "-9223372036854775808", "0x1p3", "1,5", ".", "e", ":", " ", "\t", "\n", "\r\n", "#", "'", "\"", "[", "]",
       "{", "}", ",", "&a", "*a", "<<: *a", "!!binary", "~", "null", "- ", "? ", "|", ">", "%YAML 1.2\n", "---\n",
       "P_rect_02:", "R_rect_00:", "S_rect_02:", "R:", "T:", "Tr:", "P2:", "calib_time:", "image_02/data/",
-      "0000000001.png", " l", " r", "geo-packed 1", "height ", "width ", "seq_length ", "count ",
+      "0000000001.png", " l", " r", "geo-packed 1", "geo-packed 2", "height ", "width ", "seq_length ", "count ", "pack ",
       "'descr': '<f4'", "'descr': '<f8'", "'fortran_order': True", "'shape': (", ")", "stages:", "iterations: ",
       "data:", "model:", "encoder_depth: ", std::string(1, '\0'), std::string(300, '9'), std::string(2000, '[')};
   return d;

@@ -4,6 +4,7 @@
 // stage trains, and a run folder resolves to the best of its last stage; the TensorBoard file
 // holds the losses of metrics.csv.
 #include "core/files.h"
+#include "data/packed.h"
 #include "data/synth_writer.h"
 #include "train/checkpoints.h"
 #include "data/training_data.h"
@@ -232,6 +233,40 @@ TEST(TrainingData, ADamagedPackedCacheIsNamedNotSkipped) {
   GEO_EXPECT_THROW_WITH(open_training_data(d), cache + "/index.txt", "not a geo packed cache");
   std::filesystem::remove_all(cache);
   EXPECT_EQ(open_training_data(d).format, "kitti_raw");
+}
+
+// A packed cache's val/ must come from the geo_prepare run that wrote train/, at the config's size:
+// a val/ left by an earlier run would validate, and choose best-<stage>.pt, on stale frames.
+TEST(TrainingData, AStaleValidationCacheIsRefused) {
+  DataConfig d = tiny_config().data;
+  d.root = test::fresh_dir("stale_val");
+  const auto write = [&](const std::string& part, const std::string& pack, int64_t height) {
+    PackedWriter w(d.root + "/" + part, height, d.width, d.seq_length, pack);
+    Snippet s;
+    s.frames = torch::rand({d.seq_length, 3, height, d.width});
+    s.K = torch::eye(3);
+    s.id = part;
+    w.add(s);
+    w.finish();
+  };
+  write("train", "run-2", d.height);
+  write("val", "run-1", d.height);
+  GEO_EXPECT_THROW_WITH(open_training_data(d), "'" + d.root + "': val/ was written by another geo_prepare run",
+                        "pack 'run-1', train/ 'run-2'", "remove " + d.root + "/val");
+  write("val", "run-2", d.height * 2);
+  GEO_EXPECT_THROW_WITH(open_training_data(d), d.root + "/val' holds", "ask for");
+  write("val", "run-2", d.height);
+  const auto data = open_training_data(d);
+  ASSERT_TRUE(data.val);
+  EXPECT_EQ(data.val->id(0), "val");
+  // A version-1 cache (no pack line) still reads.
+  for (const char* part : {"/train/index.txt", "/val/index.txt"}) {
+    std::string index = test::read_file(d.root + part);
+    index.replace(0, 12, "geo-packed 1");
+    index.erase(index.find("pack run-2\n"), 11);
+    test::write_text(d.root + part, index);
+  }
+  EXPECT_TRUE(open_training_data(d).val);
 }
 
 TEST(TrainingData, PerTaskSplits) {
