@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <set>
 #include <sstream>
 
@@ -779,6 +780,49 @@ std::string resolve_config_path(const std::string& name) {
     }
   throw ConfigError("config '" + name + "' not found: not a file here, nor '" + (dir / name).string() +
                     (fs::path(name).extension() == ".yaml" ? "" : "[.yaml]") + "' among the shipped configs");
+}
+
+namespace {
+
+// Every leaf of a YAML tree under its dotted path (sequences of maps by index: stages[0].name); a
+// list of scalars is one value.
+void flatten(const YAML::Node& n, const std::string& path, std::map<std::string, std::string>& out) {
+  if (n.IsMap()) {
+    for (const auto& kv : n) flatten(kv.second, join(path, kv.first.as<std::string>()), out);
+    return;
+  }
+  if (n.IsSequence() && std::any_of(n.begin(), n.end(), [](const YAML::Node& item) { return !item.IsScalar(); })) {
+    for (size_t i = 0; i < n.size(); ++i) flatten(n[i], path + "[" + std::to_string(i) + "]", out);
+    return;
+  }
+  YAML::Emitter e;
+  e << YAML::Flow << n;
+  out[path] = e.c_str();
+}
+
+}  // namespace
+
+std::vector<std::string> config_differences(const std::string& yaml_a, const std::string& yaml_b,
+                                            const std::vector<std::string>& ignore) {
+  std::map<std::string, std::string> a, b;
+  flatten(YAML::Load(yaml_a), "", a);
+  flatten(YAML::Load(yaml_b), "", b);
+  const auto ignored = [&](const std::string& key) {
+    return std::any_of(ignore.begin(), ignore.end(), [&](const std::string& i) {
+      return key == i || (key.rfind(i, 0) == 0 && (key[i.size()] == '.' || key[i.size()] == '['));
+    });
+  };
+  std::set<std::string> keys;
+  for (const auto& kv : a) keys.insert(kv.first);
+  for (const auto& kv : b) keys.insert(kv.first);
+  std::vector<std::string> out;
+  for (const auto& k : keys) {
+    if (ignored(k)) continue;
+    const auto ia = a.find(k), ib = b.find(k);
+    const std::string va = ia == a.end() ? "(none)" : ia->second, vb = ib == b.end() ? "(none)" : ib->second;
+    if (va != vb) out.push_back(k + ": " + va + " vs " + vb);
+  }
+  return out;
 }
 
 std::string to_yaml(const Config& config) {

@@ -466,4 +466,10 @@ std::string shipped_config_dir();
 // The resolved config as YAML (every key, defaults included). parse_config(to_yaml(c)) == c.
 std::string to_yaml(const Config& config);
 
+// The keys whose values differ between two configs written by to_yaml, as "key: A vs B" lines
+// (stages[1].batch_size: 4 vs 8), leaving out the keys in `ignore` (dotted paths, a section for all
+// its keys).
+std::vector<std::string> config_differences(const std::string& yaml_a, const std::string& yaml_b,
+                                            const std::vector<std::string>& ignore = {});
+
 }  // namespace geo

@@ -1,5 +1,7 @@
 #include "train/distributed.h"
 
+#include "core/config.h"
+#include "core/logging.h"
 #include "core/runtime.h"
 
 #include <spdlog/spdlog.h>
@@ -288,6 +290,23 @@ class C10dGroup : public ProcessGroup {
     }
   }
 
+  std::vector<std::string> all_gather_strings(const std::string& key, const std::string& value) override {
+    const std::string k = "geo/" + key + "/";
+    std::vector<std::string> out(static_cast<size_t>(size_));
+    int r = rank_;
+    try {
+      store_->set(k + std::to_string(rank_), std::vector<uint8_t>(value.begin(), value.end()));
+      for (r = 0; r < size_; ++r) {
+        const auto bytes = store_->get(k + std::to_string(r));  // waits up to run.distributed.timeout_s
+        out[static_cast<size_t>(r)].assign(bytes.begin(), bytes.end());
+      }
+    } catch (const std::exception& e) {
+      throw std::runtime_error("rank " + std::to_string(rank_) + ": waiting for '" + key + "' of rank " + std::to_string(r) +
+                               " failed: " + lost_processes() + ": " + message_of(e));
+    }
+    return out;
+  }
+
  private:
   void all_reduce(std::vector<torch::Tensor>& tensors, c10d::ReduceOp op, const char* what) {
     c10d::AllreduceOptions o;
@@ -541,6 +560,23 @@ int agreed_signal(ProcessGroup* group, int local, const torch::Device& device) {
       {1}, local, torch::TensorOptions(torch::kInt32).device(group->backend() == "nccl" ? device : torch::kCPU))};
   group->all_reduce_max(flag);
   return flag[0].cpu().item<int>();
+}
+
+void check_same_config(ProcessGroup& group, const std::string& config_yaml, const torch::Device& device) {
+  // Each process's own: where it writes and logs, its device and threads, where its copy of the data is.
+  static const std::vector<std::string> own = {"run.name",    "run.dir",     "run.device",       "run.threads",
+                                               "run.distributed.timeout_s", "data.root", "data.videos",
+                                               "data.num_workers", "logging.level"};
+  const auto configs = group.all_gather_strings("config", config_yaml);
+  std::string report;
+  for (int r = 1; r < group.size(); ++r) {
+    const auto diff = config_differences(configs[0], configs[static_cast<size_t>(r)], own);
+    if (!diff.empty()) report += "\n  rank " + std::to_string(r) + " vs rank 0: " + join_list(diff, "; ");
+  }
+  // Also the barrier that keeps rank 0's store alive until every process has read every config.
+  if (agreed_signal(&group, report.empty() ? 0 : 1, device) != 0)
+    throw std::runtime_error("rank " + std::to_string(group.rank()) + ": the processes were started with different "
+                             "configurations (every rank must train the same run: same config and --set options):" + report);
 }
 
 void broadcast_networks(ProcessGroup& group, Networks& nets) {

@@ -86,6 +86,9 @@ class ProcessGroup {
   // A short string shared from rank 0 (e.g. the run folder); rank 0 passes it, the others get it.
   // `failed` on rank 0 makes the others throw with `value` as the reason.
   virtual std::string share_from_rank0(const std::string& key, const std::string& value, bool failed = false) = 0;
+  // Every process's `value` (index: rank), to every process. Not a barrier: a process may go on
+  // before the others have read its value.
+  virtual std::vector<std::string> all_gather_strings(const std::string& key, const std::string& value) = 0;
 };
 
 // Averages gradients over the group on flattened buckets of at most `bucket_bytes` (one all-reduce
@@ -169,6 +172,11 @@ torch::Device process_device(const std::string& name, const ProcessGroup* group)
 // the same step by one tiny all-reduce, so that all processes stop at the step rank 0 checkpoints.
 // `local` alone without a group.
 int agreed_signal(ProcessGroup* group, int local, const torch::Device& device);
+// Every process trains with the same configuration: the configs (to_yaml) are compared at start-up,
+// and a difference outside the keys that are each process's own (run.name, run.dir, run.device,
+// run.threads, run.distributed.timeout_s, data.root, data.videos, data.num_workers, logging.level)
+// fails every process with the ranks and keys that differ, before any data is read.
+void check_same_config(ProcessGroup& group, const std::string& config_yaml, const torch::Device& device);
 // rank 0's weights and buffers in every process's networks.
 void broadcast_networks(ProcessGroup& group, Networks& nets);
 // Every BatchNorm of the networks synchronised across the group; returns how many layers.

@@ -345,9 +345,12 @@ class Run {
 
 // This process's group when geo_train was launched as one process of several (torchrun, srun);
 // null for a single process.
+// This process's group (null alone), its ranks checked to train one configuration.
 std::unique_ptr<ProcessGroup> join_group(const Config& config, const TrainOptions& options) {
-  return join_launched_group(config.run.distributed, options.device.empty() ? config.run.device : options.device,
-                             options.master_addr);
+  const std::string device = options.device.empty() ? config.run.device : options.device;
+  auto group = join_launched_group(config.run.distributed, device, options.master_addr);
+  if (group) check_same_config(*group, to_yaml(config), process_device(device, group.get()));
+  return group;
 }
 
 // The other ranks of a distributed run: they read the run folder rank 0 set up and write nothing.

@@ -331,3 +331,28 @@ TEST(Config, OnlyBareNamesMeanShippedConfigs) {
 }
 
 }  // namespace
+
+namespace geo {
+namespace {
+
+// The keys two resolved configs differ in, by dotted path (stages by index), with the ignored ones
+// (a whole section by its prefix) left out.
+TEST(Config, DifferencesAreNamedByKey) {
+  Config a = parse_config("stages: [{name: s1}, {name: s2, batch_size: 4}]\n");
+  Config b = a;
+  EXPECT_TRUE(config_differences(to_yaml(a), to_yaml(b)).empty());
+  b.stages[1].batch_size = 8;
+  b.model.use_fr = !a.model.use_fr;
+  b.run.threads = 3;
+  b.run.distributed.timeout_s = 5;
+  b.data.augment.scale_max = 1.3;
+  EXPECT_EQ(config_differences(to_yaml(a), to_yaml(b), {"run", "data.augment"}),
+            (std::vector<std::string>{"model.use_fr: true vs false", "stages[1].batch_size: 4 vs 8"}));
+  EXPECT_EQ(config_differences(to_yaml(a), to_yaml(b), {"run.threads", "run.distributed", "data", "model", "stages[1]"}),
+            std::vector<std::string>{});
+  b.stages.pop_back();
+  EXPECT_EQ(config_differences(to_yaml(a), to_yaml(b), {"run", "data", "model"}).front().rfind("stages[1].", 0), 0u);
+}
+
+}  // namespace
+}  // namespace geo

@@ -94,6 +94,9 @@ class MirrorGroup : public ProcessGroup {
   }
   void all_reduce_max(std::vector<torch::Tensor>&) override {}
   std::string share_from_rank0(const std::string&, const std::string& v, bool) override { return v; }
+  std::vector<std::string> all_gather_strings(const std::string&, const std::string& v) override {
+    return std::vector<std::string>(static_cast<size_t>(size_), v);
+  }
   int calls = 0;
 
  private:
@@ -443,6 +446,35 @@ TEST_F(Distributed, LaunchErrorsAreMessagesNotHangs) {
   for (const char* log : {"/r0.log", "/r1.log"})
     EXPECT_NE(test::read_file(dir + log).find("WORLD_SIZE differs between the processes"), std::string::npos)
         << test::read_file(dir + log);
+}
+
+// Ranks started with different configurations (here a batch size and FR on one rank) stop at
+// start-up, every one naming the keys, before any data is read; the keys that are each process's own
+// (its device, threads, data copy) may differ.
+TEST_F(Distributed, RanksWithDifferentConfigurationsAreRefusedByKey) {
+  const auto dir = test::fresh_dir("dist_config");
+  const auto cfg = config_file(dir, 2, true);
+  const std::string port = std::to_string(free_local_port());
+  const std::map<std::string, std::string> env = {{"WORLD_SIZE", "2"}, {"MASTER_ADDR", "127.0.0.1"}, {"MASTER_PORT", port}};
+  auto with_rank = [&](int r) {
+    auto e = env;
+    e["RANK"] = e["LOCAL_RANK"] = std::to_string(r);
+    return e;
+  };
+  std::vector<Proc> procs;
+  procs.push_back(spawn({"--config", cfg, "--run-dir", dir + "/run", "--set", "run.threads=1"}, with_rank(0), dir + "/r0.log"));
+  procs.push_back(spawn({"--config", cfg, "--run-dir", dir + "/run", "--set", "stages[0].batch_size=2", "--set",
+                         "model.use_fr=false", "--set", "run.threads=2"},
+                        with_rank(1), dir + "/r1.log"));
+  expect_all_exit(procs, 1, 60);
+  for (const char* log : {"/r0.log", "/r1.log"}) {
+    const std::string text = test::read_file(dir + log);
+    EXPECT_NE(text.find("the processes were started with different configurations"), std::string::npos) << text;
+    EXPECT_NE(text.find("rank 1 vs rank 0: model.use_fr: true vs false; stages[0].batch_size: 1 vs 2"), std::string::npos)
+        << text;
+    EXPECT_EQ(text.find("run.threads"), std::string::npos) << text;
+  }
+  EXPECT_FALSE(fs::exists(dir + "/run"));  // refused before the run folder was made
 }
 
 }  // namespace
