@@ -153,11 +153,11 @@ struct Options {
     geo::app::add_config_options(app, config_path, overrides,
                                  "YAML config (model, data size, stages); default: the paper's settings and its two stages");
     geo::app::add_device_option(app, device_name, "default: cpu");
-    app.add_option("--batch", batches, "inference batch sizes, e.g. 1,4")->delimiter(',')->check(geo::app::positive());
+    app.add_option("--batch", batches, "inference batch sizes, e.g. 1,4 (1..1024)")->delimiter(',')->check(CLI::Range(1, 1024));
     geo::app::add_precision_option(app, precision, {"fp32", "tf32", "bf16"},
                                    "fp32, tf32 or bf16 (run.precision; default: the config's)");
-    app.add_option("--train-batch", train_batch, "training batch size (default: each stage's batch_size)")
-        ->check(geo::app::positive());
+    app.add_option("--train-batch", train_batch, "training batch size, 1..1024 (default: each stage's batch_size)")
+        ->check(CLI::Range(1, 1024));
     app.add_option("--stage", stages, "time only these stages' training steps (names, e.g. stage1)")->delimiter(',');
     app.add_option("--fr", fr_mode, "feature refinement: both, on or off")->check(CLI::IsMember({"both", "on", "off"}));
     app.add_option("--warmup", warmup, "untimed inference runs before timing (fresh memory is slow to touch)")
@@ -174,8 +174,8 @@ struct Options {
     app.add_flag("--no-fold", no_fold, "inference with BatchNorm as separate layers (default: folded into the convolutions)");
     app.add_flag("--no-ceiling", no_ceiling, "skip the matrix-product ceiling (and the rows' share of it)");
     app.add_option("--ceiling-size", ceiling_size,
-                   "side of the square matrices timed for the ceiling (default: 2048 on CPU, 8192 on CUDA)")
-        ->check(geo::app::positive());
+                   "side of the square matrices timed for the ceiling, 64..16384 (default: 2048 on CPU, 8192 on CUDA)")
+        ->check(CLI::Range(64, 16384));
     app.add_option("--json", json_path, "also write every row as JSON to this file");
     app.add_option("--markdown", markdown_path,
                    "also write the table as markdown (machine, LibTorch version and command in its header)");
@@ -406,7 +406,10 @@ int main(int argc, char** argv) {
     const std::vector<Row> params = rows;
     geo::bench::Ceiling ceiling;
     if (!o.summary && !o.no_ceiling) {
-      ceiling = geo::bench::measure_ceiling(device, o.ceiling_size > 0 ? o.ceiling_size : device.is_cuda() ? 8192 : 2048, 7);
+      const int64_t n = o.ceiling_size > 0 ? o.ceiling_size : device.is_cuda() ? 8192 : 2048;
+      // Three n x n float32 matrices at once (a, b, the product).
+      if (!device.is_cuda()) geo::check_memory_available("--ceiling-size " + std::to_string(n), 12.0 * n * n);
+      ceiling = geo::bench::measure_ceiling(device, n, 7);
       spdlog::info("ceiling: {}x{} matrix product {:.0f} GFLOP/s fp32, {:.0f} GFLOP/s bf16", ceiling.n, ceiling.n,
                    ceiling.fp32, ceiling.bf16);
     }

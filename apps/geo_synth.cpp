@@ -31,10 +31,11 @@ int main(int argc, char** argv) {
   app.add_option("--seed", seed, "world seed (0 .. 2^63-1): the same seed writes the same files")
       ->check(CLI::Range(uint64_t{0}, uint64_t{1} << 63));
   app.add_option("--out", out, "output root (created); holds raw/, kitti2015/, odometry/")->required();
-  app.add_option("--drives", drives, "training drives (default: preset's)")->check(geo::app::positive());
-  app.add_option("--test-drives", test_drives, "held-out test drives (default: preset's)")->check(geo::app::positive());
+  app.add_option("--drives", drives, "training drives, 1..1000 (default: preset's)")->check(CLI::Range(1, 1000));
+  app.add_option("--test-drives", test_drives, "held-out test drives, 1..1000 (default: preset's)")->check(CLI::Range(1, 1000));
   app.add_option("--frames", frames, "frames per drive (default: preset's)")->check(CLI::Range(3, 100000));
-  app.add_option("--flow-pairs", flow_pairs, "KITTI-2015-style flow pairs (default: preset's)")->check(geo::app::non_negative());
+  app.add_option("--flow-pairs", flow_pairs, "KITTI-2015-style flow pairs, 0..100000 (default: preset's)")
+      ->check(CLI::Range(0, 100000));
   app.add_option("--odometry-frames", odometry_frames, "frames of odometry sequence 09 (default: preset's)")->check(CLI::Range(5, 100000));
   app.add_option("--threads", threads, "render threads (0 = all cores)")->check(geo::app::non_negative());
   app.add_option("--turns", turns, "how winding the road is: 1 gentle (~1 degree of heading per frame), "
@@ -58,6 +59,25 @@ int main(int argc, char** argv) {
     if (flow_pairs >= 0) o.flow_pairs = flow_pairs;
     if (odometry_frames > 0) o.odometry_frames = odometry_frames;
     namespace fs = std::filesystem;
+    {
+      // What the world will take on disk, before minutes of rendering: every raw frame as an RGB
+      // image, a depth map and a Velodyne scan (upper bounds: PNG compresses), flow pairs as three
+      // images and four ground-truth maps, the odometry frames as images.
+      const double image = 3.0 * o.height * o.width, scan = 16.0 * o.lidar_beams * (360.0 / o.lidar_azimuth_step_deg);
+      const double frames = static_cast<double>(o.train_drives + o.test_drives) * static_cast<double>(o.frames_per_drive);
+      const double bytes = frames * (image + 2.0 * o.height * o.width + scan) + o.flow_pairs * (3 * image + 4 * 6.0 * o.height * o.width) +
+                           static_cast<double>(o.odometry_frames) * image;
+      fs::path probe = fs::absolute(out);
+      while (!probe.empty() && !fs::exists(probe)) probe = probe.parent_path();
+      std::error_code ec;
+      const auto space = fs::space(probe, ec);
+      spdlog::info("geo_synth: {:.0f} frames, at most {:.2f} GB", frames + 3.0 * o.flow_pairs + o.odometry_frames, bytes / 1e9);
+      if (!ec && bytes / 2 > static_cast<double>(space.available))
+        throw std::runtime_error("this world needs about " + std::to_string(static_cast<int64_t>(bytes / 2e9)) + "-" +
+                                 std::to_string(static_cast<int64_t>(bytes / 1e9)) + " GB and " + probe.string() + " has " +
+                                 std::to_string(static_cast<int64_t>(space.available / 1000000000)) +
+                                 " GB free: fewer --drives, --frames, --flow-pairs or --odometry-frames");
+    }
     if (fs::exists(out) && !fs::is_empty(out)) {
       if (!force) throw std::runtime_error("--out '" + out + "' exists and is not empty (use --force to replace the world there)");
       // A new world replaces the old one whole: files the new one does not write (more drives, pairs

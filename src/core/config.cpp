@@ -444,7 +444,7 @@ void ModelConfig::validate(Checker& c) const {
 }
 
 void AugmentConfig::validate(Checker& c) const {
-  c.require(scale_max >= 1.0, "scale_max", scale_max, "must be >= 1");
+  c.require(scale_max >= 1.0 && scale_max <= 2.0, "scale_max", scale_max, "must be in [1, 2] (GeoNet: 1.15)");
   c.require(photometric_prob >= 0 && photometric_prob <= 1, "photometric_prob", photometric_prob,
             "must be in [0, 1]");
   c.require(gamma_min > 0 && gamma_min <= gamma_max, "gamma_min", gamma_min,
@@ -456,10 +456,11 @@ void AugmentConfig::validate(Checker& c) const {
 }
 
 void DataConfig::validate(Checker& c) const {
-  c.require(height >= 16 && height % 8 == 0, "height", height,
-            "must be a positive multiple of 8 (4 pyramid scales), at least 16");
-  c.require(width >= 16 && width % 8 == 0, "width", width,
-            "must be a positive multiple of 8 (4 pyramid scales), at least 16");
+  // Bounded where it is read: a network input of 4096x4096 already needs tens of GB to train.
+  c.require(height >= 16 && height <= 4096 && height % 8 == 0, "height", height,
+            "must be a multiple of 8 (4 pyramid scales) in 16..4096");
+  c.require(width >= 16 && width <= 4096 && width % 8 == 0, "width", width,
+            "must be a multiple of 8 (4 pyramid scales) in 16..4096");
   c.require(seq_length >= 3 && seq_length % 2 == 1, "seq_length", seq_length,
             "must be odd and >= 3 (target in the middle)");
   c.require(num_workers >= 0 && num_workers <= 64, "num_workers", num_workers, "must be in 0..64");
@@ -598,7 +599,7 @@ void StageConfig::validate(Checker& c) const {
   c.require(!numbered, "name", name, "must not end in '-' and eight digits (the checkpoints' numbering)");
   c.require(iterations > 0 && iterations <= kMaxCount, "iterations", iterations, kCountRange);
   c.require(!train.empty(), "train", train, "must name at least one of depth, pose, flow");
-  c.require(learning_rate > 0, "learning_rate", learning_rate, "must be > 0");
+  c.require(learning_rate > 0 && learning_rate <= 1, "learning_rate", learning_rate, "must be in (0, 1] (GeoNet: 0.0002)");
   c.require(batch_size >= 1 && batch_size <= 65536, "batch_size", batch_size, "must be in 1..65536");
   c.require(lr_schedule != LrScheduleKind::kStep || lr_step > 0, "lr_step", lr_step,
             "must be > 0 when lr_schedule is step");

@@ -1,8 +1,10 @@
 #include "core/runtime.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <stdexcept>
 #include <thread>
 
@@ -142,6 +144,25 @@ Bf16Autocast::~Bf16Autocast() {
     at::autocast::set_autocast_cpu_dtype(was_dtype_);
   }
 #endif
+}
+
+int64_t available_memory_bytes() {
+  std::ifstream in("/proc/meminfo");
+  std::string key;
+  int64_t kb = 0;
+  std::string unit;
+  while (in >> key >> kb >> unit)
+    if (key == "MemAvailable:") return kb * 1024;
+  return -1;
+}
+
+void check_memory_available(const std::string& what, double bytes) {
+  const int64_t available = available_memory_bytes();
+  if (available < 0 || bytes <= static_cast<double>(available)) return;
+  char text[160];
+  std::snprintf(text, sizeof text, " needs about %.1f GiB, this machine has %.1f GiB available", bytes / (1 << 30),
+                static_cast<double>(available) / (1 << 30));
+  throw std::runtime_error(what + text);
 }
 
 }  // namespace geo

@@ -23,6 +23,13 @@ torch::Device select_device(const std::string& name);
 // GEO_KEEP_MEMORY=0 in the environment turns this off.
 void keep_freed_memory();
 
+// The memory this machine can give without swapping (MemAvailable of /proc/meminfo), in bytes; -1
+// where it cannot be told.
+int64_t available_memory_bytes();
+// Throws std::runtime_error when `bytes` exceed the available memory: "<what> needs about X GiB,
+// this machine has Y GiB available". Nothing where the available memory is unknown.
+void check_memory_available(const std::string& what, double bytes);
+
 // Whether this CPU computes bfloat16 natively (AVX512-BF16 or AMX-BF16), checked at run time.
 bool cpu_has_fast_bf16();
 

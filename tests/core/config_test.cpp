@@ -5,6 +5,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <tuple>
+#include <vector>
 
 #include "test_util.h"
 
@@ -142,9 +144,23 @@ TEST(Config, NegativeLearningRateNamesKeyValueAndLine) {
   const std::string msg = error_of([] {
     geo::parse_config("stages:\n  - name: s\n    learning_rate: -0.001\n", "x.yaml");
   });
-  EXPECT_NE(msg.find("'stages[0].learning_rate' = -0.001 (line 3): must be > 0"),
+  EXPECT_NE(msg.find("'stages[0].learning_rate' = -0.001 (line 3): must be in (0, 1]"),
             std::string::npos)
       << msg;
+}
+
+// Sizes are bounded where they are read, naming the key: never a 22 GB allocation, a LibTorch
+// backtrace or a float overflow later.
+TEST(Config, SizesAreBoundedWhereRead) {
+  for (const auto& [text, key, why] : std::vector<std::tuple<std::string, std::string, std::string>>{
+           {"data: {height: 1048576}", "'data.height' = 1048576 (line 1)", "in 16..4096"},
+           {"data: {width: 8192}", "'data.width' = 8192 (line 1)", "in 16..4096"},
+           {"data: {augment: {scale_max: 1e300}}", "'data.augment.scale_max'", "must be in [1, 2]"},
+           {"stages: [{name: s, learning_rate: 1e300}]", "'stages[0].learning_rate'", "must be in (0, 1]"}}) {
+    const std::string msg = error_of([&] { geo::parse_config(text + "\n", "x.yaml"); });
+    EXPECT_NE(msg.find(key), std::string::npos) << msg;
+    EXPECT_NE(msg.find(why), std::string::npos) << msg;
+  }
 }
 
 TEST(Config, StageNamesArePlainAndThreadsBounded) {
