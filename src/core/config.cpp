@@ -107,6 +107,17 @@ template <class T> void read_scalar(const YAML::Node& node, const std::string& p
   if (!node.IsScalar())
     throw ConfigError(ctx.where(path, node) + ": key '" + path + "' must be " + type_name<T>() +
                       ", got " + shown);
+  if constexpr (std::is_integral_v<T> && !std::is_same_v<T, bool>) {
+    // Plain decimal only: yaml-cpp reads 010 as octal 8 and 0x10 as 16, which nobody means in a
+    // count of iterations.
+    const std::string& t = node.Scalar();
+    const size_t digits = !t.empty() && (t[0] == '+' || t[0] == '-') ? 1 : 0;  // where the digits start
+    const bool decimal = !t.empty() && t.size() > digits && t.find_first_not_of("0123456789", digits) == std::string::npos &&
+                         (t.size() == digits + 1 || t[digits] != '0');
+    if (!decimal)
+      throw ConfigError(ctx.where(path, node) + ": key '" + path + "' must be " + type_name<T>() +
+                        " written in decimal without leading zeros, got " + shown);
+  }
   try {
     out = node.as<T>();
   } catch (const YAML::Exception&) {
@@ -129,8 +140,16 @@ struct ParseVisitor {
   template <class T> void operator()(const char* key, T& out) {
     known.emplace_back(key);
     const YAML::Node child = node[key];
-    if (!child.IsDefined() || child.IsNull()) return;  // keep the default
+    if (!child.IsDefined()) return;  // keep the default
     const std::string path = join(prefix, key);
+    if (child.IsNull()) {
+      // An empty section keeps its defaults; an empty value ("iterations:", "iterations: ~") is a
+      // value left out by mistake, never silently the default.
+      if constexpr (std::is_arithmetic_v<T> || std::is_same_v<T, std::string> || std::is_enum_v<T>)
+        throw ConfigError(ctx.where(path, child) + ": key '" + path + "' has no value (give one, or leave the key out " +
+                          "for the default)");
+      return;
+    }
     ctx.record(path, child);
     read_value(child, path, out, ctx);
   }

@@ -149,6 +149,23 @@ TEST(Config, NegativeLearningRateNamesKeyValueAndLine) {
       << msg;
 }
 
+// A value left empty is an error, not the default; integers are decimal (YAML's 010 is octal 8).
+TEST(Config, EmptyValuesAndNonDecimalIntegersAreRefused) {
+  for (const auto& [text, why] : std::vector<std::pair<std::string, std::string>>{
+           {"stages: [{name: s, iterations: ~}]", "key 'stages[0].iterations' has no value"},
+           {"stages:\n  - name: s\n    iterations:\n", "key 'stages[0].iterations' has no value"},
+           {"model: {use_fr: null}", "key 'model.use_fr' has no value"},
+           {"stages: [{name: s, iterations: 010}]", "written in decimal without leading zeros, got '010'"},
+           {"stages: [{name: s, iterations: 0x10}]", "got '0x10'"},
+           {"data: {height: 1e3}", "got '1e3'"}}) {
+    const std::string msg = error_of([&] { geo::parse_config(text + "\n", "x.yaml"); });
+    EXPECT_NE(msg.find(why), std::string::npos) << msg;
+  }
+  EXPECT_EQ(geo::parse_config("stages: [{name: s, iterations: 10}]\n").stages[0].iterations, 10);
+  EXPECT_EQ(geo::parse_config("stages: [{name: s, iterations: +5}]\n").stages[0].iterations, 5);
+  EXPECT_EQ(geo::parse_config("model:\nrun: {seed: -0}\n").model.use_fr, geo::Config().model.use_fr);  // an empty section
+}
+
 // Sizes are bounded where they are read, naming the key: never a 22 GB allocation, a LibTorch
 // backtrace or a float overflow later.
 TEST(Config, SizesAreBoundedWhereRead) {
