@@ -377,6 +377,10 @@ int train(const Config& config, const TrainOptions& options, std::string* run_di
   try {
     folder = options.run_dir.empty() ? RunFolder::create_new(config.run.dir, config.run.name) : RunFolder(options.run_dir);
     const std::string& dir = folder->root();
+    // The lock first: a folder where a run is training right now is said to be in use, never
+    // called a stopped run to be removed.
+    fs::create_directories(dir);
+    lock = std::make_unique<FolderLock>(dir);  // one writer per run folder
     if (!folder->latest().empty())
       throw std::runtime_error("run folder '" + dir + "' already holds a run; use --resume " + dir + " or another --run-dir");
     // A run that stopped before its first checkpoint cannot be resumed, and a new one would append
@@ -385,8 +389,6 @@ int train(const Config& config, const TrainOptions& options, std::string* run_di
     if (!earlier.empty())
       throw std::runtime_error("run folder '" + dir + "' holds the files of an earlier run (" + join_list(earlier, ", ") +
                                ") that stopped before its first checkpoint: remove the folder or use another --run-dir");
-    fs::create_directories(dir);
-    lock = std::make_unique<FolderLock>(dir);  // one writer per run folder
     write_file_atomic(folder->config(), to_yaml(config));
   } catch (const std::exception& e) {
     if (group) group->share_from_rank0("run_dir", e.what(), true);

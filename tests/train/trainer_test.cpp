@@ -452,6 +452,20 @@ TEST(Trainer, ASecondWriterOnARunFolderIsRefused) {
   test::write_text(dir + "/config.yaml", to_yaml(tiny_config()));
   const FolderLock running(dir);  // as if a geo_train were training in it
   GEO_EXPECT_THROW_WITH(resume(dir, {}), dir, "is in use by process");
+  // A new run into it is told the folder is in use (before its first checkpoint a live run has only
+  // logs), never advised to remove it.
+  test::write_text(dir + "/train.log", "training\n");
+  TrainOptions o;
+  o.run_dir = dir;
+  std::string msg;
+  try {
+    train(tiny_config(), o);
+  } catch (const std::exception& e) {
+    msg = e.what();
+  }
+  EXPECT_NE(msg.find(dir + " is in use by process"), std::string::npos) << msg;
+  EXPECT_EQ(msg.find("remove the folder"), std::string::npos) << msg;
+  EXPECT_EQ(test::read_file(dir + "/train.log"), "training\n");
 }
 
 TEST(Trainer, ExplicitCudaWithoutCudaIsAnError) {
