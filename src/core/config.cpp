@@ -1,4 +1,5 @@
 #include "core/config.h"
+#include "core/files.h"
 #include "core/paths.h"  // generated: GEO_SOURCE_DIR
 
 #include <spdlog/spdlog.h>
@@ -784,7 +785,7 @@ std::string resolve_config_path(const std::string& name) {
     spdlog::info("config {}", fs::absolute(name, ec).string());
     return name;
   }
-  if (fs::is_directory(name, ec)) throw ConfigError("config '" + name + "' is a folder, not a YAML file");
+  if (fs::exists(name, ec)) throw ConfigError("config '" + name + "' " + unreadable_file_reason(name) + " (a YAML file is needed)");
   const fs::path dir = shipped_config_dir();
   // Only a bare name means a shipped config: a path with a folder that does not exist is a typo,
   // and silently training the shipped file of the same name would hide it.

@@ -169,6 +169,21 @@ FolderLock::~FolderLock() {
   if (fd_ >= 0) ::close(fd_);  // releases the lock
 }
 
+std::string unreadable_file_reason(const std::string& path) {
+  std::error_code ec;
+  const auto status = std::filesystem::status(path, ec);
+  switch (status.type()) {
+    case std::filesystem::file_type::regular: return "";
+    case std::filesystem::file_type::directory: return "is a folder, not a file";
+    case std::filesystem::file_type::fifo: return "is a FIFO (named pipe), not a file";
+    case std::filesystem::file_type::character:
+    case std::filesystem::file_type::block: return "is a device, not a file";
+    case std::filesystem::file_type::socket: return "is a socket, not a file";
+    case std::filesystem::file_type::not_found: return "no such file";
+    default: return ec ? "cannot be read (" + ec.message() + ")" : "is not a regular file";
+  }
+}
+
 std::string zero_padded(long long number, int digits) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%0*lld", digits, number);

@@ -32,6 +32,12 @@ struct NamedPath {
 };
 void check_outputs(const std::vector<NamedPath>& outputs, const std::vector<std::string>& inputs, bool force = false);
 
+// Why `path` cannot be read as a file: "" for a regular file (or a link to one), else "no such
+// file", "is a folder, not a file", "is a FIFO (named pipe), not a file", "is a device, not a file",
+// "is a socket, not a file". Every reader of a model, checkpoint or config says so by name instead of
+// blocking on a FIFO or reading /dev/zero without end.
+std::string unreadable_file_reason(const std::string& path);
+
 // An exclusive lock on a folder (flock on <dir>/.lock, which holds the owner's PID and host): one
 // writer per run folder. The kernel releases it when the process ends, however it ends, so a crash
 // never leaves a stale lock. Throws std::runtime_error naming the holder when the folder is taken.

@@ -86,8 +86,8 @@ void save_state(const torch::nn::Module& module, const std::string& path) {
 }
 
 torch::serialize::InputArchive open_archive(const std::string& path) {
-  if (!std::filesystem::is_regular_file(path))
-    throw std::runtime_error(path + ": no such file");
+  const std::string why = unreadable_file_reason(path);
+  if (!why.empty()) throw std::runtime_error(path + ": " + why);
   // Bytes altered inside a tensor would load silently (LibTorch does not check the records' CRCs).
   verify_zip_checksums(path);
   torch::serialize::InputArchive archive;

@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
+
+#include <sys/stat.h>
 #include <filesystem>
 #include <fstream>
 #include <tuple>
@@ -347,7 +349,14 @@ TEST(Config, ResolveNamesEveryPlaceTried) {
   EXPECT_NE(msg.find("config 'nope.yaml' not found"), std::string::npos) << msg;
   EXPECT_NE(msg.find("configs/nope.yaml"), std::string::npos) << msg;
   EXPECT_EQ(error_of([] { geo::resolve_config_path(geo::shipped_config_dir()); }),
-            "config '" + geo::shipped_config_dir() + "' is a folder, not a YAML file");
+            "config '" + geo::shipped_config_dir() + "' is a folder, not a file (a YAML file is needed)");
+  // Devices and FIFOs are named as such (a FIFO would block the reader, /dev/zero never end).
+  EXPECT_EQ(error_of([] { geo::resolve_config_path("/dev/zero"); }),
+            "config '/dev/zero' is a device, not a file (a YAML file is needed)");
+  const std::string fifo = geo::test::fresh_dir("config_fifo") + "/c.yaml";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  EXPECT_EQ(error_of([&] { geo::resolve_config_path(fifo); }),
+            "config '" + fifo + "' is a FIFO (named pipe), not a file (a YAML file is needed)");
 }
 
 // A mistyped path is an error, never the shipped config of the same file name; bare names (with or

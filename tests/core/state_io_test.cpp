@@ -7,6 +7,8 @@
 #include <fstream>
 #include <iterator>
 
+#include "test_util.h"
+
 namespace {
 
 struct TinyImpl : torch::nn::Module {
@@ -84,6 +86,9 @@ TEST(StateIo, MissingAndCorruptFilesAreNamed) {
         }
       },
       std::runtime_error);
+  // A device or a folder given as a model is named as such, never read (/dev/zero has no end).
+  GEO_EXPECT_THROW_WITH(geo::load_state(*a, "/dev/zero"), "/dev/zero: is a device, not a file");
+  GEO_EXPECT_THROW_WITH(geo::load_state(*a, "/tmp"), "/tmp: is a folder, not a file");
   const auto path = temp_path("corrupt.pt");
   { std::ofstream(path) << "not a state file"; }
   EXPECT_THROW(geo::load_state(*a, path), std::runtime_error);
