@@ -11,6 +11,9 @@
 #include <stdexcept>
 #include <vector>
 
+#include <caffe2/serialize/inline_container.h>
+#include <c10/util/Exception.h>
+
 namespace geo {
 namespace {
 
@@ -106,6 +109,12 @@ bool verify_zip_checksums(const std::string& path) {
   std::vector<unsigned char> cd(cd_size);
   if (!f.read(cd_offset, cd.data(), cd_size)) throw std::runtime_error(damaged + "truncated directory" + advice);
   std::vector<unsigned char> buffer(1 << 20);
+  struct Compressed {
+    std::string name;
+    uint32_t crc;
+    uint64_t size;
+  };
+  std::vector<Compressed> compressed;
   size_t at = 0;
   for (uint64_t i = 0; i < entries; ++i) {
     if (at + 46 > cd.size() || u32(&cd[at]) != 0x02014b50u)
@@ -129,7 +138,10 @@ bool verify_zip_checksums(const std::string& path) {
       x += 4 + len;
     }
     at += 46 + name_len + extra_len + comment_len;
-    if (method != 0) continue;  // compressed records: LibTorch writes none; the reader would check them
+    if (method != 0) {  // deflated (LibTorch's code/ records, or a re-packed archive): checked below
+      compressed.push_back({name, crc, size});
+      continue;
+    }
     unsigned char lh[30];
     if (!f.read(local, lh, 30) || u32(lh) != 0x04034b50u)
       throw std::runtime_error(damaged + "record '" + name + "' has no header" + advice);
@@ -145,6 +157,26 @@ bool verify_zip_checksums(const std::string& path) {
     }
     if (c != crc)
       throw std::runtime_error(damaged + "record '" + name + "' fails its CRC-32 check: bytes were altered" + advice);
+  }
+  if (!compressed.empty()) {
+    // Inflated by LibTorch's own reader (which skips the CRCs), checked here. Its names leave out
+    // the archive's top folder.
+    try {
+      caffe2::serialize::PyTorchStreamReader reader(path);
+      for (const auto& r : compressed) {
+        const auto slash = r.name.find('/');
+        try {
+          auto [data, n] = reader.getRecord(slash == std::string::npos ? r.name : r.name.substr(slash + 1));
+          if (n != r.size || crc32(data.get(), n) != r.crc)
+            throw std::runtime_error(damaged + "record '" + r.name + "' fails its CRC-32 check: bytes were altered" + advice);
+        } catch (const c10::Error& e) {
+          throw std::runtime_error(damaged + "record '" + r.name + "' cannot be inflated: " + e.what_without_backtrace() +
+                                   advice);
+        }
+      }
+    } catch (const c10::Error& e) {
+      throw std::runtime_error(damaged + "LibTorch cannot open it: " + std::string(e.what_without_backtrace()) + advice);
+    }
   }
   return true;
 }

@@ -13,7 +13,8 @@ namespace geo {
 uint32_t crc32(const void* data, size_t size, uint32_t crc = 0);
 
 // Checks every record of the ZIP archive `path` against the CRC-32 and sizes of its central
-// directory (ZIP64 included). Throws std::runtime_error naming the file and the damaged record;
+// directory (ZIP64 included); compressed records (LibTorch deflates its code/ records) are
+// inflated by LibTorch's reader and then checked. Throws std::runtime_error naming the file and the damaged record;
 // a file that is no ZIP archive at all is left to the reader (returns false); true when checked.
 bool verify_zip_checksums(const std::string& path);
 

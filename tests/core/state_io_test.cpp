@@ -138,4 +138,37 @@ TEST(StateIo, AFileAlteredInsideATensorIsRefused) {
   std::filesystem::remove(path);
 }
 
+// LibTorch deflates its code/ records, and its reader checks no CRC of them either: a byte altered
+// in one is found after inflating it, naming the file and the record.
+TEST(StateIo, AnAlteredCompressedRecordIsRefused) {
+  Tiny a(4);
+  const auto path = temp_path("deflated.pt");
+  geo::save_state(*a, path);
+  EXPECT_TRUE(geo::verify_zip_checksums(path));  // the intact file, its compressed records included
+  std::string bytes;
+  {
+    std::ifstream in(path, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  // The first compressed record (method 8) of the central directory; its data after the local
+  // header's name and extra field (LibTorch's local headers leave the sizes to a data descriptor).
+  const auto u16 = [&](size_t at) { return static_cast<size_t>(static_cast<unsigned char>(bytes[at])) |
+                                           static_cast<size_t>(static_cast<unsigned char>(bytes[at + 1])) << 8; };
+  const auto u32 = [&](size_t at) { return u16(at) | u16(at + 2) << 16; };
+  size_t entry = 0;
+  for (entry = bytes.find("PK\x01\x02"); entry != std::string::npos; entry = bytes.find("PK\x01\x02", entry + 4))
+    if (u16(entry + 10) == 8) break;
+  ASSERT_NE(entry, std::string::npos) << "no compressed record in a LibTorch archive";
+  const std::string name = bytes.substr(entry + 46, u16(entry + 28));
+  const size_t local = u32(entry + 42), size = u32(entry + 20);
+  const size_t data = local + 30 + u16(local + 26) + u16(local + 28);
+  ASSERT_GT(size, 4u);
+  bytes[data + size / 2] = static_cast<char>(bytes[data + size / 2] ^ 0x10);
+  { std::ofstream(path, std::ios::binary) << bytes; }
+  GEO_EXPECT_THROW_WITH(geo::verify_zip_checksums(path), path + ": damaged file", "record '" + name + "'");
+  Tiny b(4);
+  GEO_EXPECT_THROW_WITH(geo::load_state(*b, path), path + ": damaged file", "record '" + name + "'");
+  std::filesystem::remove(path);
+}
+
 }  // namespace
