@@ -57,6 +57,14 @@ void read_state(torch::nn::Module& module, torch::serialize::InputArchive& archi
     }
     loaded[name] = t;
   }
+  // Weights that are NaN or infinite (a diverged run saved with valid CRCs) would predict nothing
+  // but NaN, written out as zero depth: refused by name.
+  std::vector<std::string> non_finite;
+  for (const auto& [name, t] : loaded)
+    if (t.is_floating_point() && !torch::isfinite(t).all().item<bool>()) non_finite.push_back(name);
+  if (!non_finite.empty())
+    throw std::runtime_error(what + ": holds NaN or infinite values in " + list(non_finite) +
+                             " (nothing was loaded; a run that diverged: use an earlier checkpoint)");
   if (!missing.empty() || !unexpected.empty() || !mismatched.empty()) {
     std::string msg = what + ": does not match the network (nothing was loaded)";
     if (!missing.empty()) msg += "\n  missing keys: " + list(missing);

@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -86,6 +87,21 @@ TEST(StateIo, MissingAndCorruptFilesAreNamed) {
         }
       },
       std::runtime_error);
+  // NaN weights (a diverged run, saved with valid CRCs) are refused by key, and nothing is loaded.
+  {
+    Tiny nan_net(4);
+    {
+      torch::NoGradGuard no_grad;
+      nan_net->fc1->bias[1] = std::nan("");
+    }
+    const auto nan_path = temp_path("nan.pt");
+    geo::save_state(*nan_net, nan_path);
+    Tiny c(4);
+    const auto before = c->fc1->weight.clone();
+    GEO_EXPECT_THROW_WITH(geo::load_state(*c, nan_path), "holds NaN or infinite values in fc1.bias", "nothing was loaded");
+    EXPECT_TRUE(torch::equal(before, c->fc1->weight));
+    std::filesystem::remove(nan_path);
+  }
   // A device or a folder given as a model is named as such, never read (/dev/zero has no end).
   GEO_EXPECT_THROW_WITH(geo::load_state(*a, "/dev/zero"), "/dev/zero: is a device, not a file");
   GEO_EXPECT_THROW_WITH(geo::load_state(*a, "/tmp"), "/tmp: is a folder, not a file");
