@@ -1,5 +1,7 @@
 #include "data/calib.h"
 
+#include <cstdio>
+
 #include "data/text_io.h"
 
 #include <cmath>
@@ -51,11 +53,15 @@ torch::Tensor KeyValues::rotation(const std::string& key) const {
 }
 
 void check_focal_lengths(double fx, double fy, const std::string& what) {
-  // Positive and below 1e5 px (KITTI: ~720 px; a 1e5 px focal length is a 0.4 degree field of view).
-  auto ok = [](double f) { return std::isfinite(f) && f > 0 && f < 1e5; };
-  if (!ok(fx) || !ok(fy))
-    throw std::runtime_error(what + ": focal lengths fx = " + std::to_string(fx) + ", fy = " + std::to_string(fy) +
-                             " are not plausible (must be finite, > 0 and < 1e5 pixels)");
+  // From 1 to 1e5 px (KITTI: ~720 px; below 1 px the field of view passes 180 degrees, a 1e5 px
+  // focal length is 0.4 degrees): normalised intrinsics (fx ~ 0.6) are the mistake this catches.
+  auto ok = [](double f) { return std::isfinite(f) && f >= 1 && f < 1e5; };
+  if (!ok(fx) || !ok(fy)) {
+    char text[200];
+    std::snprintf(text, sizeof text, ": focal lengths fx = %.6g, fy = %.6g are not plausible", fx, fy);
+    throw std::runtime_error(what + text + " (in pixels: must be finite, >= 1 and < 1e5; intrinsics normalised by the "
+                                           "image size must be multiplied by it)");
+  }
 }
 
 KeyValues parse_key_values(const std::string& text, const std::string& source) {
@@ -64,6 +70,7 @@ KeyValues parse_key_values(const std::string& text, const std::string& source) {
   std::istringstream in(text);
   std::string line;
   int line_no = 0;
+  std::map<std::string, int> seen;  // key -> line
   while (std::getline(in, line)) {
     ++line_no;
     if (!line.empty() && line.back() == '\r') line.pop_back();
@@ -81,6 +88,9 @@ KeyValues parse_key_values(const std::string& text, const std::string& source) {
     key = trim(key);
     if (key == "calib_time") continue;  // a date, not numbers (raw KITTI)
     const std::string where = source + " line " + std::to_string(line_no) + " ('" + key + "')";
+    if (!seen.emplace(key, line_no).second)
+      throw std::runtime_error(where + ": key '" + key + "' is given twice (lines " + std::to_string(seen[key]) + " and " +
+                               std::to_string(line_no) + "): which one is meant cannot be told");
     kv.values[key] = parse_doubles(rest, where);
   }
   return kv;
