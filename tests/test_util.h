@@ -62,6 +62,16 @@ inline std::string kitti_samples() {
   return std::filesystem::exists(dir + "/README.md") ? dir : "";
 }
 
+// A NumPy .npy file (format 1.0) with the header dict `header` as written, padded as NumPy pads it,
+// followed by `data`.
+inline std::string npy_bytes(std::string header, const std::string& data) {
+  header += std::string(63 - (10 + header.size()) % 64, ' ') + "\n";
+  std::string out = std::string("\x93NUMPY\x01\x00", 8);
+  out += static_cast<char>(header.size() & 0xff);
+  out += static_cast<char>(header.size() >> 8);
+  return out + header + data;
+}
+
 // The built tools (geo_train, ...): GEO_APPS_DIR, else the build tree's apps/.
 inline std::string apps_dir() {
   const char* env = std::getenv("GEO_APPS_DIR");

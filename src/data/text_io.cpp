@@ -133,15 +133,34 @@ torch::Tensor read_npy(const std::string& path) {
   if (hlen > bytes.size() - start)
     throw std::runtime_error(path + ": header of " + std::to_string(hlen) + " bytes runs past the end of the file");
   const std::string header = bytes.substr(start, hlen);
-  const bool f4 = header.find("'<f4'") != std::string::npos, f8 = header.find("'<f8'") != std::string::npos;
-  if (f4 == f8) throw std::runtime_error(path + ": only little-endian float32/float64 arrays are supported ('descr' '<f4' or '<f8')");
-  if (header.find("'fortran_order': True") != std::string::npos)
-    throw std::runtime_error(path + ": Fortran-order arrays are not supported");
-  const auto a = header.find('('), b = header.find(')', a == std::string::npos ? 0 : a);
-  if (a == std::string::npos || b == std::string::npos)
-    throw std::runtime_error(path + ": header has no 'shape' tuple");
+  // The header is a Python dict literal: each key's value read whatever the spacing around ':'.
+  const auto field = [&](const std::string& key) {
+    size_t k = header.find("'" + key + "'");
+    if (k == std::string::npos) k = header.find("\"" + key + "\"");
+    if (k == std::string::npos) throw std::runtime_error(path + ": header has no '" + key + "'");
+    size_t i = header.find_first_not_of(" \t", k + key.size() + 2);
+    if (i == std::string::npos || header[i] != ':') throw std::runtime_error(path + ": malformed header at '" + key + "'");
+    i = header.find_first_not_of(" \t", i + 1);
+    if (i == std::string::npos) throw std::runtime_error(path + ": malformed header at '" + key + "'");
+    size_t j = i;
+    for (int depth = 0; j < header.size(); ++j) {
+      if (header[j] == '(') ++depth;
+      if (header[j] == ')') --depth;
+      if (depth == 0 && (header[j] == ',' || header[j] == '}')) break;
+    }
+    return trim(header.substr(i, j - i));
+  };
+  const std::string descr = field("descr"), order = field("fortran_order"), shape_text = field("shape");
+  const bool f4 = descr == "'<f4'" || descr == "\"<f4\"", f8 = descr == "'<f8'" || descr == "\"<f8\"";
+  if (!f4 && !f8)
+    throw std::runtime_error(path + ": 'descr' is " + descr + ": only little-endian float32/float64 arrays are supported ('<f4' or '<f8')");
+  if (order == "True") throw std::runtime_error(path + ": Fortran-order arrays are not supported (save with np.ascontiguousarray)");
+  if (order != "False") throw std::runtime_error(path + ": 'fortran_order' is '" + order + "' (True or False)");
+  const auto a = shape_text.find('('), b = shape_text.rfind(')');
+  if (a != 0 || b != shape_text.size() - 1) throw std::runtime_error(path + ": 'shape' is '" + shape_text + "', not a tuple");
+  const std::string header_shape = shape_text;
   std::vector<int64_t> shape;
-  std::istringstream dims(header.substr(a + 1, b - a - 1));
+  std::istringstream dims(header_shape.substr(a + 1, b - a - 1));
   std::string tok;
   const int64_t elem = f4 ? 4 : 8;
   int64_t count = 1;

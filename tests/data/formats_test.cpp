@@ -274,5 +274,25 @@ TEST(KittiSamples, OdometryPoses) {
   EXPECT_EQ(read_poses(root + "/odometry/poses/10.txt").size(0), 1201);
 }
 
+// The .npy header is a Python dict: read whatever its spacing, so that a Fortran-order array
+// written without spaces is refused, never read as C order.
+TEST(Npy, TheHeaderIsReadWhateverItsSpacing) {
+  const auto dir = test::fresh_dir("npy_header");
+  const float values[6] = {1, 2, 3, 4, 5, 6};
+  const std::string data(reinterpret_cast<const char*>(values), sizeof values);
+  test::write_text(dir + "/c.npy", test::npy_bytes("{'descr':'<f4','fortran_order':False,'shape':(2,3)}", data));
+  const auto t = read_npy(dir + "/c.npy");
+  EXPECT_EQ(t.sizes(), (std::vector<int64_t>{2, 3}));
+  EXPECT_EQ(t[1][0].item<float>(), 4.0f);
+  test::write_text(dir + "/f.npy", test::npy_bytes("{'descr':'<f4','fortran_order':True,'shape':(2,3)}", data));
+  GEO_EXPECT_THROW_WITH(read_npy(dir + "/f.npy"), "f.npy: Fortran-order arrays are not supported");
+  test::write_text(dir + "/b.npy", test::npy_bytes("{'descr': '>f4', 'fortran_order': False, 'shape': (2, 3), }", data));
+  GEO_EXPECT_THROW_WITH(read_npy(dir + "/b.npy"), "'descr' is '>f4'", "little-endian");
+  test::write_text(dir + "/o.npy", test::npy_bytes("{'descr': '<f4', 'fortran_order': 0, 'shape': (2, 3), }", data));
+  GEO_EXPECT_THROW_WITH(read_npy(dir + "/o.npy"), "'fortran_order' is '0'");
+  test::write_text(dir + "/s.npy", test::npy_bytes("{'descr': '<f4', 'fortran_order': False, 'shape': 6, }", data));
+  GEO_EXPECT_THROW_WITH(read_npy(dir + "/s.npy"), "'shape' is '6', not a tuple");
+}
+
 }  // namespace
 }  // namespace geo

@@ -48,7 +48,7 @@ const std::vector<std::string>& text_dictionary() {
       "{", "}", ",", "&a", "*a", "<<: *a", "!!binary", "~", "null", "- ", "? ", "|", ">", "%YAML 1.2\n", "---\n",
       "P_rect_02:", "R_rect_00:", "S_rect_02:", "R:", "T:", "Tr:", "P2:", "calib_time:", "image_02/data/",
       "0000000001.png", " l", " r", "geo-packed 1", "geo-packed 2", "height ", "width ", "seq_length ", "count ", "pack ",
-      "'descr': '<f4'", "'descr': '<f8'", "'fortran_order': True", "'shape': (", ")", "stages:", "iterations: ",
+      "'descr': '<f4'", "'descr': '<f8'", "'fortran_order': True", "'fortran_order':True", "'shape': (", ")", "stages:", "iterations: ",
       "data:", "model:", "encoder_depth: ", std::string(1, '\0'), std::string(300, '9'), std::string(2000, '[')};
   return d;
 }
@@ -321,12 +321,8 @@ TEST(Fuzz, PackedCacheIndex) {
 TEST(Fuzz, NpyPredictions) {
   const auto dir = test::fresh_dir("fuzz_npy");
   auto npy = [](const std::string& descr, const std::string& shape, size_t bytes) {
-    std::string header = "{'descr': '" + descr + "', 'fortran_order': False, 'shape': " + shape + ", }";
-    header += std::string(63 - (10 + header.size()) % 64, ' ') + "\n";
-    std::string out = std::string("\x93NUMPY\x01\x00", 8);
-    out += static_cast<char>(header.size() & 0xff);
-    out += static_cast<char>(header.size() >> 8);
-    return out + header + std::string(bytes, '\x01');
+    return test::npy_bytes("{'descr': '" + descr + "', 'fortran_order': False, 'shape': " + shape + ", }",
+                           std::string(bytes, '\x01'));
   };
   fuzz("npy", {npy("<f4", "(2, 3, 4)", 96), npy("<f8", "(3,)", 24)}, dir + "/pred.npy", dir + "/pred.npy",
        [](const std::string& p) { (void)read_npy(p); });
