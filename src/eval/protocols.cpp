@@ -83,6 +83,9 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, PredictionS
   const double camera_height = o.scaling == DepthScaling::kCameraHeight ? camera_height_of(o, root) : 0.0;
   std::string first_nonpositive;
   std::string first_non_finite;
+  bool from_files = false;        // predictions from files, meant at the image's size
+  int64_t predictions_resized = 0;  // of them, those of another size (resized bilinearly)
+  std::string first_resized;
   Progress progress("eigen", static_cast<int64_t>(entries.size()), 0, "images");
   for (size_t i = 0; i < entries.size(); ++i) {
     const auto test = eigen_test_image(root, entries[i], i, list);
@@ -93,6 +96,23 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, PredictionS
     const int64_t H = answer.height, W = answer.width;
     const torch::Tensor& depth = answer.depth;
     require_finite(depth, "the depth prediction for line " + std::to_string(i + 1) + " (" + image + ")");
+    if (answer.from_file) {
+      from_files = true;
+      // A prediction file of another size is resized, counted and said; one whose shape is not the
+      // image's (H and W swapped, another camera) is refused rather than stretched.
+      const int64_t h = depth.size(0), w = depth.size(1);
+      if (h != H || w != W) {
+        const double aspect = (static_cast<double>(h) / w) / (static_cast<double>(H) / W);
+        if (aspect > 1.2 || aspect < 1 / 1.2)
+          throw std::runtime_error("the depth prediction for line " + std::to_string(i + 1) + " (" + image + ") is " +
+                                   std::to_string(h) + "x" + std::to_string(w) + " (HxW) for an image of " +
+                                   std::to_string(H) + "x" + std::to_string(W) + ": another shape" +
+                                   (h == W && w == H ? " (H and W swapped)" : "") + "; nothing was scored");
+        if (predictions_resized++ == 0)
+          first_resized = std::to_string(i + 1) + " (" + std::to_string(h) + "x" + std::to_string(w) + " vs " +
+                          std::to_string(H) + "x" + std::to_string(W) + ")";
+      }
+    }
     // Depths are positive: all <= 0 is no depth map (a disparity's sign, a log depth); some <= 0 are
     // clamped to 1e-3 as every protocol does, counted and reported.
     const int64_t nonpositive = (depth <= 0).sum().item<int64_t>();
@@ -173,6 +193,10 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, PredictionS
               {"velodyne_points_non_finite", non_finite_points},
               {"predictions_with_nonpositive_depth", images_nonpositive},
               {"images_without_road_plane", static_cast<int64_t>(without_plane.size())}};
+  if (from_files) r.counts.emplace_back("predictions_resized", predictions_resized);
+  if (predictions_resized > 0)
+    spdlog::warn("{} of {} depth predictions differ in size from their image and were resized bilinearly; first: "
+                 "line {}", predictions_resized, entries.size(), first_resized);
   return r;
 }
 

@@ -167,6 +167,7 @@ class FileSource : public PredictionSource {
   DepthAnswer depth(const DepthQuery& q) override {
     DepthAnswer a;
     std::tie(a.height, a.width) = image_size(q.image);
+    a.from_file = true;
     const bool npy = path_.size() > 4 && path_.substr(path_.size() - 4) == ".npy";
     if (npy && !npy_.defined()) {
       npy_ = read_npy(path_);
@@ -191,7 +192,13 @@ class FileSource : public PredictionSource {
     const std::string p = path_ + "/" + q.name + "_10.png";
     require_file(p, "flow prediction");
     FlowAnswer a;
-    a.full = read_flow_png(p).flow;
+    const auto map = read_flow_png(p);
+    // KITTI's format marks each pixel valid or not: a prediction with no valid pixel holds no flow
+    // (its vectors decode as zero) and is refused, never scored as zero flow.
+    if (!(map.valid > 0.5).any().item<bool>())
+      throw std::runtime_error(p + ": no pixel of the flow prediction is marked valid (the third channel is 0 "
+                               "everywhere): nothing to score; write valid = 1 where the flow is predicted");
+    a.full = map.flow;
     a.meant_at_ground_truth_size = true;
     return a;
   }

@@ -21,6 +21,7 @@ struct DepthQuery {
 struct DepthAnswer {
   torch::Tensor depth;             // [h,w], positive, in any scale (the protocol scales it)
   int64_t height = 0, width = 0;   // the test image's size (the ground truth's)
+  bool from_file = false;          // a prediction file: meant at the image's size (a model's is resized by design)
 };
 
 // One KITTI 2015 pair: its name (000123), its frames _10 (target) and _11 (source), the frame before

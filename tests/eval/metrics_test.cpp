@@ -222,6 +222,18 @@ TEST(Protocols, EigenDepthOfTheTruthScoresNearlyPerfectly) {
   EXPECT_LT(exact, depth.metrics[0].second);
   std::printf("abs_rel of the dense truth: %.4f (reference pixel shift), %.4f (exact pixels)\n", depth.metrics[0].second, exact);
   EXPECT_EQ(count_of(depth, "velodyne_points_non_finite"), 0);
+  EXPECT_EQ(count_of(depth, "predictions_resized"), 0);
+  {  // A prediction file of another size is resized and counted; one with H and W swapped is refused.
+    const std::string first = predictions + "/000000.png";
+    const auto truth = read_depth_png(first);  // [1,H,W]
+    const int64_t H = truth.size(1), W = truth.size(2);
+    write_depth_png(first, torch::full({1, H / 2, W / 2}, 10.0f));
+    EXPECT_EQ(count_of(score_files(e, predictions), "predictions_resized"), 1);
+    write_depth_png(first, torch::full({1, W, H}, 10.0f));
+    GEO_EXPECT_THROW_WITH(score_files(e, predictions), "line 1", std::to_string(W) + "x" + std::to_string(H) + " (HxW)",
+                          "(H and W swapped)");
+    write_depth_png(first, truth);
+  }
   // NaN points in a scan are left out of the ground truth and counted; the metrics do not move.
   {
     const auto d = tests[0].substr(0, tests[0].find("/image_02"));
@@ -278,6 +290,9 @@ TEST(Protocols, Kitti2015FlowOfTheTruthScoresPerfectly) {
     const auto first = std::filesystem::directory_iterator(small)->path().string();
     write_flow_png(first, torch::zeros({2, 4, 6}), torch::ones({1, 4, 6}));
     EXPECT_EQ(count_of(score_files(f, small), "predictions_resized"), 1);
+    // A prediction with every valid bit 0 holds no flow: refused, not scored as zero flow.
+    write_flow_png(first, torch::ones({2, 4, 6}), torch::zeros({1, 4, 6}));
+    GEO_EXPECT_THROW_WITH(score_files(f, small), first, "no pixel of the flow prediction is marked valid");
   }
   test::write_text(root + "/pairs.txt", "training/image_2/000001_10.png\n");
   f.split_file = root + "/pairs.txt";
