@@ -170,9 +170,10 @@ class C10dGroup : public ProcessGroup {
       }
     } catch (const std::exception& e) {
       throw std::runtime_error(
-          l.rank == 0 ? "rank 0 could not open the rendezvous at " + where + " (MASTER_ADDR:MASTER_PORT; port in use?) " +
-                            "or not all " + std::to_string(l.world_size) + " processes arrived within " +
-                            std::to_string(config.timeout_s) + " s: " + message_of(e)
+          l.rank == 0 ? "rank 0 could not open the rendezvous at " + where + " (MASTER_ADDR:MASTER_PORT; port in use, " +
+                            "e.g. by another process also launched with RANK=0?) or not all " + std::to_string(l.world_size) +
+                            " processes arrived within " + std::to_string(config.timeout_s) + " s (each process needs its own RANK, " +
+                            "0.." + std::to_string(l.world_size - 1) + "): " + message_of(e)
                       : "rank " + std::to_string(l.rank) + " could not reach the rendezvous at " + where +
                             " within run.distributed.timeout_s (" + std::to_string(config.timeout_s) + " s): " + message_of(e));
     }
