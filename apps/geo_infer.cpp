@@ -29,6 +29,7 @@
 #include "data/visual_outputs.h"
 #include "eval/metrics.h"
 #include "geometry/road_plane.h"
+#include "geometry/trajectory.h"
 #include "app_options.h"
 #include "geo/geo.h"
 
@@ -202,14 +203,13 @@ int main(int argc, char** argv) {
         found += plane.found;
         if (!plane.found) spdlog::warn("{}: no road plane ({}); its scale comes from its neighbours", frames[i].first, plane.why);
       }
-      scales = geo::smooth_scales(scales, 5);
-      for (size_t i = 0; i < frames.size(); ++i)
-        if (!(scales[i] > 0))
-          throw std::runtime_error("--camera-height: no road plane in any frame near " + frames[i].first +
-                                   (intrinsics.empty() && !model.spec().learns_intrinsics
-                                        ? " (with the default KITTI-like camera: give the input's --intrinsics)"
-                                        : "") +
-                                   ": metric scale needs a flat road in front of the camera");
+      scales = geo::metric_scales(scales, [&](size_t i) {
+        return "--camera-height: no road plane in any frame near " + frames[i].first +
+               (intrinsics.empty() && !model.spec().learns_intrinsics
+                    ? " (with the default KITTI-like camera: give the input's --intrinsics)"
+                    : "") +
+               ": metric scale needs a flat road in front of the camera";
+      });
       spdlog::info("metric scale from the camera height {} m: road plane found in {} of {} frames", camera_height, found,
                    frames.size());
     }
@@ -223,7 +223,7 @@ int main(int argc, char** argv) {
       disp_video.emplace(output + "/disp.avi", fps);
       if (model.spec().seq_length == 3) flow_video.emplace(output + "/flow.avi", fps);
     }
-    std::vector<torch::Tensor> trajectory = {torch::eye(4, torch::kFloat64)};
+    geo::TrajectoryChain trajectory;
     int64_t beyond_png = 0;  // depths that KITTI's 16-bit PNG (depth x 256) cannot hold
     for (size_t i = 0; i < frames.size(); ++i) {
       const auto& [name, img] = frames[i];
@@ -244,9 +244,7 @@ int main(int argc, char** argv) {
           const auto flow_colour = geo::colorize_flow(model.flow(img[0], next[0], K).cpu());
           geo::write_image(output + "/" + name + "-flow.png", flow_colour);
           if (flow_video) flow_video->write(flow_colour);
-          auto T = model.pose({i > 0 ? frames[i - 1].second[0] : img[0], img[0], next[0]})[1].cpu().to(torch::kFloat64);
-          T.slice(0, 0, 3).select(1, 3).mul_(scales[i]);  // the motion at this frame's depth scale
-          trajectory.push_back(trajectory.back().matmul(torch::inverse(T)));
+          trajectory.add_step(model.pose({i > 0 ? frames[i - 1].second[0] : img[0], img[0], next[0]})[1]);
         }
       }
       if ((i + 1) % 10 == 0 || i + 1 == frames.size()) spdlog::info("  {}/{} frames", i + 1, frames.size());
@@ -256,8 +254,8 @@ int main(int argc, char** argv) {
       spdlog::warn("{:.0f}% of the depths are beyond 256, the most a KITTI depth PNG holds: *-depth.png saturates there{}",
                    100 * beyond, camera_height > 0 ? fmt::format(" (is --camera-height {} in metres?)", camera_height) : "");
     std::string written = "*-disp.png, *-depth.png";
-    if (trajectory.size() == frames.size() && sequence) {
-      auto poses = torch::stack(trajectory);
+    if (trajectory.steps() + 1 == frames.size() && sequence) {
+      auto poses = trajectory.poses(scales);  // each step at its frame's depth scale
       geo::write_poses(output + "/trajectory.txt", poses);
       torch::Tensor truth;
       if (!ground_truth.empty()) {

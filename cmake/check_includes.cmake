@@ -21,6 +21,7 @@ function(forbid glob regex why)
 endfunction()
 
 forbid("src/pipeline/*" "[\"<](train|eval|data|api)/" "the pipeline layer sits below training, evaluation and data")
+forbid("src/pipeline/*" "[\"<]losses/(total_loss|smoothness|consistency)\\.h" "inference links the photometric error (geo_photometric), not the losses")
 forbid("src/api/*" "[\"<](train|eval|data)/" "the library is built on the pipeline layer only")
 forbid("src/eval/*" "[\"<]train/" "evaluation does not depend on training")
 forbid("src/data/*" "[\"<](train|eval|api|pipeline)/" "data readers sit below the networks, training and evaluation")

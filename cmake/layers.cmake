@@ -1,6 +1,7 @@
 # geo's layers, checked when CMake configures, and written to <build>/layers.txt:
 #
-#   core -> geometry -> losses, models -> pipeline -> { geo (the library), train_parts -> training }
+#   core -> geometry -> photometric -> losses -> train_parts -> training
+#           geometry -> models, photometric -> pipeline -> { geo (the library), train_parts }
 #                                  data -> data_io -> evaluation (on geo and pipeline, never training)
 #                                          data_io -> training_data (what a config trains on) -> training
 #
@@ -61,8 +62,10 @@ function(geo_layers_check target)
 endfunction()
 
 set(geo_training_layers geo_train_parts geo_training)
-geo_layers_check(geo_pipeline NOT ${geo_training_layers} geo_evaluation geo_data geo_data_io geo)
-geo_layers_check(geo NOT ${geo_training_layers} geo_evaluation geo_data geo_data_io ABOVE geo_pipeline)
+# Inference (the pipeline, the library) links the photometric error for the FlowNet's input, never
+# the losses.
+geo_layers_check(geo_pipeline NOT ${geo_training_layers} geo_losses geo_evaluation geo_data geo_data_io geo)
+geo_layers_check(geo NOT ${geo_training_layers} geo_losses geo_evaluation geo_data geo_data_io ABOVE geo_pipeline)
 geo_layers_check(geo_evaluation NOT ${geo_training_layers} ABOVE geo geo_pipeline)
 geo_layers_check(geo_train_parts NOT geo_evaluation geo ABOVE geo_pipeline)
 geo_layers_check(geo_training NOT geo_evaluation geo ABOVE geo_pipeline)

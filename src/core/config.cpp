@@ -484,6 +484,7 @@ void DataConfig::validate(Checker& c) const {
   c.require(seq_length >= 3 && seq_length % 2 == 1, "seq_length", seq_length,
             "must be odd and >= 3 (target in the middle)");
   c.require(num_workers >= 0 && num_workers <= 64, "num_workers", num_workers, "must be in 0..64");
+  c.require(one_of(val_split, {"list", "geonet"}), "val_split", val_split, "must be list or geonet");
   c.require(split != "odometry" || !sequences.empty(), "sequences", sequences,
             "must name at least one KITTI odometry sequence when data.split is odometry");
   c.require(!split.empty(), "split", split, "must not be empty (eigen_zhou, kitti_raw_stereo, raw_minus_kitti2015, odometry, ...)");
@@ -600,6 +601,11 @@ const std::vector<EnumName<Sampler>>& enum_names(Sampler) {
 const std::vector<EnumName<FlowMask>>& enum_names(FlowMask) {
   static const std::vector<EnumName<FlowMask>> n{{FlowMask::kOcclusion, "occlusion"},
                                                  {FlowMask::kConsistency, "consistency"}};
+  return n;
+}
+const std::vector<EnumName<FlowReduction>>& enum_names(FlowReduction) {
+  static const std::vector<EnumName<FlowReduction>> n{{FlowReduction::kPerSource, "per_source"},
+                                                      {FlowReduction::kGeoNet, "geonet"}};
   return n;
 }
 const std::vector<EnumName<Net>>& enum_names(Net) {

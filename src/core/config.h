@@ -34,6 +34,7 @@ enum class Precision { kFp32, kTf32, kBf16 };
 enum class BadSample { kStop, kSkip };
 enum class Sampler { kZeros, kBorder };
 enum class FlowMask { kOcclusion, kConsistency };
+enum class FlowReduction { kPerSource, kGeoNet };
 enum class Net { kDepth, kPose, kFlow };
 const std::vector<EnumName<Upsample>>& enum_names(Upsample);
 const std::vector<EnumName<LrScheduleKind>>& enum_names(LrScheduleKind);
@@ -42,6 +43,7 @@ const std::vector<EnumName<Precision>>& enum_names(Precision);
 const std::vector<EnumName<BadSample>>& enum_names(BadSample);
 const std::vector<EnumName<Sampler>>& enum_names(Sampler);
 const std::vector<EnumName<FlowMask>>& enum_names(FlowMask);
+const std::vector<EnumName<FlowReduction>>& enum_names(FlowReduction);
 const std::vector<EnumName<Net>>& enum_names(Net);
 
 // The YAML name of an enumerated value ("nearest").
@@ -194,6 +196,10 @@ struct DataConfig {
   std::vector<std::string> sequences = {"00", "01", "02", "03", "04", "05", "06", "07", "08"};  // odometry split (GeoNet)
   std::string train_list;             // explicit training list; empty = <split>/train_files.txt
   std::string val_list;               // explicit validation list; empty = <split>/val_files.txt
+  // Validation of KITTI raw splits: list (the split's validation list, e.g. eigen_zhou's
+  // val_files.txt) or geonet (GeoNet's prepare_train_data: 10% of the training snippets, chosen by
+  // a fixed hash, held out of training; neighbours of training frames, so an optimistic score).
+  std::string val_split = "list";
   int height = 128;                   // training height (paper Sec. 4.2)
   int width = 416;                    // training width (paper Sec. 4.2)
   int seq_length = 3;                 // target in the middle + 2 sources (paper); 5 for odometry
@@ -218,6 +224,7 @@ struct DataConfig {
     v("sequences", sequences);
     v("train_list", train_list);
     v("val_list", val_list);
+    v("val_split", val_split);
     v("height", height);
     v("width", width);
     v("seq_length", seq_length);
@@ -252,6 +259,10 @@ struct LossConfig {
   // Mask of the flow reconstruction L_fr: occlusion (paper eq. 13, alpha1/alpha2) or consistency
   // (GeoNet: the eq. 15 mask, consistency_a/consistency_b).
   FlowMask flow_mask = FlowMask::kOcclusion;
+  // How L_fr averages over sources: per_source (the masked mean of each source, then the mean over
+  // sources: one bad source cannot dominate) or geonet (GeoNet's build_losses: one masked mean over
+  // all sources pooled, times num_source / 2, and no mask at all when the stage's l_fg is 0).
+  FlowReduction flow_reduction = FlowReduction::kPerSource;
   bool min_reprojection = false;     // per-pixel minimum over sources (monodepth2; off)
   bool automask = false;             // auto-mask static pixels (monodepth2; off)
   // GeoNet's L_br carries a factor num_source / 2 (geonet_model.py: build_losses): 1 for 3-frame
@@ -269,6 +280,7 @@ struct LossConfig {
     v("sampler", sampler);
     v("mask_out_of_view", mask_out_of_view);
     v("flow_mask", flow_mask);
+    v("flow_reduction", flow_reduction);
     v("min_reprojection", min_reprojection);
     v("automask", automask);
     v("rigid_source_factor", rigid_source_factor);

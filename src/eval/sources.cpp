@@ -7,6 +7,7 @@
 #include "data/text_io.h"
 #include "geometry/camera.h"
 #include "geometry/road_plane.h"
+#include "geometry/trajectory.h"
 
 #include <algorithm>
 #include <deque>
@@ -100,7 +101,7 @@ class ModelSource : public PredictionSource {
     std::vector<double> scales;
     TrajectoryAnswer out;
     out.snippet_poses.resize(static_cast<size_t>(n));
-    std::vector<torch::Tensor> cam_to_world = {torch::eye(4, torch::kFloat64)}, steps;
+    TrajectoryChain chain;
     Progress progress("odometry " + q.name, n, 0, "frames");
     for (int64_t j = 0; j < n; ++j) {
       while (first < j - k) {  // frames no snippet needs any more
@@ -112,10 +113,7 @@ class ModelSource : public PredictionSource {
       for (int64_t m = 1; m <= k; ++m) srcs.push_back(frame(j + m));
       const auto tgt = frame(j);
       const auto src_from_tgt = m_.pose(tgt, srcs)[0].cpu().to(torch::kFloat64);  // [L-1,4,4]
-      if (j + 1 < n) {  // T_{j+1 <- j}: the first source after the target, chained into the trajectory
-        steps.push_back(torch::inverse(src_from_tgt[k]));
-        cam_to_world.push_back(cam_to_world.back().matmul(steps.back()));
-      }
+      if (j + 1 < n) chain.add_step(src_from_tgt[k]);  // T_{j+1 <- j}: the first source after the target
       if (L == 5 && j >= 2 && j + 2 < n) {
         std::vector<torch::Tensor> in_target;
         for (int64_t m = 0; m < 4; ++m) in_target.push_back(torch::inverse(src_from_tgt[m]));
@@ -133,22 +131,12 @@ class ModelSource : public PredictionSource {
       }
       progress.update(j + 1);
     }
-    out.trajectory = torch::stack(cam_to_world);
-    if (q.camera_height > 0) {
-      // Each step at its frame's metric scale: the road plane of the frame's predicted depth,
-      // smoothed over 11 frames (as geo_infer --camera-height).
-      scales = smooth_scales(scales, 5);
-      std::vector<torch::Tensor> metric = {torch::eye(4, torch::kFloat64)};
-      for (size_t j = 0; j < steps.size(); ++j) {
-        if (!(scales[j] > 0))
-          throw std::runtime_error("--scaling camera-height: no road plane in any frame near frame " + std::to_string(j) +
-                                   " of sequence " + q.name + ": a metric trajectory needs a road in front of the camera");
-        auto step = steps[j].clone();
-        step.slice(0, 0, 3).select(1, 3).mul_(scales[j]);
-        metric.push_back(metric.back().matmul(step));
-      }
-      out.metric = torch::stack(metric);
-    }
+    out.trajectory = chain.poses();
+    if (q.camera_height > 0)  // each step at its frame's metric scale (as geo_infer --camera-height)
+      out.metric = chain.poses(metric_scales(scales, [&](size_t j) {
+        return "--scaling camera-height: no road plane in any frame near frame " + std::to_string(j) + " of sequence " +
+               q.name + ": a metric trajectory needs a road in front of the camera";
+      }));
     return out;
   }
 

@@ -40,28 +40,6 @@ torch::Tensor direction_loss(const std::vector<torch::Tensor>& errors,
 
 }  // namespace
 
-OutOfView out_of_view(const LossConfig& cfg) {
-  return cfg.sampler == Sampler::kBorder ? OutOfView::kBorder : OutOfView::kZero;
-}
-
-torch::Tensor to_loss_range(const torch::Tensor& image01, const LossConfig& cfg) {
-  const double lo = cfg.image_range.at(0), hi = cfg.image_range.at(1);
-  return lo == 0.0 && hi == 1.0 ? image01 : image01 * (hi - lo) + lo;
-}
-
-torch::Tensor from_loss_range(const torch::Tensor& image, const LossConfig& cfg) {
-  const double lo = cfg.image_range.at(0), hi = cfg.image_range.at(1);
-  return lo == 0.0 && hi == 1.0 ? image : (image - lo) / (hi - lo);
-}
-
-RigidView rigid_view(const torch::Tensor& src, const torch::Tensor& tgt, const torch::Tensor& flow,
-                     const LossConfig& cfg) {
-  RigidView v;
-  v.warp = warp(src, flow, out_of_view(cfg));
-  v.error_channels = photometric_error_channels(v.warp.image, tgt, cfg.ssim_alpha);
-  return v;
-}
-
 RigidTerms rigid_terms(const LossInputs& in, const LossConfig& cfg) {
   check_shape(in.tgt, "tgt", {-1, 3, -1, -1});
   const auto B = in.tgt.size(0);
@@ -150,7 +128,8 @@ RigidTerms rigid_terms(const LossInputs& in, const LossConfig& cfg) {
 }
 
 FlowTerms flow_terms(const RigidTerms& rigid, const PerSourceScale<torch::Tensor>& fwd_full,
-                     const PerSourceScale<torch::Tensor>& bwd_full, const LossConfig& cfg) {
+                     const PerSourceScale<torch::Tensor>& bwd_full, const LossConfig& cfg,
+                     double flow_consistency_weight) {
   const size_t N = rigid.src_pyr.size();
   const int S = static_cast<int>(rigid.tgt_pyr.size());
   TORCH_CHECK(fwd_full.size() == N && bwd_full.size() == N, "full flows must hold ", N,
@@ -161,6 +140,11 @@ FlowTerms flow_terms(const RigidTerms& rigid, const PerSourceScale<torch::Tensor
   out.fwd_visible.assign(N, std::vector<torch::Tensor>(S));
   out.bwd_visible.assign(N, std::vector<torch::Tensor>(S));
   std::vector<torch::Tensor> fr, fs, fg;
+  const bool geonet = cfg.flow_reduction == FlowReduction::kGeoNet;
+  const bool unmasked = geonet && flow_consistency_weight == 0;
+  // GeoNet's reduction: per scale, the errors and masks of all sources pooled into one masked mean
+  // per direction ([scale] -> per-source tensors, concatenated over the batch below).
+  std::vector<std::vector<torch::Tensor>> pooled_fe(S), pooled_fm(S), pooled_be(S), pooled_bm(S);
   for (size_t i = 0; i < N; ++i) {
     TORCH_CHECK(static_cast<int>(fwd_full[i].size()) == S && static_cast<int>(bwd_full[i].size()) == S,
                 "full flows of source ", i, " must hold ", S, " scales");
@@ -188,7 +172,15 @@ FlowTerms flow_terms(const RigidTerms& rigid, const PerSourceScale<torch::Tensor
       }
       const auto fe = photometric_error(fw.image, tgt, cfg.ssim_alpha);
       const auto be = photometric_error(bw.image, src, cfg.ssim_alpha);
-      fr.push_back(masked_mean(fe, fmask) + masked_mean(be, bmask));
+      if (unmasked) {
+        fmask = torch::ones_like(fmask);
+        bmask = torch::ones_like(bmask);
+      }
+      if (geonet) {
+        pooled_fe[s].push_back(fe), pooled_fm[s].push_back(fmask), pooled_be[s].push_back(be), pooled_bm[s].push_back(bmask);
+      } else {
+        fr.push_back(masked_mean(fe, fmask) + masked_mean(be, bmask));
+      }
       fs.push_back((edge_aware_smoothness(ff, tgt) + edge_aware_smoothness(bf, src)) /
                    static_cast<double>(int64_t{1} << (s + 1)));
       fg.push_back(0.5 * (cf.loss + cb.loss));
@@ -196,7 +188,14 @@ FlowTerms flow_terms(const RigidTerms& rigid, const PerSourceScale<torch::Tensor
   }
   // Sum over scales, mean over sources: the per-(source, scale) entries sum to S * N terms.
   const double n = static_cast<double>(N);
-  out.flow = torch::stack(fr).sum() / n;
+  if (geonet) {  // sum over scales of num_source / 2 x (pooled fwd + pooled bwd)
+    for (int s = 0; s < S; ++s)
+      fr.push_back(masked_mean(torch::cat(pooled_fe[s]), torch::cat(pooled_fm[s])) +
+                   masked_mean(torch::cat(pooled_be[s]), torch::cat(pooled_bm[s])));
+    out.flow = torch::stack(fr).sum() * (n / 2.0);
+  } else {
+    out.flow = torch::stack(fr).sum() / n;
+  }
   out.flow_smooth = torch::stack(fs).sum() / n;
   out.flow_consistency = torch::stack(fg).sum() / n;
   return out;

@@ -12,14 +12,10 @@
 
 #include "core/config.h"
 #include "geometry/warp.h"
+#include "losses/rigid_view.h"
 
 namespace geo {
 
-// The sampler the config selects (loss.sampler: zeros -> OutOfView::kZero, border -> kBorder).
-OutOfView out_of_view(const LossConfig& cfg);
-// Images in [0,1] -> the range the losses see (loss.image_range), and back.
-torch::Tensor to_loss_range(const torch::Tensor& image01, const LossConfig& cfg);
-torch::Tensor from_loss_range(const torch::Tensor& image, const LossConfig& cfg);
 
 template <class T> using PerSourceScale = std::vector<std::vector<T>>;  // [source][scale]
 
@@ -48,15 +44,6 @@ struct RigidTerms {
   torch::Tensor disp_smooth;  // L_ds: sum over scales of smoothness / 2^s over all frames
 };
 
-// One direction of the rigid step: `src` warped into the view of `tgt` by `flow` (loss.sampler) and
-// the per-channel photometric error of the warp against tgt; src and tgt in the loss range. What
-// rigid_terms computes for every source and scale, and inference for the FlowNet's input.
-struct RigidView {
-  Warped warp;
-  torch::Tensor error_channels;  // [B,3,h,w]
-};
-RigidView rigid_view(const torch::Tensor& src, const torch::Tensor& tgt, const torch::Tensor& flow,
-                     const LossConfig& cfg);
 
 // Computes L_br and L_ds. Throws on inconsistent shapes, naming the argument.
 RigidTerms rigid_terms(const LossInputs& in, const LossConfig& cfg);
@@ -70,8 +57,11 @@ struct FlowTerms {
 };
 
 // fwd_full / bwd_full: N x S full flows (residual + rigid) in pixels of their scale.
+// flow_consistency_weight: the stage's l_fg; with loss.flow_reduction geonet, 0 leaves L_fr unmasked
+// (GeoNet computes its masks only for the consistency term).
 FlowTerms flow_terms(const RigidTerms& rigid, const PerSourceScale<torch::Tensor>& fwd_full,
-                     const PerSourceScale<torch::Tensor>& bwd_full, const LossConfig& cfg);
+                     const PerSourceScale<torch::Tensor>& bwd_full, const LossConfig& cfg,
+                     double flow_consistency_weight = 1.0);
 
 struct LossTerms {
   // Unweighted terms; undefined when the stage does not compute them (never zero-filled).

@@ -4,7 +4,7 @@
 #include "geometry/pose.h"
 #include "geometry/warp.h"
 #include "losses/photometric.h"
-#include "losses/total_loss.h"
+#include "losses/rigid_view.h"
 #include "models/layers.h"
 
 #include <yaml-cpp/yaml.h>

@@ -80,7 +80,7 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
     }
   }
   frozen.reset();
-  out.flow = flow_terms(out.rigid, out.fwd_full, bwd_full, config.loss);
+  out.flow = flow_terms(out.rigid, out.fwd_full, bwd_full, config.loss, stage.weights.flow_consistency);
   out.losses = total_loss(out.rigid, &*out.flow, stage.weights);
   return out;
 }

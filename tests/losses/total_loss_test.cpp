@@ -171,6 +171,42 @@ TEST(TotalLoss, FlowReconstructionMaskIsEq13OrGeoNetsConsistencyMask) {
   EXPECT_NEAR(con.flow.item<double>(), 4.0 / 64 + 4.0 / 64, 1e-12);
 }
 
+// loss.flow_reduction geonet: GeoNet's build_losses pools all sources into one masked mean per
+// direction and scale, times num_source / 2, and leaves L_fr unmasked when l_fg is 0. Four
+// sources: three with zero flow and zero error, the fourth the disputed block above (error 1 on 4
+// pixels per direction, kept by the consistency mask, excluded by eq. 13).
+TEST(TotalLoss, GeoNetsFlowReductionPoolsSourcesAndDropsTheMaskWithoutConsistency) {
+  const int64_t H = 8, W = 8;
+  const auto zeros = torch::zeros({1, 3, H, W}, torch::kFloat64);
+  auto ff = torch::zeros({1, 2, H, W}, torch::kFloat64);
+  ff.select(1, 0).fill_(1.0);
+  auto bf = -ff.clone();
+  bf.select(1, 0).narrow(1, 2, 2).narrow(2, 4, 2).fill_(1.5);
+  auto block = zeros.clone();
+  block.narrow(2, 2, 2).narrow(3, 4, 2).fill_(1.0);
+  geo::RigidTerms rigid;
+  rigid.tgt_pyr = {zeros};
+  rigid.src_pyr = {{zeros}, {zeros}, {zeros}, {block}};
+  const auto still = torch::zeros({1, 2, H, W}, torch::kFloat64);
+  const geo::PerSourceScale<torch::Tensor> fwd = {{still}, {still}, {still}, {ff}}, bwd = {{still}, {still}, {still}, {bf}};
+  geo::LossConfig cfg;
+  cfg.ssim_alpha = 0.0;
+  cfg.image_range = {0.0, 1.0};
+  cfg.sampler = geo::Sampler::kBorder;
+  cfg.flow_mask = geo::FlowMask::kConsistency;
+  // Per source: (4/64 + 4/64) for the fourth, 0 for the others, mean over 4 sources.
+  EXPECT_NEAR(geo::flow_terms(rigid, fwd, bwd, cfg).flow.item<double>(), 0.125 / 4, 1e-12);
+  // GeoNet: 4 error pixels of 4 x 64 pooled per direction, (4/256 + 4/256) x num_source / 2 = 2.
+  cfg.flow_reduction = geo::FlowReduction::kGeoNet;
+  EXPECT_NEAR(geo::flow_terms(rigid, fwd, bwd, cfg, 0.2).flow.item<double>(), 8.0 / 256 * 2, 1e-12);
+  // With the eq. 13 mask the disputed pixels are out (0); without l_fg GeoNet masks nothing.
+  cfg.flow_mask = geo::FlowMask::kOcclusion;
+  EXPECT_NEAR(geo::flow_terms(rigid, fwd, bwd, cfg, 0.2).flow.item<double>(), 0.0, 1e-12);
+  EXPECT_NEAR(geo::flow_terms(rigid, fwd, bwd, cfg, 0.0).flow.item<double>(), 8.0 / 256 * 2, 1e-12);
+  cfg.flow_reduction = geo::FlowReduction::kPerSource;  // geo's own reduction always masks
+  EXPECT_NEAR(geo::flow_terms(rigid, fwd, bwd, cfg, 0.0).flow.item<double>(), 0.0, 1e-12);
+}
+
 TEST(TotalLoss, StagesWithoutFlowLeaveFlowTermsUndefined) {
   const auto sc = shifted_plane(2, -0.5);
   const geo::LossConfig cfg;
