@@ -26,6 +26,7 @@ struct Model::Impl {
   torch::Device device = torch::kCPU;
   ModelSpec spec;
   std::optional<Config> training_config;  // a training checkpoint's config (none for model files)
+  std::vector<std::string> init_configs;   // its init chain (CheckpointContents::init_configs)
 };
 
 namespace {
@@ -179,6 +180,7 @@ Model ModelAccess::untrained(const NetworkSpec& spec, const std::string& name, c
 }
 
 const std::optional<Config>& ModelAccess::training_config(const Model& model) { return model.impl_->training_config; }
+const std::vector<std::string>& ModelAccess::init_configs(const Model& model) { return model.impl_->init_configs; }
 
 Model Model::load(const std::string& path, const LoadOptions& options) {
   return guarded("loading geo model '" + path + "'", [&] {
@@ -190,6 +192,7 @@ Model Model::load(const std::string& path, const LoadOptions& options) {
     if (options.threads > 0) torch::set_num_threads(options.threads);
     make_ready(*impl, options.device, options.precision, checkpoint.has_flow(), file);
     impl->training_config = checkpoint.config();
+    impl->init_configs = checkpoint.init_configs();
     return Model(impl);
   });
 }

@@ -7,6 +7,7 @@
 
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace geo {
 
@@ -17,6 +18,8 @@ struct ModelAccess {
                          const std::string& precision = "fp32");
   // The config a training checkpoint carries (nullopt for geo_export's model files and untrained models).
   static const std::optional<Config>& training_config(const Model& model);
+  // The configs of the checkpoints its weights started from (CheckpointContents::init_configs).
+  static const std::vector<std::string>& init_configs(const Model& model);
 };
 
 }  // namespace geo

@@ -58,6 +58,11 @@ std::vector<SplitEntry> raw_drive_snippets(const std::string& root, const std::s
 // folder under `root` not in `test_scenes`.
 std::set<std::string> raw_drives_on_disk(const std::string& root, const std::set<std::string>& test_scenes);
 
+// GeoNet's validation split (prepare_train_data.py: each frame to val.txt with probability 0.1):
+// whether this snippet is held out, decided by a fixed hash of its drive, frame and camera, so that
+// the choice is the same on every machine and for every order of reading.
+bool in_geonet_validation(const SplitEntry& e);
+
 // Removes entries whose drive is a test scene or whose frame is static; returns how many were removed.
 size_t exclude_entries(std::vector<SplitEntry>& entries, const std::set<std::string>& test_scenes,
                        const std::set<std::string>& static_frames);

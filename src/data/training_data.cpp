@@ -95,6 +95,13 @@ TrainingData open_at(const DataConfig& d, TrainingData out) {
   if (entries.empty())
     throw ConfigError("data.split " + d.split + ": all " + std::to_string(listed) + " entries of " + out.train_list +
                       " are excluded (test scenes or static frames listed in " + join_list(out.exclusions, ",") + ")");
+  std::vector<SplitEntry> held_out;  // data.val_split geonet: GeoNet's 10% of the training snippets
+  if (d.val_split == "geonet") {
+    std::vector<SplitEntry> kept;
+    for (auto& e : entries) (in_geonet_validation(e) ? held_out : kept).push_back(std::move(e));
+    entries = std::move(kept);
+    out.val_list = "GeoNet's 10% of " + out.train_list;
+  }
   auto train = std::make_shared<SequenceDataset>(std::move(entries), so);
   out.dropped = train->dropped();
   if (train->size() == 0 && !lists.from_drives) {
@@ -112,7 +119,10 @@ TrainingData open_at(const DataConfig& d, TrainingData out) {
                       " frames on disk (first missing: " + missing + ")");
   }
   out.train = train;
-  if (!out.val_list.empty()) {
+  if (d.val_split == "geonet") {
+    auto val = std::make_shared<SequenceDataset>(std::move(held_out), so);
+    if (val->size() > 0) out.val = val;
+  } else if (!out.val_list.empty()) {
     auto val_entries = read_split(out.val_list);
     if (minus_2015) out.excluded += exclude_entries(val_entries, scenes, {});
     auto val = std::make_shared<SequenceDataset>(std::move(val_entries), so);

@@ -23,6 +23,7 @@ Predictor::Predictor(const Config& config, const std::string& device)
 }
 
 const std::optional<Config>& Predictor::training_config() const { return ModelAccess::training_config(*model_); }
+const std::vector<std::string>& Predictor::init_configs() const { return ModelAccess::init_configs(*model_); }
 
 torch::Tensor Predictor::depth(const torch::Tensor& image) { return model_->depth(image).unsqueeze(1); }
 

@@ -27,6 +27,9 @@ class Predictor {
   // The config a training checkpoint carries: what the model was trained on. nullopt for model
   // files (geo_export) and untrained models.
   const std::optional<Config>& training_config() const;
+  // The configs its initial weights were trained with, nearest first ("unknown: ..." where a link
+  // carried none): CheckpointContents::init_configs.
+  const std::vector<std::string>& init_configs() const;
 
   // image [B,3,H,W] -> depth [B,1,H,W] in the network's (unknown) scale: 1 / disparity.
   torch::Tensor depth(const torch::Tensor& image);

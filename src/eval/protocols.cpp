@@ -447,26 +447,52 @@ bool is_synth_world(const std::string& data_root, const std::string& root) {
   return false;
 }
 
-// Which test drives the model trained on: warned about and recorded in the result.
+// Which test drives the model trained on, its own run or any checkpoint of its init chain (each
+// checkpoint records what its init was trained on): warned about and recorded in the result.
 void check_training_drives(EvalResult& r, const Predictor& pred) {
   const auto& config = pred.training_config();
   if (!config) {
     r.training_drives_unknown = "the model carries no training config (a geo_export model file or an untrained model)";
     return;
   }
-  const auto trained = training_drives(config->data);
-  if (!trained.unknown.empty()) {
-    r.training_drives_unknown = trained.unknown;
-    spdlog::warn("cannot tell whether the model trained on test drives: {}", trained.unknown);
-    return;
+  struct Link {
+    std::string what;  // "the model's training data (data.split X)" or "init 1 (data.split Y)"
+    TrainingDrives drives;
+  };
+  std::vector<Link> links{{"the model's training data (data.split " + config->data.split + ")", training_drives(config->data)}};
+  const auto& chain = pred.init_configs();
+  for (size_t i = 0; i < chain.size(); ++i) {
+    Link l;
+    if (chain[i].rfind("unknown: ", 0) == 0) {
+      l.what = "init " + std::to_string(i + 1);
+      l.drives.unknown = "its weights started from a checkpoint whose training data is unknown: " + chain[i].substr(9);
+    } else {
+      const Config c = parse_config(chain[i], "init " + std::to_string(i + 1) + " of " + pred.path());
+      l.what = "the data of the checkpoint it was initialised from" + std::string(i ? " (" + std::to_string(i + 1) + " links up)" : "") +
+               " (data.split " + c.data.split + ")";
+      l.drives = training_drives(c.data);
+    }
+    links.push_back(std::move(l));
+  }
+  std::set<std::string> leaked;
+  for (const auto& l : links) {
+    if (!l.drives.unknown.empty()) {  // a leak another link shows is still recorded
+      if (r.training_drives_unknown.empty()) {
+        r.training_drives_unknown = l.drives.unknown;
+        spdlog::warn("cannot tell whether the model trained on test drives: {}", l.drives.unknown);
+      }
+      continue;
+    }
+    std::vector<std::string> here;
+    for (const auto& d : r.test_drives)
+      if (l.drives.drives.count(d)) here.push_back(d), leaked.insert(d);
+    if (!here.empty())
+      spdlog::warn("{} holds {} of the {} drives of this test set: {}. These results are measured on training drives; "
+                   "train on data disjoint from the test set (README, KITTI)",
+                   l.what, here.size(), r.test_drives.size(), join_list(here, ", "));
   }
   for (const auto& d : r.test_drives)
-    if (trained.drives.count(d)) r.test_drives_in_training.push_back(d);
-  if (r.test_drives_in_training.empty()) return;
-  spdlog::warn("the model's training data (data.split {}) holds {} of the {} drives of this test set: {}. These "
-               "results are measured on training drives; train on data disjoint from the test set (README, KITTI)",
-               config->data.split, r.test_drives_in_training.size(), r.test_drives.size(),
-               join_list(r.test_drives_in_training, ", "));
+    if (leaked.count(d)) r.test_drives_in_training.push_back(d);
 }
 
 }  // namespace

@@ -40,6 +40,11 @@ void write_checkpoint(torch::serialize::OutputArchive& a, const CheckpointConten
   }
   write_train_state(a, c.state);
   a.write("config", c10::IValue(to_yaml(c.config)));
+  if (!c.init_configs.empty()) {
+    c10::List<std::string> chain;
+    for (const auto& y : c.init_configs) chain.push_back(y);
+    a.write("init_configs", c10::IValue(chain));
+  }
 }
 
 void write_train_state(torch::serialize::OutputArchive& a, const TrainState& s) {
@@ -80,6 +85,23 @@ CheckpointFile::CheckpointFile(std::string path) : path_(std::move(path)), archi
     config_ = parse_config(yaml.toStringRef(), path_ + " [config]");
     spec_ = NetworkSpec::of(*config_);
   }
+  c10::IValue chain;
+  if (archive_.try_read("init_configs", chain)) {
+    if (!chain.isList()) throw std::runtime_error(path_ + ": 'init_configs' is not a list of configs");
+    for (const auto& y : chain.toListRef()) {
+      if (!y.isString()) throw std::runtime_error(path_ + ": 'init_configs' holds a value that is not a config");
+      init_configs_.push_back(y.toStringRef());
+    }
+  }
+}
+
+std::vector<std::string> CheckpointFile::lineage() const {
+  std::vector<std::string> out;
+  out.push_back(config_ ? to_yaml(*config_)
+                        : "unknown: " + path_ + (model_file_ ? " is a geo_export model file, which carries no training config"
+                                                             : " carries no training config"));
+  out.insert(out.end(), init_configs_.begin(), init_configs_.end());
+  return out;
 }
 
 NetworkSpec CheckpointFile::spec() const {

@@ -5,6 +5,7 @@
 //     optimizer            Adam state     spec            NetworkSpec as YAML
 //     train_state          TrainState     depth, pose, [flow]  networks (fp32 or fp16)
 //     config               the run's config as YAML
+//     init_configs         the configs the run's initial weights were trained with (optional)
 //
 // Checkpoints written before the typed train state (a float64 "meta" [stage, iteration, best] and a
 // separate "world_size") are still read.
@@ -21,6 +22,7 @@
 #include <limits>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace geo {
 
@@ -41,6 +43,10 @@ struct CheckpointContents {
   const torch::optim::Optimizer* optimizer = nullptr;
   TrainState state;
   const Config& config;
+  // The chain of `init` checkpoints the weights started from, nearest first: each one's config as
+  // YAML, or "unknown: <why>" for one that carried none (a model file). What the networks have seen
+  // besides this run's data (geo_eval's training-drive check follows it).
+  std::vector<std::string> init_configs = {};
 };
 void write_checkpoint(torch::serialize::OutputArchive& archive, const CheckpointContents& contents);
 // The train state alone (write_checkpoint's part of it; tests of the run folder's rotation).
@@ -63,6 +69,11 @@ class CheckpointFile {
   NetworkSpec spec() const;
   // The training config (training checkpoints), nullopt for model files.
   const std::optional<Config>& config() const { return config_; }
+  // CheckpointContents::init_configs as written (empty for model files and older checkpoints).
+  const std::vector<std::string>& init_configs() const { return init_configs_; }
+  // What a run initialised from this file inherits: its own config (or "unknown: ..." for a model
+  // file), then its init_configs.
+  std::vector<std::string> lineage() const;
   // Throws "<path>: not a geo training checkpoint ..." for model files and foreign files.
   TrainState train_state();
   // Weights into `nets` (strict per network; a network absent from the file is an error unless
@@ -79,6 +90,7 @@ class CheckpointFile {
   bool model_file_ = false;
   bool has_flow_ = false;
   std::optional<Config> config_;
+  std::vector<std::string> init_configs_;
   std::optional<NetworkSpec> spec_;
 };
 

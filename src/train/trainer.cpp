@@ -148,6 +148,7 @@ class Run {
     CheckpointFile file(resume_from_);
     file.load_networks(nets_, false);
     state_ = file.train_state();
+    init_configs_ = file.init_configs();
     const int64_t was = state_.world_size;
     const int64_t now = group_ ? group_->size() : 1;
     if (was != now && writer_)
@@ -173,6 +174,10 @@ class Run {
                                  "; set those keys to match or initialise from another checkpoint");
     }
     file.load_networks(nets_, true);
+    // What those weights were trained on travels with every checkpoint of this run (geo_eval's
+    // training-drive check), nearest first, after what earlier stages' inits brought.
+    const auto inherited = file.lineage();
+    init_configs_.insert(init_configs_.begin(), inherited.begin(), inherited.end());
     spdlog::info("stage {}: networks initialised from {}", s.name, path);
   }
 
@@ -295,7 +300,7 @@ class Run {
     const std::string path = checkpoints_.save(stage().name, state_.iteration, best, [&](torch::serialize::OutputArchive& a) {
       TrainState state = state_;
       state.world_size = group_ ? group_->size() : 1;
-      write_checkpoint(a, CheckpointContents{nets_, &step.optimizer(), state, cfg_});
+      write_checkpoint(a, CheckpointContents{nets_, &step.optimizer(), state, cfg_, init_configs_});
     });
     spdlog::info("checkpoint {}{}", path, best ? " (best of stage " + stage().name + ")" : "");
   }
@@ -339,6 +344,7 @@ class Run {
   std::vector<std::shared_ptr<MetricsSink>> sinks_;
   TrainState state_;
   std::string resume_from_;  // the checkpoint the current stage resumes from ("" = a fresh stage)
+  std::vector<std::string> init_configs_;  // CheckpointContents::init_configs of this run
   int64_t skipped_ = 0;
   bool summaries_skipped_ = false;
 };

@@ -536,13 +536,14 @@ TEST(Protocols, AModelTrainedOnTestDrivesIsWarnedAndRecorded) {
   std::filesystem::copy(world + "/odometry", root + "/odometry", std::filesystem::copy_options::recursive);
   // A KITTI root without its own split lists: training used the shipped ones.
   std::filesystem::create_directories(root + "/kitti_raw");
-  auto checkpoint_of = [&](const std::string& data, const std::string& name, const std::string& data_root = "/kitti_raw") {
+  auto checkpoint_of = [&](const std::string& data, const std::string& name, const std::string& data_root = "/kitti_raw",
+                           std::vector<std::string> init_configs = {}) {
     const Config c = parse_config("model: {encoder_depth: 18}\ndata: {height: 64, width: 208, root: " + root +
                                       data_root + ", " + data + "}\n", name + ".yaml");
     torch::manual_seed(1);
     Networks nets = Networks::create(NetworkSpec::of(c), false);
     torch::serialize::OutputArchive a;
-    write_checkpoint(a, CheckpointContents{nets, nullptr, TrainState{}, c});
+    write_checkpoint(a, CheckpointContents{nets, nullptr, TrainState{}, c, std::move(init_configs)});
     save_archive(a, root + "/" + name + ".pt");
     return root + "/" + name + ".pt";
   };
@@ -563,6 +564,15 @@ TEST(Protocols, AModelTrainedOnTestDrivesIsWarnedAndRecorded) {
   const auto clean = evaluate(e, pose_model);
   EXPECT_TRUE(clean.test_drives_in_training.empty());
   EXPECT_TRUE(clean.training_drives_unknown.empty());
+  // Clean itself, but initialised from a checkpoint that trained on the test drive: the init chain
+  // is followed (the flow table's stage 1 on eigen_zhou); a link without a config is unknown.
+  const std::string leaky_init = to_yaml(CheckpointFile(root + "/eigen_zhou.pt").config().value());
+  Predictor chained(checkpoint_of("split: odometry", "chained", "/kitti_raw", {to_yaml(CheckpointFile(root + "/odometry.pt").config().value()), leaky_init}), "cpu");
+  EXPECT_EQ(evaluate(e, chained).test_drives_in_training, std::vector<std::string>{"2011_09_30_drive_0033"});
+  Predictor from_model(checkpoint_of("split: odometry", "from_model", "/kitti_raw", {"unknown: m.pt is a model file"}), "cpu");
+  const auto unknown_init = evaluate(e, from_model);
+  EXPECT_NE(unknown_init.training_drives_unknown.find("m.pt is a model file"), std::string::npos)
+      << unknown_init.training_drives_unknown;
   // A root that is not here (a relative one from another folder): unknown, never "none".
   Predictor elsewhere(checkpoint_of("split: eigen_zhou", "elsewhere", "/moved_away"), "cpu");
   const auto unknown = evaluate(e, elsewhere);

@@ -5,7 +5,9 @@
 // holds the losses of metrics.csv.
 #include "core/files.h"
 #include "data/packed.h"
+#include "data/splits.h"
 #include "data/synth_writer.h"
+#include "pipeline/checkpoint.h"
 #include "train/checkpoints.h"
 #include "data/training_data.h"
 #include "train/trainer.h"
@@ -15,6 +17,7 @@
 #include <csignal>
 #include <fstream>
 #include <map>
+#include <set>
 #include <sstream>
 
 #include "synth_world.h"
@@ -269,6 +272,33 @@ TEST(TrainingData, AStaleValidationCacheIsRefused) {
   EXPECT_TRUE(open_training_data(d).val);
 }
 
+// data.val_split geonet: GeoNet's prepare_train_data holds out each frame with probability 0.1;
+// geo by a fixed hash, the same on every machine, the held-out snippets never trained on.
+TEST(TrainingData, GeoNetsValidationSplitHoldsOutATenthOfTheTrainingSnippets) {
+  int64_t held = 0;
+  for (int64_t f = 0; f < 4000; ++f) {
+    SplitEntry e;
+    e.folder = "2011_09_26/2011_09_26_drive_0001_sync";
+    e.frame = f;
+    e.side = f % 2 ? 'l' : 'r';
+    held += in_geonet_validation(e);
+    EXPECT_EQ(in_geonet_validation(e), in_geonet_validation(e));
+  }
+  EXPECT_GT(held, 340);  // 400 expected; a binomial's 3 sigma is 57
+  EXPECT_LT(held, 460);
+  DataConfig d = tiny_config().data;
+  const auto listed = open_training_data(d);
+  d.val_split = "geonet";
+  const auto geonet = open_training_data(d);
+  std::set<std::string> train_ids, val_ids;
+  for (size_t i = 0; i < geonet.train->size(); ++i) train_ids.insert(geonet.train->id(i));
+  if (geonet.val)
+    for (size_t i = 0; i < geonet.val->size(); ++i) val_ids.insert(geonet.val->id(i));
+  EXPECT_EQ(train_ids.size() + val_ids.size(), listed.train->size());
+  for (const auto& id : val_ids) EXPECT_EQ(train_ids.count(id), 0u) << id;
+  EXPECT_NE(geonet.val_list.find("GeoNet's 10% of"), std::string::npos) << geonet.val_list;
+}
+
 TEST(TrainingData, PerTaskSplits) {
   // odometry (GeoNet's pose data): every frame of the sequences with L/2 neighbours each side.
   DataConfig d = tiny_config().data;
@@ -405,6 +435,40 @@ TEST(Trainer, InitFromAnotherArchitectureOrABrokenFileIsOneClearLine) {
   std::filesystem::resize_file(base + "/cut.pt", 1000);
   i.init = base + "/cut.pt";
   GEO_EXPECT_THROW_WITH(train(cfg, i), base + "/cut.pt: not a readable geo/LibTorch file");
+}
+
+// Every checkpoint of a run records what its initial weights were trained on, nearest first, and a
+// run initialised from it inherits the chain (geo_eval's training-drive check follows it).
+TEST(Trainer, CheckpointsRecordTheirInitChain) {
+  auto cfg = tiny_config();
+  cfg.stages.resize(1);
+  cfg.stages[0].iterations = 1;
+  cfg.logging.checkpoint_interval = 1;
+  const auto base = test::fresh_dir("initchain");
+  TrainOptions a;
+  a.run_dir = base + "/a";
+  ASSERT_EQ(train(cfg, a), 0);
+  EXPECT_TRUE(CheckpointFile(resolve_checkpoint(a.run_dir)).init_configs().empty());
+  auto second = cfg;
+  second.data.split = "eigen_zhou";
+  second.run.seed = 7;
+  TrainOptions b;
+  b.run_dir = base + "/b";
+  b.init = a.run_dir;
+  ASSERT_EQ(train(second, b), 0);
+  const auto chain_b = CheckpointFile(resolve_checkpoint(b.run_dir)).init_configs();
+  ASSERT_EQ(chain_b.size(), 1u);
+  EXPECT_EQ(parse_config(chain_b[0]).run.seed, cfg.run.seed);  // a's config
+  TrainOptions c;
+  c.run_dir = base + "/c";
+  c.init = b.run_dir;
+  ASSERT_EQ(train(cfg, c), 0);
+  const auto chain_c = CheckpointFile(resolve_checkpoint(c.run_dir)).init_configs();
+  ASSERT_EQ(chain_c.size(), 2u);
+  EXPECT_EQ(parse_config(chain_c[0]).run.seed, 7);  // b's, then a's
+  EXPECT_EQ(parse_config(chain_c[1]).run.seed, cfg.run.seed);
+  ASSERT_EQ(resume(c.run_dir, {}), 0);  // a resumed run keeps it
+  EXPECT_EQ(CheckpointFile(resolve_checkpoint(c.run_dir)).init_configs(), chain_c);
 }
 
 // Sends this process SIGTERM (as a cluster scheduler would) after `n` steps: just before validation.
