@@ -28,7 +28,7 @@ EncoderDecoderImpl::EncoderDecoderImpl(const EncoderDecoderOptions& o, Head h)
     if (k >= 2) {
       pred.push_back(register_module(
           "pred" + std::to_string(6 - k),
-          torch::nn::Conv2d(torch::nn::Conv2dOptions(width, o.out_channels, 3).padding(1))));
+          Conv2d(torch::nn::Conv2dOptions(width, o.out_channels, 3).padding(1))));
     }
     in = width;
   }

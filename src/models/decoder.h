@@ -38,7 +38,7 @@ struct EncoderDecoderImpl : torch::nn::Module {
   ResNetEncoder encoder{nullptr};
   std::vector<ConvBn> upconv, iconv;        // index 0 = stage 6 (coarsest) ... 5 = stage 1
   std::vector<FeatureRefinement> refine;    // empty when decoder FR is off
-  std::vector<torch::nn::Conv2d> pred;      // index 0 = 1/8 ... 3 = full
+  std::vector<Conv2d> pred;      // index 0 = 1/8 ... 3 = full
 };
 TORCH_MODULE(EncoderDecoder);
 

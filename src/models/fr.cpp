@@ -148,11 +148,11 @@ FeatureRefinementImpl::FeatureRefinementImpl(const FeatureRefinementOptions& o) 
   const int64_t hidden = std::max(o.min_hidden, o.channels / o.ratio);
   // The shared MLP as 1x1 convolutions without bias (as in common CBAM implementations).
   mlp_in = register_module("mlp_in",
-                           torch::nn::Conv2d(torch::nn::Conv2dOptions(o.channels, hidden, 1).bias(false)));
+                           Conv2d(torch::nn::Conv2dOptions(o.channels, hidden, 1).bias(false)));
   mlp_out = register_module("mlp_out",
-                            torch::nn::Conv2d(torch::nn::Conv2dOptions(hidden, o.channels, 1).bias(false)));
+                            Conv2d(torch::nn::Conv2dOptions(hidden, o.channels, 1).bias(false)));
   spatial = register_module(
-      "spatial", torch::nn::Conv2d(torch::nn::Conv2dOptions(2, 1, o.kernel).padding(o.kernel / 2).bias(false)));
+      "spatial", Conv2d(torch::nn::Conv2dOptions(2, 1, o.kernel).padding(o.kernel / 2).bias(false)));
   if (o.spatial_bn) spatial_bn = register_module("spatial_bn", torch::nn::BatchNorm2d(1));
 }
 

@@ -4,6 +4,8 @@
 
 #include <torch/torch.h>
 
+#include "models/conv.h"
+
 #include <utility>
 
 namespace geo {
@@ -29,7 +31,7 @@ struct FeatureRefinementImpl : torch::nn::Module {
   torch::Tensor spatial_gate(const torch::Tensor& f1);
 
   FeatureRefinementOptions options;
-  torch::nn::Conv2d mlp_in{nullptr}, mlp_out{nullptr}, spatial{nullptr};
+  Conv2d mlp_in{nullptr}, mlp_out{nullptr}, spatial{nullptr};
   torch::nn::BatchNorm2d spatial_bn{nullptr};
 };
 TORCH_MODULE(FeatureRefinement);

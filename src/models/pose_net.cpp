@@ -11,8 +11,8 @@ PoseNetImpl::PoseNetImpl(const PoseNetOptions& o) : options(o) {
     convs.push_back(register_module("conv" + std::to_string(i + 1), ConvBn(in, widths[i], kernels[i], 2)));
     in = widths[i];
   }
-  pred = register_module("pred", torch::nn::Conv2d(torch::nn::Conv2dOptions(in, 6 * num_sources(), 1)));
-  if (o.learn_intrinsics) intrinsics = register_module("intrinsics", torch::nn::Conv2d(torch::nn::Conv2dOptions(in, 4, 1)));
+  pred = register_module("pred", Conv2d(torch::nn::Conv2dOptions(in, 6 * num_sources(), 1)));
+  if (o.learn_intrinsics) intrinsics = register_module("intrinsics", Conv2d(torch::nn::Conv2dOptions(in, 4, 1)));
   init_weights(*this);
   if (intrinsics) {  // start at fx = fy = ln 2 W, principal point centred
     torch::NoGradGuard no_grad;

@@ -38,8 +38,8 @@ struct PoseNetImpl : torch::nn::Module {
   PoseNetOptions options;
   torch::Dtype compute_dtype = torch::kFloat32;  // as DepthNetImpl::compute_dtype
   std::vector<ConvBn> convs;     // conv1..conv7: 16 (7x7), 32 (5x5), 64, 128, 256, 256, 256 (3x3), /2
-  torch::nn::Conv2d pred{nullptr};  // 1x1 to 6 * num_sources, no BN / activation
-  torch::nn::Conv2d intrinsics{nullptr};  // learn_intrinsics: 1x1, 256 -> 4 on the averaged conv7 output
+  Conv2d pred{nullptr};  // 1x1 to 6 * num_sources, no BN / activation
+  Conv2d intrinsics{nullptr};  // learn_intrinsics: 1x1, 256 -> 4 on the averaged conv7 output
 };
 TORCH_MODULE(PoseNet);
 
