@@ -1,9 +1,14 @@
-// What the command-line tools share: range checks whose messages say what is expected.
+// What the command-line tools share: one frame for running a tool (process settings, logging, errors
+// as messages and exit codes) and range checks whose messages say what is expected.
 #pragma once
 
 #include <CLI/CLI.hpp>
 
 #include "core/config.h"
+#include "core/logging.h"
+#include "core/runtime.h"
+
+#include <spdlog/spdlog.h>
 
 #include <cmath>
 #include <cstdlib>
@@ -11,6 +16,20 @@
 #include <vector>
 
 namespace geo::app {
+
+// Runs a tool's work once its options are parsed: the process-wide memory setting every tool
+// applies, logging at info, and any exception as one error line naming what is wrong with exit code
+// 1 (a tool's own codes, e.g. 130 for an interrupted training, come back from `body`).
+template <class Body> int run_tool(Body&& body) {
+  keep_freed_memory();
+  try {
+    setup_logging("info");
+    return body();
+  } catch (const std::exception& e) {
+    spdlog::error("{}", e.what());
+    return 1;
+  }
+}
 
 // A number >= `min` (or > `min` when `strict`), integers and reals alike: "must be >= 1 (got 0)"
 // rather than CLI11's "Value 0 not in range 0.000000 to 1.797e308".

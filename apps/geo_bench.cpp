@@ -375,10 +375,7 @@ int main(int argc, char** argv) {
   Options o;
   o.add_to(app);
   CLI11_PARSE(app, argc, argv);
-  geo::keep_freed_memory();
-
-  try {
-    geo::setup_logging("info");
+  return geo::app::run_tool([&] {
     if (!o.precision.empty()) o.overrides.push_back("run.precision=" + o.precision);
     const std::string config_file = o.config_path.empty() ? "" : geo::resolve_config_path(o.config_path);
     const geo::Config config = config_file.empty() ? geo::parse_config("", "<defaults>", o.overrides)
@@ -443,9 +440,6 @@ int main(int argc, char** argv) {
                                                                    config.data.width, !o.no_fold}));
       spdlog::info("wrote {}", o.json_path);
     }
-  } catch (const std::exception& e) {
-    spdlog::error("{}", e.what());
-    return 1;
-  }
-  return 0;
+    return 0;
+  });
 }

@@ -74,9 +74,7 @@ int main(int argc, char** argv) {
   // --compare only reads results: every option of an evaluation would be silently ignored beside it.
   for (auto* other : {split_opt, checkpoint_opt, predictions_opt, untrained_opt, trivial_opt}) compare_opt->excludes(other);
   CLI11_PARSE(app, argc, argv);
-  geo::keep_freed_memory();
-  try {
-    geo::setup_logging("info");
+  return geo::app::run_tool([&] {
     if (!compare.empty()) {
       std::vector<geo::EvalResult> results;
       std::vector<std::string> names;  // columns named by file stem: trained.json -> trained
@@ -148,8 +146,5 @@ int main(int argc, char** argv) {
       spdlog::info("results written to {}", output);
     }
     return 0;
-  } catch (const std::exception& e) {
-    spdlog::error("{}", e.what());
-    return 1;
-  }
+  });
 }

@@ -5,9 +5,9 @@
 //   geo_export --checkpoint runs/stage2 --out model.pt [--half]
 #include <CLI/CLI.hpp>
 
-#include <cstdio>
 #include <filesystem>
 
+#include "app_options.h"
 #include "geo/geo.h"
 #include "pipeline/checkpoint.h"
 
@@ -22,7 +22,7 @@ int main(int argc, char** argv) {
   app.add_flag("--force", force, "replace --out even when it is not a geo_export model file");
   app.add_flag("--half", half, "store the weights as float16 (half the size; computed in float32 when loaded)");
   CLI11_PARSE(app, argc, argv);
-  try {
+  return geo::app::run_tool([&] {
     const geo::Model model = geo::Model::load(checkpoint);
     // Never replace the input (a run folder's best-<stage>.pt is a hard link to a checkpoint), nor,
     // unasked, a file that is not a model file (a training checkpoint holds Adam's state and the run's
@@ -49,17 +49,12 @@ int main(int argc, char** argv) {
     const double diff = (model.depth(image) - back.depth(image)).abs().max().item<double>();
     const double scale = model.depth(image).abs().max().item<double>();
     const auto in_size = fs::file_size(s.source), out_size = fs::file_size(out);
-    std::printf("%s: %s -> %s\n", "geo_export", s.source.c_str(), out.c_str());
-    std::printf("  %lld x %lld input, %lld-frame PoseNet, ResNet-%d, FR %s, FlowNet %s, %s weights\n",
-                static_cast<long long>(s.height), static_cast<long long>(s.width), static_cast<long long>(s.seq_length),
-                s.encoder_depth, s.feature_refinement ? "on" : "off", s.has_flow ? "yes" : "no",
-                half ? "float16" : "float32");
-    std::printf("  %.1f MB -> %.1f MB (%.0f%%); depth from the written file differs by at most %.3g (%.2g relative)\n",
-                static_cast<double>(in_size) / 1e6, static_cast<double>(out_size) / 1e6,
-                100.0 * static_cast<double>(out_size) / static_cast<double>(in_size), diff, diff / scale);
+    spdlog::info("{} -> {}: {}x{} input, {}-frame PoseNet, ResNet-{}, FR {}, FlowNet {}, {} weights", s.source, out,
+                 s.height, s.width, s.seq_length, s.encoder_depth, s.feature_refinement ? "on" : "off",
+                 s.has_flow ? "yes" : "no", half ? "float16" : "float32");
+    spdlog::info("{:.1f} MB -> {:.1f} MB ({:.0f}%); depth from the written file differs by at most {:.3g} ({:.2g} relative)",
+                 static_cast<double>(in_size) / 1e6, static_cast<double>(out_size) / 1e6,
+                 100.0 * static_cast<double>(out_size) / static_cast<double>(in_size), diff, diff / scale);
     return 0;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "geo_export: %s\n", e.what());
-    return 1;
-  }
+  });
 }

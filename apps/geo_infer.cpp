@@ -71,9 +71,7 @@ int main(int argc, char** argv) {
   bool force = false;
   app.add_flag("--force", force, "write into a non-empty --output: geo_infer's earlier outputs there are removed first");
   CLI11_PARSE(app, argc, argv);
-  geo::keep_freed_memory();
-  try {
-    geo::setup_logging("info");
+  return geo::app::run_tool([&] {
     geo::LoadOptions load;
     load.device = device;
     load.precision = precision;
@@ -278,8 +276,5 @@ int main(int argc, char** argv) {
     }
     spdlog::info("done: {}/{{{}}}", output, written);
     return 0;
-  } catch (const std::exception& e) {
-    spdlog::error("{}", e.what());
-    return 1;
-  }
+  });
 }

@@ -29,9 +29,7 @@ int main(int argc, char** argv) {
   app.add_option("--batches", batches, "batches to time with --throughput")->check(geo::app::positive());
   app.add_option("--batch-size", batch_size, "batch size for --throughput (default: the first stage's)")->check(geo::app::positive());
   CLI11_PARSE(app, argc, argv);
-  geo::keep_freed_memory();
-  try {
-    geo::setup_logging("info");
+  return geo::app::run_tool([&] {
     const auto cfg = geo::load_config(geo::resolve_config_path(config_path), overrides);
     auto data = geo::open_training_data(cfg.data);
     spdlog::info("{} data: {} training snippets ({} excluded, {} without neighbours), {} validation",
@@ -64,8 +62,5 @@ int main(int argc, char** argv) {
     }
     spdlog::info("cache written: train with --set data.root={}", out);
     return 0;
-  } catch (const std::exception& e) {
-    spdlog::error("{}", e.what());
-    return 1;
-  }
+  });
 }

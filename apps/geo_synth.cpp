@@ -46,9 +46,7 @@ int main(int argc, char** argv) {
                  "also write the first training drive as a Motion-JPEG AVI at 10 fps (train on it with "
                  "data.videos and the camera printed at the end)");
   CLI11_PARSE(app, argc, argv);
-  geo::keep_freed_memory();
-  try {
-    geo::setup_logging("info");
+  return geo::app::run_tool([&] {
     auto o = geo::SynthOptions::preset_named(preset);
     o.seed = seed;
     o.threads = threads;
@@ -116,8 +114,5 @@ int main(int argc, char** argv) {
                    video, o.frames_per_drive, frames, video, k.fx, k.fy, k.cx, k.cy);
     }
     return 0;
-  } catch (const std::exception& e) {
-    spdlog::error("{}", e.what());
-    return 1;
-  }
+  });
 }

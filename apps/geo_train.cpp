@@ -38,9 +38,7 @@ int main(int argc, char** argv) {
              "batch_size is per process, gradients are averaged, rank 0 writes the run folder. "
              "run.distributed.{backend,timeout_s,shard_data,verify_interval} configure it.");
   CLI11_PARSE(app, argc, argv);
-  geo::keep_freed_memory();
-  try {
-    geo::setup_logging("info");
+  return geo::app::run_tool([&] {
     if (config_path.empty() && resume_dir.empty())
       throw std::runtime_error("give --config FILE (e.g. --config stage1.yaml) or --resume RUN_DIR; see --help");
     if (!resume_dir.empty()) {
@@ -51,8 +49,5 @@ int main(int argc, char** argv) {
     geo::setup_logging(config.logging.level);
     std::string dir;
     return geo::train(config, opts, &dir);
-  } catch (const std::exception& e) {
-    spdlog::error("{}", e.what());
-    return 1;
-  }
+  });
 }
