@@ -7,13 +7,11 @@
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
-#include <cstdlib>
 #include <cstdio>
 #include <filesystem>
 
 #include "core/files.h"
 #include "core/logging.h"
-#include "core/runtime.h"
 #include "eval/protocols.h"
 #include "app_options.h"
 
@@ -95,50 +93,27 @@ int main(int argc, char** argv) {
                 : scaling == "none"        ? geo::DepthScaling::kNone
                                            : geo::DepthScaling::kMedian;
     o.flow_resize = flow_resize == "bilinear" ? geo::FlowResize::kBilinear : geo::FlowResize::kNearest;
-    if (o.data_root.empty()) {
-      const char* env = std::getenv("GEO_KITTI_ROOT");
-      o.data_root = env && *env ? env : "data/kitti";
-      if (!std::filesystem::is_directory(o.data_root))
-        throw std::runtime_error("no data root: '" + o.data_root + "' does not exist; give --data-root DIR or set GEO_KITTI_ROOT");
-    }
+    o.data_root = geo::eval_data_root(o.data_root);
     // The source of the predictions: a model (a checkpoint, an untrained network), files, or the
     // trivial baseline; none with --export-gt alone.
-    std::unique_ptr<geo::Predictor> predictor;
-    std::unique_ptr<geo::PredictionSource> source;
-    if (!untrained.empty()) {
-      predictor = std::make_unique<geo::Predictor>(geo::load_config(geo::resolve_config_path(untrained)), device);
-    } else if (trivial) {
-      source = geo::trivial_source();
-    } else if (!predictions.empty()) {
-      source = geo::file_source(predictions);
-    } else if (export_gt.empty() || !checkpoint.empty()) {
-      // (--export-gt alone writes the ground truth and needs no model)
-      if (checkpoint.empty()) {
-        checkpoint = geo::latest_run_checkpoint(runs);
-        if (checkpoint.empty())
-          throw std::runtime_error("no model: give --checkpoint FILE|RUN_DIR (no training run found under '" + runs +
-                                   "'), or --predictions PATH");
-      }
-      predictor = std::make_unique<geo::Predictor>(checkpoint, device);
-    }
-    if (predictor) {
-      spdlog::info("model {} ({}x{}, FlowNet {})", predictor->path(), predictor->width(), predictor->height(),
-                   predictor->has_flow() ? "yes" : "no: rigid flow only");
-      source = geo::model_source(*predictor);
-    }
+    geo::SourceChoice choice;
+    choice.checkpoint = checkpoint, choice.runs = runs, choice.predictions = predictions;
+    choice.untrained_config = untrained, choice.device = device, choice.trivial = trivial;
+    choice.need_model = export_gt.empty();
+    const auto chosen = geo::choose_source(choice);
     // Before minutes of evaluation: the outputs replace nothing this command reads (the model, the
     // predictions, the data root's ground truth) and not each other.
     geo::check_outputs({{"--output", output}, {"--output-poses", o.output_poses}},
-                       {predictor ? predictor->path() : checkpoint, predictions, o.data_root});
+                       {chosen.reads, checkpoint, o.data_root});
     geo::EvalResult r;
     if (!export_gt.empty()) {
       if (o.split != "eigen") throw std::runtime_error("--export-gt is for --split eigen (got " + o.split + ")");
       r = geo::export_eigen_ground_truth(o, export_gt);
       spdlog::info("ground truth of {} test images written to {}", r.counts[0].second, export_gt);
     }
-    if (source) {
+    if (chosen.source) {
       spdlog::info("evaluating split {} on {}", o.split, geo::split_root(o.split, o.data_root));
-      r = geo::evaluate(o, *source);
+      r = geo::evaluate(o, *chosen.source);
     }
     std::printf("%s", geo::format_results({r}, {o.split}).c_str());
     if (!output.empty()) {

@@ -1,6 +1,9 @@
 #include "eval/sources.h"
 
+#include <spdlog/spdlog.h>
+
 #include "core/files.h"
+#include "core/config.h"
 #include "core/progress.h"
 #include "data/calib.h"
 #include "data/image_io.h"
@@ -10,6 +13,7 @@
 #include "geometry/trajectory.h"
 
 #include <algorithm>
+#include <cstdlib>
 #include <deque>
 #include <filesystem>
 #include <stdexcept>
@@ -233,5 +237,42 @@ class TrivialSource : public PredictionSource {
 std::unique_ptr<PredictionSource> model_source(Predictor& model) { return std::make_unique<ModelSource>(model); }
 std::unique_ptr<PredictionSource> file_source(const std::string& path) { return std::make_unique<FileSource>(path); }
 std::unique_ptr<PredictionSource> trivial_source() { return std::make_unique<TrivialSource>(); }
+
+ChosenSource choose_source(const SourceChoice& c) {
+  ChosenSource out;
+  if (!c.untrained_config.empty()) {
+    out.predictor = std::make_unique<Predictor>(load_config(resolve_config_path(c.untrained_config)), c.device);
+  } else if (c.trivial) {
+    out.source = trivial_source();
+  } else if (!c.predictions.empty()) {
+    out.source = file_source(c.predictions);
+    out.reads = c.predictions;
+  } else if (c.need_model || !c.checkpoint.empty()) {
+    std::string checkpoint = c.checkpoint;
+    if (checkpoint.empty()) {
+      checkpoint = latest_run_checkpoint(c.runs);
+      if (checkpoint.empty())
+        throw std::runtime_error("no model: give --checkpoint FILE|RUN_DIR (no training run found under '" + c.runs +
+                                 "'), or --predictions PATH");
+    }
+    out.predictor = std::make_unique<Predictor>(checkpoint, c.device);
+    out.reads = out.predictor->path();
+  }
+  if (out.predictor) {
+    spdlog::info("model {} ({}x{}, FlowNet {})", out.predictor->path(), out.predictor->width(), out.predictor->height(),
+                 out.predictor->has_flow() ? "yes" : "no: rigid flow only");
+    out.source = model_source(*out.predictor);
+  }
+  return out;
+}
+
+std::string eval_data_root(const std::string& given) {
+  if (!given.empty()) return given;
+  const char* env = std::getenv("GEO_KITTI_ROOT");
+  const std::string root = env && *env ? env : "data/kitti";
+  if (!fs::is_directory(root))
+    throw std::runtime_error("no data root: '" + root + "' does not exist; give --data-root DIR or set GEO_KITTI_ROOT");
+  return root;
+}
 
 }  // namespace geo

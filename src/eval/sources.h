@@ -74,6 +74,24 @@ std::unique_ptr<PredictionSource> file_source(const std::string& path);
 // The baseline any method must beat: a constant depth, zero flow, no motion.
 std::unique_ptr<PredictionSource> trivial_source();
 
+// What geo_eval scores, chosen from its options: an untrained network of a config, the trivial
+// baseline, prediction files, or a model (a checkpoint file or run folder; the newest run under
+// `runs` when none is given). `need_model` false (--export-gt alone) and nothing given: no source.
+struct SourceChoice {
+  std::string checkpoint, runs = "runs", predictions, untrained_config, device = "auto";
+  bool trivial = false;
+  bool need_model = true;
+};
+struct ChosenSource {
+  std::unique_ptr<Predictor> predictor;  // the model a model source reads (kept alive with it)
+  std::unique_ptr<PredictionSource> source;
+  std::string reads;                     // the file or folder it reads ("" for baselines)
+};
+ChosenSource choose_source(const SourceChoice& choice);
+
+// geo_eval's data root: `given`, else $GEO_KITTI_ROOT, else ./data/kitti; an error when that is no folder.
+std::string eval_data_root(const std::string& given);
+
 // Helpers the protocols share with the sources.
 void require_file(const std::string& path, const std::string& what);
 // Predictions must be finite: a NaN would otherwise turn into a nan metric (or, through a mask, a
