@@ -39,7 +39,8 @@ PoseOutput PoseNetImpl::predict(const torch::Tensor& tgt, const std::vector<torc
   for (auto& c : convs) x = c(x);
   PoseOutput out;
   if (intrinsics) {
-    const auto v = conv2d(*intrinsics, x.mean({2, 3}, true)).flatten(1).to(torch::kFloat32);  // [B,4]
+    // Scaled as the poses are (intrinsics_output_scale: why, in pose_net.h).
+    const auto v = options.intrinsics_output_scale * conv2d(*intrinsics, x.mean({2, 3}, true)).flatten(1).to(torch::kFloat32);  // [B,4]
     const double W = static_cast<double>(tgt.size(3)), H = static_cast<double>(tgt.size(2));
     const auto fx = torch::softplus(v.select(1, 0)) * W, fy = torch::softplus(v.select(1, 1)) * W;
     const auto cx = (v.select(1, 2) + 0.5) * W, cy = (v.select(1, 3) + 0.5) * H;
