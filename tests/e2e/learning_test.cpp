@@ -181,7 +181,7 @@ run: {seed: 1, threads: 2}
   // and its depth no worse than 1.15x the calibrated run's AbsRel. Measured 2026-11-25 (AMD EPYC,
   // 2 cores, the in-memory world of seed 1): fx 114.2, fy 111.2 against 120.8, 123.1 (from 144.2:
   // 0.69 W), AbsRel 0.2178 against 0.2108 (1.03x). A warp that ignores the learned camera leaves it
-  // at its start (19% off); the unscaled head of the first version collapsed to fx 44, fy 14.
+  // at its start (19% off); an unscaled head collapses to fx 44, fy 14.
   const std::string learned_yaml = R"(
 model: {encoder_depth: 18, bn_momentum: 0.1, learn_intrinsics: true}
 data: {height: 64, width: 208, num_workers: 1, augment: {enabled: false}}
