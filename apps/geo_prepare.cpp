@@ -57,7 +57,7 @@ int main(int argc, char** argv) {
     if (data.val) {
       pack(data.val, out + "/val");
     } else if (geo::has_packed_cache_files(out + "/val")) {  // an earlier run's: no longer this cache's
-      for (const char* f : {"/index.txt", "/frames.bin", "/frames.bin.tmp"}) std::filesystem::remove(out + "/val" + f);
+      geo::remove_packed_cache_files(out + "/val");
       spdlog::info("removed {}/val: an earlier geo_prepare's validation set (this config has none)", out);
     }
     spdlog::info("cache written: train with --set data.root={}", out);

@@ -22,11 +22,19 @@ bool is_packed_cache(const std::string& dir) {
   return in && std::getline(in, first) && first.rfind("geo-packed", 0) == 0;
 }
 
+namespace {
+constexpr const char* kCacheFiles[] = {"/index.txt", "/frames.bin", "/frames.bin.tmp"};
+}  // namespace
+
 bool has_packed_cache_files(const std::string& dir) {
   std::error_code ec;
-  for (const char* f : {"/index.txt", "/frames.bin", "/frames.bin.tmp"})
+  for (const char* f : kCacheFiles)
     if (fs::exists(dir + f, ec)) return true;
   return false;
+}
+
+void remove_packed_cache_files(const std::string& dir) {
+  for (const char* f : kCacheFiles) fs::remove(dir + f);
 }
 
 void check_packed_cache_complete(const std::string& dir) {

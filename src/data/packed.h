@@ -29,6 +29,8 @@ bool is_packed_cache(const std::string& dir);
 // Whether `dir` holds any file of a packed cache (index.txt, frames.bin, or geo_prepare's
 // frames.bin.tmp): such a folder is read as a cache, and a damaged one is an error, never skipped.
 bool has_packed_cache_files(const std::string& dir);
+// Removes those files from `dir` (geo_prepare, for a part an earlier run left); the folder stays.
+void remove_packed_cache_files(const std::string& dir);
 // Throws std::runtime_error naming `dir` when it holds frames but no index.txt (an interrupted
 // geo_prepare).
 void check_packed_cache_complete(const std::string& dir);

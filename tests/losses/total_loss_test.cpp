@@ -137,25 +137,35 @@ TEST(TotalLoss, RigidLossCarriesGeoNetsSourceFactor) {
               geo::rigid_terms(sources(4), off).disp_smooth.item<double>(), 1e-15);
 }
 
+// Forward flow u = 1 on an 8x8 image; the backward flow disagrees by 2.5 px on a 2x2 block (rows
+// 2-3, columns 4-5), where the source is 1 and everything else 0.
+struct DisputedBlock {
+  torch::Tensor zeros, ff, bf, src;
+};
+DisputedBlock disputed_block() {
+  const int64_t H = 8, W = 8;
+  DisputedBlock d;
+  d.zeros = torch::zeros({1, 3, H, W}, torch::kFloat64);
+  d.ff = torch::zeros({1, 2, H, W}, torch::kFloat64);
+  d.ff.select(1, 0).fill_(1.0);
+  d.bf = -d.ff.clone();
+  d.bf.select(1, 0).narrow(1, 2, 2).narrow(2, 4, 2).fill_(1.5);
+  d.src = d.zeros.clone();
+  d.src.narrow(2, 2, 2).narrow(3, 4, 2).fill_(1.0);
+  return d;
+}
+
 TEST(TotalLoss, FlowReconstructionMaskIsEq13OrGeoNetsConsistencyMask) {
   // Forward flow u = 1; the backward flow disagrees by 2.5 px on a 2x2 block. Eq. 13 calls those
   // pixels occluded (6.25 > 0.01 (1 + 2.25) + 0.5), GeoNet's consistency bound max(3, 0.05) keeps
   // them. With an error of 1 only on those pixels, L_fr is 0 with the eq. 13 mask and
   // (4 / 64) per direction with the consistency mask.
-  const int64_t H = 8, W = 8;
+  // The target is 0; the source is 1 on the block. Forward, target pixels x in {3, 4} read the
+  // source block at x + 1: error 1 exactly where the flows disagree. Backward, the block pixels
+  // read the target (0) and compare with their own 1: error 1 there too.
+  const auto [zeros, ff, bf, src] = disputed_block();
   geo::RigidTerms rigid;
-  const auto zeros = torch::zeros({1, 3, H, W}, torch::kFloat64);
   rigid.tgt_pyr = {zeros};
-  rigid.src_pyr = {{zeros}};
-  auto ff = torch::zeros({1, 2, H, W}, torch::kFloat64);
-  ff.select(1, 0).fill_(1.0);
-  auto bf = -ff.clone();
-  bf.select(1, 0).narrow(1, 2, 2).narrow(2, 4, 2).fill_(1.5);
-  // The target is 0; the source is 1 on the block (rows 2-3, columns 4-5). Forward, target pixels
-  // x in {3, 4} read the source block at x + 1: error 1 exactly where the flows disagree. Backward,
-  // the block pixels read the target (0) and compare with their own 1: error 1 there too.
-  auto src = zeros.clone();
-  src.narrow(2, 2, 2).narrow(3, 4, 2).fill_(1.0);
   rigid.src_pyr = {{src}};
   geo::LossConfig cfg;
   cfg.ssim_alpha = 0.0;
@@ -176,18 +186,11 @@ TEST(TotalLoss, FlowReconstructionMaskIsEq13OrGeoNetsConsistencyMask) {
 // sources: three with zero flow and zero error, the fourth the disputed block above (error 1 on 4
 // pixels per direction, kept by the consistency mask, excluded by eq. 13).
 TEST(TotalLoss, GeoNetsFlowReductionPoolsSourcesAndDropsTheMaskWithoutConsistency) {
-  const int64_t H = 8, W = 8;
-  const auto zeros = torch::zeros({1, 3, H, W}, torch::kFloat64);
-  auto ff = torch::zeros({1, 2, H, W}, torch::kFloat64);
-  ff.select(1, 0).fill_(1.0);
-  auto bf = -ff.clone();
-  bf.select(1, 0).narrow(1, 2, 2).narrow(2, 4, 2).fill_(1.5);
-  auto block = zeros.clone();
-  block.narrow(2, 2, 2).narrow(3, 4, 2).fill_(1.0);
+  const auto [zeros, ff, bf, block] = disputed_block();
   geo::RigidTerms rigid;
   rigid.tgt_pyr = {zeros};
   rigid.src_pyr = {{zeros}, {zeros}, {zeros}, {block}};
-  const auto still = torch::zeros({1, 2, H, W}, torch::kFloat64);
+  const auto still = torch::zeros_like(ff);
   const geo::PerSourceScale<torch::Tensor> fwd = {{still}, {still}, {still}, {ff}}, bwd = {{still}, {still}, {still}, {bf}};
   geo::LossConfig cfg;
   cfg.ssim_alpha = 0.0;

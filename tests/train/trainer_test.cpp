@@ -411,11 +411,17 @@ TEST(Trainer, AFailedCheckpointWriteNamesThePathAndResumeContinues) {
   EXPECT_EQ(state_of(resolve_checkpoint(o.run_dir)).iteration, 3);
 }
 
-TEST(Trainer, InitFromAnotherArchitectureOrABrokenFileIsOneClearLine) {
+// One stage of one iteration with its checkpoint: a run folder to initialise others from.
+Config one_step_config() {
   auto cfg = tiny_config();
   cfg.stages.resize(1);
   cfg.stages[0].iterations = 1;
   cfg.logging.checkpoint_interval = 1;
+  return cfg;
+}
+
+TEST(Trainer, InitFromAnotherArchitectureOrABrokenFileIsOneClearLine) {
+  const auto cfg = one_step_config();
   const auto base = test::fresh_dir("initarch");
   TrainOptions o;
   o.run_dir = base + "/r18";
@@ -440,10 +446,7 @@ TEST(Trainer, InitFromAnotherArchitectureOrABrokenFileIsOneClearLine) {
 // Every checkpoint of a run records what its initial weights were trained on, nearest first, and a
 // run initialised from it inherits the chain (geo_eval's training-drive check follows it).
 TEST(Trainer, CheckpointsRecordTheirInitChain) {
-  auto cfg = tiny_config();
-  cfg.stages.resize(1);
-  cfg.stages[0].iterations = 1;
-  cfg.logging.checkpoint_interval = 1;
+  const auto cfg = one_step_config();
   const auto base = test::fresh_dir("initchain");
   TrainOptions a;
   a.run_dir = base + "/a";
