@@ -54,7 +54,7 @@ int main(int argc, char** argv) {
                  "above the road fitted to the prediction (no ground truth), or none; odometry: camera-height also "
                  "scores the trajectory in metres (metric_t_err, metric_r_err, metric_scale_error)")
       ->check(CLI::IsMember({"median", "camera-height", "none"}));
-  auto* height_opt = app.add_option("--camera-height", o.camera_height,
+  app.add_option("--camera-height", o.camera_height,
                  "eigen, odometry: the camera's height above the road in metres (default: the data root's camera_height.txt, "
                  "which geo_synth writes, else KITTI's 1.65)")
       ->check(geo::app::above_zero());
@@ -83,16 +83,10 @@ int main(int argc, char** argv) {
       std::printf("%s", geo::format_results(results, names).c_str());
       return 0;
     }
-    if (o.split.empty()) throw std::runtime_error("--split is required (eigen, kitti2015 or odometry); see --help");
-    if (scaling == "camera-height" && o.split == "kitti2015")
-      throw std::runtime_error("--scaling camera-height is for --split eigen and odometry: flow has no scale to set");
-    if (height_opt->count() > 0 && scaling != "camera-height")
-      throw std::runtime_error("--camera-height is used by --scaling camera-height only (the scaling is '" + scaling + "')");
     o.matlab_offset = !no_matlab;
-    o.scaling = scaling == "camera-height" ? geo::DepthScaling::kCameraHeight
-                : scaling == "none"        ? geo::DepthScaling::kNone
-                                           : geo::DepthScaling::kMedian;
-    o.flow_resize = flow_resize == "bilinear" ? geo::FlowResize::kBilinear : geo::FlowResize::kNearest;
+    o.scaling = geo::depth_scaling_named(scaling);
+    o.flow_resize = geo::flow_resize_named(flow_resize);
+    geo::check_eval_options(o);
     o.data_root = geo::eval_data_root(o.data_root);
     // The source of the predictions: a model (a checkpoint, an untrained network), files, or the
     // trivial baseline; none with --export-gt alone.

@@ -4,6 +4,7 @@
 #           geometry -> models, photometric -> pipeline -> { geo (the library), train_parts }
 #                                  data -> data_io -> evaluation (on geo and pipeline, never training)
 #                                          data_io -> training_data (what a config trains on) -> training
+#   core -> metrics (tensors only) -> evaluation
 #
 # geo_layers_check(TARGET NOT forbidden...) fails the configuration when TARGET links, directly or
 # through any of its dependencies, one of the forbidden targets.
@@ -66,6 +67,8 @@ set(geo_training_layers geo_train_parts geo_training)
 # the losses.
 geo_layers_check(geo_pipeline NOT ${geo_training_layers} geo_losses geo_evaluation geo_data geo_data_io geo)
 geo_layers_check(geo NOT ${geo_training_layers} geo_losses geo_evaluation geo_data geo_data_io ABOVE geo_pipeline)
+# The metrics on tensors: LibTorch and core only (the OpenCV-free build and Python use them).
+geo_layers_check(geo_metrics NOT geo_geometry geo_models geo_pipeline geo_data ${geo_training_layers} geo)
 geo_layers_check(geo_evaluation NOT ${geo_training_layers} ABOVE geo geo_pipeline)
 geo_layers_check(geo_train_parts NOT geo_evaluation geo ABOVE geo_pipeline)
 geo_layers_check(geo_training NOT geo_evaluation geo ABOVE geo_pipeline)

@@ -60,6 +60,8 @@ if [ "$TORCH" = system ]; then
     libtorch-dev
     libgloo-dev  # the headers of LibTorch's Gloo backend: multi-process training (train/distributed.h)
     libopenblas0-pthread  # without it Debian's LibTorch uses the reference BLAS: 17-25x slower matmuls
+    # The Python module (python/) on the same LibTorch, and its tests.
+    python3-torch python3-numpy python3-yaml python3-dev pybind11-dev python3-pytest
   )
 fi
 if [ "$OPENCV" = 1 ]; then PACKAGES+=(libopencv-dev); fi
@@ -89,6 +91,9 @@ BUILD_DIR="${GEO_BUILD_DIR:-build}"
 JOBS="${GEO_JOBS:-$(nproc)}"
 CONFIGURE=(-DCMAKE_BUILD_TYPE=Release)
 if [ "$OPENCV" = 1 ]; then CONFIGURE+=(-DGEO_WITH_OPENCV=ON); else CONFIGURE+=(-DGEO_WITH_OPENCV=OFF); fi
+# With Debian's LibTorch the packages above hold everything the Python module needs: a module that
+# cannot be built is then an error, not a quiet omission.
+if [ "$TORCH" = system ]; then CONFIGURE+=(-DGEO_WITH_PYTHON=ON); fi
 if [ -n "$TORCH_PREFIX" ]; then CONFIGURE+=("-DCMAKE_PREFIX_PATH=$TORCH_PREFIX"); fi
 echo "geo setup: LibTorch $TORCH${TORCH_PREFIX:+ ($TORCH_PREFIX)}, OpenCV $OPENCV, build folder $BUILD_DIR"
 if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
@@ -97,6 +102,9 @@ if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
   cmake -S . -B "$BUILD_DIR" "${CONFIGURE[@]}"
 elif [ -n "${GEO_TORCH:-}${GEO_OPENCV:-}" ]; then
   cmake -S . -B "$BUILD_DIR" "${CONFIGURE[@]}" >/dev/null  # asked for explicitly: apply to an existing build
+fi
+if [ "$TORCH" = system ] && ! grep -q '^GEO_WITH_PYTHON:STRING=ON$' "$BUILD_DIR/CMakeCache.txt"; then
+  cmake -S . -B "$BUILD_DIR" -DGEO_WITH_PYTHON=ON >/dev/null  # a build folder made before the module existed
 fi
 if [ "${GEO_WERROR:-0}" = 1 ]; then
   cmake -S . -B "$BUILD_DIR" -DGEO_WERROR=ON >/dev/null

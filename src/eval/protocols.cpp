@@ -526,6 +526,30 @@ std::string split_root(const std::string& split, const std::string& root) {
   return fs::is_directory(root + sub) ? root + sub : root;
 }
 
+DepthScaling depth_scaling_named(const std::string& name) {
+  if (name == "median") return DepthScaling::kMedian;
+  if (name == "camera-height") return DepthScaling::kCameraHeight;
+  if (name == "none") return DepthScaling::kNone;
+  throw std::runtime_error("depth scaling '" + name + "': must be median, camera-height or none");
+}
+
+FlowResize flow_resize_named(const std::string& name) {
+  if (name == "nearest") return FlowResize::kNearest;
+  if (name == "bilinear") return FlowResize::kBilinear;
+  throw std::runtime_error("flow resize '" + name + "': must be nearest or bilinear");
+}
+
+void check_eval_options(const EvalOptions& o) {
+  if (o.split.empty()) throw std::runtime_error("--split is required (eigen, kitti2015 or odometry); see --help");
+  if (o.split != "eigen" && o.split != "kitti2015" && o.split != "odometry")
+    throw std::runtime_error("split '" + o.split + "': must be eigen, kitti2015 or odometry");
+  if (o.scaling == DepthScaling::kCameraHeight && o.split == "kitti2015")
+    throw std::runtime_error("--scaling camera-height is for --split eigen and odometry: flow has no scale to set");
+  if (o.camera_height != 0 && o.scaling != DepthScaling::kCameraHeight)
+    throw std::runtime_error(std::string("--camera-height is used by --scaling camera-height only (the scaling is '") +
+                             (o.scaling == DepthScaling::kMedian ? "median" : "none") + "')");
+}
+
 EvalResult evaluate(const EvalOptions& o, PredictionSource& source) {
   Predictor* pred = source.model();
   if (!fs::is_directory(o.data_root)) throw std::runtime_error("data root '" + o.data_root + "' is not a directory (--data-root)");

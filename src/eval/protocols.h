@@ -55,6 +55,14 @@ struct EvalResult {
   std::string json() const;
 };
 
+// The scaling and flow-resize names geo_eval and Python take (median | camera-height | none; nearest |
+// bilinear); others throw naming the value.
+DepthScaling depth_scaling_named(const std::string& name);
+FlowResize flow_resize_named(const std::string& name);
+// The option combinations an evaluation refuses rather than ignores: an unknown split, camera-height
+// scaling of flow, a camera height without camera-height scaling.
+void check_eval_options(const EvalOptions& options);
+
 // Scores the source's predictions on options.split. Throws naming the missing/bad file.
 EvalResult evaluate(const EvalOptions& options, PredictionSource& source);
 // The model's own predictions (model_source).

@@ -1,0 +1,167 @@
+// geo.Model: include/geo/geo.h from Python. Arguments are converted with the GIL held; the networks
+// run with it released, so Python threads calling one Model run at once.
+#include "bindings.h"
+
+#include "geo/geo.h"
+
+namespace geo::python {
+
+using namespace pybind11::literals;
+
+namespace {
+
+py::object with_scale(torch::Tensor result, std::vector<double> scale, bool wanted) {
+  if (!wanted) return py::cast(std::move(result));
+  return py::make_tuple(std::move(result), std::move(scale));
+}
+
+}  // namespace
+
+void bind_model(py::module_& m) {
+  m.def("image", &image_arg, "image"_a, "what"_a = "image",
+        "The tensor geo sees for an image: torch tensors as they are ([3,H,W], [B,3,H,W]); numpy arrays\n"
+        "([H,W,3], [B,H,W,3], uint8 0..255 or float 0..1) as a channels-first view of the same memory.");
+  m.def("kitti_like_intrinsics", &kitti_like_intrinsics, "height"_a, "width"_a,
+        "KITTI's proportions at height x width (fx = 0.58 W, fy = 1.92 H, principal point at the centre): [3,3] float64.");
+
+  py::class_<ModelSpec>(m, "ModelSpec", "What a model expects and has (read from its file).")
+      .def_readonly("height", &ModelSpec::height)
+      .def_readonly("width", &ModelSpec::width)
+      .def_readonly("seq_length", &ModelSpec::seq_length)
+      .def_readonly("encoder_depth", &ModelSpec::encoder_depth)
+      .def_readonly("feature_refinement", &ModelSpec::feature_refinement)
+      .def_readonly("has_flow", &ModelSpec::has_flow)
+      .def_readonly("source", &ModelSpec::source)
+      .def_readonly("learns_intrinsics", &ModelSpec::learns_intrinsics)
+      .def_readonly("precision", &ModelSpec::precision)
+      .def("__repr__", [](const ModelSpec& s) {
+        return "ModelSpec(" + std::to_string(s.height) + "x" + std::to_string(s.width) + ", seq_length=" +
+               std::to_string(s.seq_length) + ", resnet" + std::to_string(s.encoder_depth) +
+               (s.feature_refinement ? ", FR" : "") + (s.has_flow ? ", FlowNet" : "") +
+               (s.learns_intrinsics ? ", learned camera" : "") + ", " + s.precision + ", '" + s.source + "')";
+      });
+
+  py::class_<Model::FlowParts>(m, "FlowParts", "flow_parts(): the full flow and the rigid flow of depth and motion alone.")
+      .def_readonly("full", &Model::FlowParts::full)
+      .def_readonly("rigid", &Model::FlowParts::rigid)
+      .def("__iter__", [](const Model::FlowParts& p) { return py::iter(py::make_tuple(p.full, p.rigid)); });
+
+  py::class_<Model>(m, "Model",
+                    "A trained geo model: depth, camera motion and optical flow of images.\n"
+                    "Images are torch tensors [3,H,W] / [B,3,H,W] or numpy arrays [H,W,3] / [B,H,W,3] (RGB, uint8\n"
+                    "0..255 or float 0..1), any size; outputs are torch tensors at the images' size. Intrinsics\n"
+                    "([3,3], pixels of the given image) are optional (KITTI's proportions, or the camera a model\n"
+                    "that learns it predicts). Safe to call from several threads at once.")
+      .def_static(
+          "load",
+          [](const std::string& path, const std::string& device, const std::string& precision, int threads) {
+            LoadOptions options;
+            options.device = device, options.precision = precision, options.threads = threads;
+            py::gil_scoped_release release;
+            return Model::load(path, options);
+          },
+          "path"_a, py::kw_only(), "device"_a = "cpu", "precision"_a = "fp32", "threads"_a = 0,
+          "A geo_export model file, a training checkpoint or a run folder. device: cpu, cuda, cuda:N or auto;\n"
+          "precision: fp32, bf16 or auto; threads > 0 sets LibTorch's intra-op threads (process-wide).")
+      .def_property_readonly("spec", &Model::spec)
+      .def_property_readonly("device", &Model::device)
+      .def(
+          "depth",
+          [](const Model& model, py::handle image) {
+            const auto x = image_arg(image, "image");
+            py::gil_scoped_release release;
+            return model.depth(x);
+          },
+          "image"_a, "Depth (up to scale) at the image's size: [H,W] ([B,H,W] for a batch).")
+      .def(
+          "metric_depth",
+          [](const Model& model, py::handle image, double camera_height, py::handle intrinsics, bool return_scale) {
+            const auto x = image_arg(image, "image");
+            const auto K = optional_tensor_arg(intrinsics, "intrinsics");
+            std::vector<double> scale;
+            torch::Tensor depth;
+            {
+              py::gil_scoped_release release;
+              depth = model.metric_depth(x, camera_height, K, &scale);
+            }
+            return with_scale(depth, scale, return_scale);
+          },
+          "image"_a, "camera_height"_a = 1.65, "intrinsics"_a = py::none(), py::kw_only(), "return_scale"_a = false,
+          "Depth in metres from the camera's height above the road (KITTI: 1.65 m) fitted to the lower image;\n"
+          "return_scale: also the factor(s) applied. geo.Error when no road is found.")
+      .def(
+          "relative_pose",
+          [](const Model& model, py::handle from, py::handle to, py::handle intrinsics) {
+            const auto a = image_arg(from, "from"), b = image_arg(to, "to");
+            const auto K = optional_tensor_arg(intrinsics, "intrinsics");
+            py::gil_scoped_release release;
+            return model.relative_pose(a, b, K);
+          },
+          "from_"_a, "to"_a, "intrinsics"_a = py::none(),
+          "[4,4] transform of points in from_'s camera into to's (translation up to the depth's scale).")
+      .def(
+          "metric_relative_pose",
+          [](const Model& model, py::handle from, py::handle to, double camera_height, py::handle intrinsics,
+             bool return_scale) {
+            const auto a = image_arg(from, "from"), b = image_arg(to, "to");
+            const auto K = optional_tensor_arg(intrinsics, "intrinsics");
+            std::vector<double> scale;
+            torch::Tensor pose;
+            {
+              py::gil_scoped_release release;
+              pose = model.metric_relative_pose(a, b, camera_height, K, &scale);
+            }
+            return with_scale(pose, scale, return_scale);
+          },
+          "from_"_a, "to"_a, "camera_height"_a = 1.65, "intrinsics"_a = py::none(), py::kw_only(),
+          "return_scale"_a = false, "relative_pose() with its translation in metres (metric_depth()'s scale of from_).")
+      .def(
+          "pose",
+          [](const Model& model, const py::sequence& frames) {
+            std::vector<torch::Tensor> xs;
+            for (size_t i = 0; i < frames.size(); ++i) xs.push_back(image_arg(frames[i], "frames[" + std::to_string(i) + "]"));
+            py::gil_scoped_release release;
+            return model.pose(xs);
+          },
+          "frames"_a, "The PoseNet on a snippet of spec.seq_length frames: [L-1,4,4] from the middle frame's camera into each other's.")
+      .def(
+          "flow",
+          [](const Model& model, py::handle from, py::handle to, py::handle intrinsics, py::handle previous) {
+            const auto a = image_arg(from, "from"), b = image_arg(to, "to");
+            const auto K = optional_tensor_arg(intrinsics, "intrinsics");
+            const auto p = previous.is_none() ? torch::Tensor() : image_arg(previous, "previous");
+            py::gil_scoped_release release;
+            return model.flow(a, b, K, p);
+          },
+          "from_"_a, "to"_a, "intrinsics"_a = py::none(), "previous"_a = py::none(),
+          "Optical flow from_ -> to in pixels: [2,H,W] (rigid flow plus the FlowNet's residual).")
+      .def(
+          "flow_parts",
+          [](const Model& model, py::handle from, py::handle to, py::handle intrinsics, py::handle previous) {
+            const auto a = image_arg(from, "from"), b = image_arg(to, "to");
+            const auto K = optional_tensor_arg(intrinsics, "intrinsics");
+            const auto p = previous.is_none() ? torch::Tensor() : image_arg(previous, "previous");
+            py::gil_scoped_release release;
+            return model.flow_parts(a, b, K, p);
+          },
+          "from_"_a, "to"_a, "intrinsics"_a = py::none(), "previous"_a = py::none(),
+          "flow() and the rigid flow alone: FlowParts(full, rigid), which unpacks as full, rigid = ...")
+      .def(
+          "intrinsics",
+          [](const Model& model, py::handle from, py::handle to) {
+            const auto a = image_arg(from, "from"), b = image_arg(to, "to");
+            py::gil_scoped_release release;
+            return model.intrinsics(a, b);
+          },
+          "from_"_a, "to"_a, "The camera a model that learns it predicts for the pair: [3,3] in pixels of the images.")
+      .def(
+          "save",
+          [](const Model& model, const std::string& path, bool half) {
+            py::gil_scoped_release release;
+            model.save(path, half);
+          },
+          "path"_a, "half"_a = false, "Writes the weights and spec (geo_export's file); half: stored as float16.")
+      .def("__repr__", [](const Model& model) { return "geo.Model('" + model.spec().source + "')"; });
+}
+
+}  // namespace geo::python

@@ -1,0 +1,50 @@
+"""geo: depth, optical flow and camera motion from monocular video (GeoNet with feature refinement).
+
+The C++ library from Python, on the same LibTorch as the installed torch (tensors cross without
+copies):
+
+    import geo
+    model = geo.Model.load("model.pt")          # a geo_export file, a checkpoint or a run folder
+    depth = model.depth(image)                   # image: numpy HxWx3 uint8 or torch 3xHxW -> [H,W]
+    motion = model.relative_pose(prev, image)    # [4,4]
+    flow = model.flow(prev, image)               # [2,H,W] pixels
+
+    geo.eval.depth_errors(gt, depth)             # Eigen metrics (median scaling) as a dict
+    world = geo.synth.world(frames=3)            # the synthetic world with ground truth
+    run = geo.train("smoke.yaml", overrides=["data.format=synthetic"], callback=print)
+
+geo.eval, geo.synth, geo.kitti and (built with OpenCV) geo.io hold the protocols, the synthetic world
+and KITTI's formats. Failures raise geo.Error (a RuntimeError) with geo's message.
+"""
+import sys as _sys
+
+import torch as _torch  # noqa: F401  (registers torch's types before geo's module loads)
+
+from ._geo import (  # noqa: F401
+    ConfigError,
+    Error,
+    FlowParts,
+    Model,
+    ModelSpec,
+    eval,
+    has_opencv,
+    image,
+    kitti,
+    kitti_like_intrinsics,
+    resume,
+    state_dicts,
+    synth,
+    train,
+)
+
+if has_opencv:
+    from ._geo import io  # noqa: F401
+
+# `import geo.eval` and friends work as for any package.
+for _name in ("eval", "synth", "kitti", "io"):
+    if _name in globals():
+        _sys.modules[__name__ + "." + _name] = globals()[_name]
+del _name
+
+__all__ = ["Model", "ModelSpec", "FlowParts", "Error", "ConfigError", "image", "kitti_like_intrinsics", "train",
+           "resume", "state_dicts", "eval", "synth", "kitti"] + (["io"] if has_opencv else [])

@@ -1,0 +1,129 @@
+"""geo.Model from Python: the same results as the C++ tools, numpy and torch inputs without copies,
+errors as geo.Error, and one Model called from several threads."""
+import threading
+
+import numpy as np
+import pytest
+import torch
+
+import geo
+from conftest import run_app
+
+
+@pytest.fixture(scope="module")
+def frames():
+    return geo.synth.world(frames=3, seed=7)["images"]  # [3,3,64,208] uint8
+
+
+def test_spec_is_the_trained_architecture(model, model_file):
+    spec = model.spec
+    assert (spec.height, spec.width, spec.seq_length, spec.encoder_depth) == (64, 208, 3, 18)
+    assert spec.feature_refinement and spec.has_flow and not spec.learns_intrinsics
+    assert spec.source == str(model_file)
+    assert model.device == torch.device("cpu")
+
+
+def test_numpy_images_are_viewed_channels_last_without_a_copy(frames):
+    hwc = np.ascontiguousarray(frames[0].permute(1, 2, 0).numpy())
+    seen = geo.image(hwc)
+    assert seen.shape == (3, 64, 208) and seen.data_ptr() == hwc.ctypes.data
+    assert torch.equal(seen, frames[0])
+    batch = np.ascontiguousarray(frames.permute(0, 2, 3, 1).numpy())
+    assert geo.image(batch).data_ptr() == batch.ctypes.data and torch.equal(geo.image(batch), frames)
+    # A torch tensor is geo's [3,H,W] as it is: the same tensor, no copy.
+    assert geo.image(frames[1]).data_ptr() == frames[1].data_ptr()
+    # Read-only arrays (PIL's np.asarray) are shared too; reversed channels (BGR[..., ::-1]) are copied.
+    hwc.flags.writeable = False
+    assert geo.image(hwc).data_ptr() == hwc.ctypes.data
+    bgr = np.ascontiguousarray(hwc[..., ::-1])
+    assert torch.equal(geo.image(bgr[..., ::-1]), frames[0])
+
+
+def test_numpy_and_torch_inputs_give_the_same_outputs(model, frames):
+    hwc = [f.permute(1, 2, 0).numpy() for f in frames]
+    depth = model.depth(hwc[1])
+    assert depth.shape == (64, 208) and depth.dtype == torch.float32 and bool((depth > 0).all())
+    assert torch.equal(depth, model.depth(frames[1]))
+    # A batch is one forward pass (its convolutions may sum in another order): equal to rounding.
+    assert torch.allclose(model.depth(frames), torch.stack([model.depth(f) for f in frames]), rtol=1e-5, atol=0)
+    assert torch.equal(model.flow(hwc[0], hwc[1]), model.flow(frames[0], frames[1]))
+    assert torch.equal(model.relative_pose(hwc[0], hwc[1]), model.relative_pose(frames[0], frames[1]))
+
+
+def test_outputs_have_the_documented_shapes(model, frames):
+    a, b, c = frames
+    pose = model.relative_pose(a, b)
+    assert pose.shape == (4, 4) and torch.equal(pose[3], torch.tensor([0, 0, 0, 1], dtype=pose.dtype))
+    assert model.pose([a, b, c]).shape == (2, 4, 4)
+    full, rigid = model.flow_parts(b, c, previous=a)
+    assert full.shape == rigid.shape == (2, 64, 208)
+    assert torch.equal(full, model.flow(b, c, previous=a))
+    K = geo.kitti_like_intrinsics(64, 208)
+    assert torch.allclose(K, torch.tensor([[0.58 * 208, 0, 104], [0, 1.92 * 64, 32], [0, 0, 1]], dtype=torch.float64))
+    assert torch.equal(model.depth(b), model.depth(b))  # no state between calls
+    assert torch.equal(model.flow(b, c, K.numpy()), model.flow(b, c, K))
+
+
+def test_depth_equals_geo_infer_byte_for_byte(model, model_file, frames, tmp_path):
+    inputs = tmp_path / "frames"
+    inputs.mkdir()
+    for i, f in enumerate(frames):
+        geo.io.write_image(str(inputs / f"{i:06d}.png"), f)
+    out = tmp_path / "geo_infer"
+    run_app("geo_infer", "--checkpoint", model_file, "--input", inputs, "--output", out)
+    for i in range(len(frames)):
+        image = geo.io.read_image(str(inputs / f"{i:06d}.png"), size=(model.spec.height, model.spec.width))
+        mine = tmp_path / f"{i:06d}-depth.png"
+        geo.io.write_depth_png(str(mine), model.depth(image))
+        assert mine.read_bytes() == (out / f"{i:06d}-depth.png").read_bytes()
+
+
+def test_bad_inputs_raise_geo_errors_naming_them(model, frames, tmp_path):
+    with pytest.raises(geo.Error, match="image: an image array must be HxWx3 or BxHxWx3 RGB.*got 64x208"):
+        model.depth(np.zeros((64, 208), np.uint8))
+    with pytest.raises(geo.Error, match="image: not a numeric array"):
+        model.depth(np.array([["a"]]))
+    with pytest.raises(geo.Error, match="intrinsics"):
+        model.flow(frames[0], frames[1], torch.eye(4))
+    with pytest.raises(geo.Error, match=str(tmp_path / "missing.pt")):
+        geo.Model.load(str(tmp_path / "missing.pt"))
+    not_a_model = tmp_path / "junk.pt"
+    not_a_model.write_bytes(b"not a zip file")
+    with pytest.raises(geo.Error, match="junk.pt"):
+        geo.Model.load(str(not_a_model))
+    with pytest.raises(geo.Error, match="learn"):
+        model.intrinsics(frames[0], frames[1])  # this model assumes KITTI's proportions
+    with pytest.raises(geo.Error):
+        geo.Model.load(str(tmp_path / "missing.pt"), device="gpu")
+    assert issubclass(geo.Error, RuntimeError) and issubclass(geo.ConfigError, geo.Error)
+
+
+def test_two_threads_share_one_model(model, frames):
+    expected = [model.depth(f) for f in frames]
+    results, errors = {}, []
+
+    def work(index):
+        try:
+            results[index] = [model.depth(frames[(index + k) % 3]) for k in range(6)]
+        except Exception as e:  # pragma: no cover - reported below
+            errors.append(e)
+
+    threads = [threading.Thread(target=work, args=(i,)) for i in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors
+    for index, outs in results.items():
+        for k, out in enumerate(outs):
+            assert torch.equal(out, expected[(index + k) % 3])
+
+
+def test_save_and_load_round_trip(model, frames, tmp_path):
+    path = tmp_path / "again.pt"
+    model.save(str(path))
+    again = geo.Model.load(str(path))
+    assert torch.equal(again.depth(frames[0]), model.depth(frames[0]))
+    half = tmp_path / "half.pt"
+    model.save(str(half), half=True)
+    assert half.stat().st_size < path.stat().st_size * 0.6
