@@ -113,6 +113,53 @@ void bind_train(py::module_& m) {
       },
       "run_dir"_a, py::kw_only(), "device"_a = "", "callback"_a = py::none(),
       "geo_train --resume: continues the run in run_dir from its latest checkpoint.");
+  // The networks themselves (eval mode, BatchNorm unfolded, as training checkpoints hold them): what
+  // geo.nn's plain PyTorch modules are checked against, and raw outputs for those who want them.
+  py::class_<Networks>(m, "Networks",
+                       "A checkpoint's networks as trained (eval mode, BatchNorm not folded): raw network outputs.")
+      .def_static(
+          "load",
+          [](const std::string& path) {
+            py::gil_scoped_release release;
+            CheckpointFile file(resolve_checkpoint(path));
+            Networks nets = file.networks();
+            nets.depth->eval();
+            nets.pose->eval();
+            if (nets.flow) nets.flow->eval();
+            return nets;
+          },
+          "checkpoint"_a)
+      .def(
+          "depth_net",
+          [](Networks& n, py::handle image) {
+            const auto x = tensor_arg(image, "image");
+            py::gil_scoped_release release;
+            torch::NoGradGuard no_grad;
+            return n.depth->forward(x).disp;
+          },
+          "image"_a, "DepthNet: image [B,3,H,W] RGB in [0,1] -> disparities at 4 scales, finest first.")
+      .def(
+          "pose_net",
+          [](Networks& n, py::handle target, const py::sequence& sources) {
+            const auto t = tensor_arg(target, "target");
+            std::vector<torch::Tensor> srcs;
+            for (size_t i = 0; i < sources.size(); ++i) srcs.push_back(tensor_arg(sources[i], "sources[" + std::to_string(i) + "]"));
+            py::gil_scoped_release release;
+            torch::NoGradGuard no_grad;
+            return n.pose->forward(t, srcs);
+          },
+          "target"_a, "sources"_a, "PoseNet: target and sources [B,3,H,W] in [0,1] -> [B,N,6] (tx, ty, tz, rx, ry, rz).")
+      .def(
+          "flow_net",
+          [](Networks& n, py::handle input) {
+            if (!n.flow) throw Error("this checkpoint has no FlowNet");
+            const auto x = tensor_arg(input, "input");
+            py::gil_scoped_release release;
+            torch::NoGradGuard no_grad;
+            return n.flow->forward(x).flow;
+          },
+          "input"_a, "FlowNet: its 12-channel input [B,12,H,W] -> residual flows in pixels at 4 scales, finest first.")
+      .def_property_readonly("has_flow", [](const Networks& n) { return static_cast<bool>(n.flow); });
   m.def(
       "state_dicts",
       [](const std::string& path) {

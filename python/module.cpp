@@ -69,21 +69,24 @@ PYBIND11_MODULE(_geo, m) {
   m.doc() = "geo: depth, optical flow and camera motion from monocular video (GeoNet with feature refinement)";
   // Every geo failure is a geo.Error (a RuntimeError) carrying geo's message; a config's is a
   // geo.ConfigError (a geo.Error) naming the key.
-  static py::exception<geo::Error> error(m, "Error", PyExc_RuntimeError);
-  static py::exception<geo::ConfigError> config_error(m, "ConfigError", error.ptr());
-  py::register_exception_translator([](std::exception_ptr p) {
+  // The module holds the two types (PyErr_SetString rather than py::exception's call operator,
+  // which pybind11 2.12 deprecated and 2.10 has no replacement for).
+  static PyObject* error = py::exception<geo::Error>(m, "Error", PyExc_RuntimeError).ptr();
+  static PyObject* config_error = py::exception<geo::ConfigError>(m, "ConfigError", error).ptr();
+  // Local: only for geo's own functions (a global one would turn torch's errors into geo.Error too).
+  py::register_local_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
     } catch (const geo::ConfigError& e) {
-      config_error(e.what());
+      PyErr_SetString(config_error, e.what());
     } catch (const geo::Error& e) {
-      error(e.what());
+      PyErr_SetString(error, e.what());
     } catch (const c10::Error&) {
       throw;  // torch's own translation (RuntimeError, IndexError, ...)
     } catch (const std::invalid_argument& e) {
       PyErr_SetString(PyExc_ValueError, e.what());
     } catch (const std::runtime_error& e) {
-      error(e.what());  // geo's readers and checks throw std::runtime_error naming the file or value
+      PyErr_SetString(error, e.what());  // geo's readers and checks throw std::runtime_error naming the file or value
     }
   });
   geo::python::bind_model(m);

@@ -26,7 +26,7 @@ fi
 
 ROOT="${GEO_DEBIAN13_ROOT:-${HOME:-/root}/.cache/geo/debian13}"
 # Debian 13 packages the root starts with; scripts/setup.sh inside adds what it needs.
-PACKAGES=python3-torch,python3-yaml,python3-numpy,python3-dev,pybind11-dev,python3-pytest,libtorch-dev,libgloo-dev,libopenblas0-pthread,g++,cmake,make,ninja-build,ccache,libyaml-cpp-dev,libcli11-dev,libspdlog-dev,libgtest-dev,libgmock-dev
+PACKAGES=python3-torch,python3-yaml,python3-numpy,python3-dev,pybind11-dev,python3-pytest,python3-onnx,libtorch-dev,libgloo-dev,libopenblas0-pthread,g++,cmake,make,ninja-build,ccache,libyaml-cpp-dev,libcli11-dev,libspdlog-dev,libgtest-dev,libgmock-dev
 
 # The host's Debian mirror (its main archive, as apt uses it): never written into the repository.
 host_mirror() {

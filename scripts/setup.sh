@@ -61,7 +61,7 @@ if [ "$TORCH" = system ]; then
     libgloo-dev  # the headers of LibTorch's Gloo backend: multi-process training (train/distributed.h)
     libopenblas0-pthread  # without it Debian's LibTorch uses the reference BLAS: 17-25x slower matmuls
     # The Python module (python/) on the same LibTorch, and its tests.
-    python3-torch python3-numpy python3-yaml python3-dev pybind11-dev python3-pytest
+    python3-torch python3-numpy python3-yaml python3-dev pybind11-dev python3-pytest python3-onnx
   )
 fi
 if [ "$OPENCV" = 1 ]; then PACKAGES+=(libopencv-dev); fi

@@ -96,6 +96,10 @@ def test_bad_inputs_raise_geo_errors_naming_them(model, frames, tmp_path):
     with pytest.raises(geo.Error):
         geo.Model.load(str(tmp_path / "missing.pt"), device="gpu")
     assert issubclass(geo.Error, RuntimeError) and issubclass(geo.ConfigError, geo.Error)
+    # torch's own errors stay torch's.
+    with pytest.raises(RuntimeError) as raised:
+        torch.zeros(2) @ torch.zeros(3)
+    assert not isinstance(raised.value, geo.Error)
 
 
 def test_two_threads_share_one_model(model, frames):
