@@ -16,7 +16,16 @@ copies):
 geo.eval, geo.synth, geo.kitti and (built with OpenCV) geo.io hold the protocols, the synthetic world
 and KITTI's formats. Failures raise geo.Error (a RuntimeError) with geo's message.
 """
+import os as _os
+import pathlib as _pathlib
 import sys as _sys
+
+# Installed (cmake --install): the shipped configs are <prefix>/share/geo/configs, beside this
+# package's <prefix>/lib/python3.X/...; geo.train("stage1.yaml") finds them there.
+_configs = _pathlib.Path(__file__).resolve().parents[4] / "share" / "geo" / "configs"
+if "GEO_CONFIG_DIR" not in _os.environ and _configs.is_dir():
+    _os.environ["GEO_CONFIG_DIR"] = str(_configs)
+del _configs
 
 import torch as _torch  # noqa: F401  (registers torch's types before geo's module loads)
 

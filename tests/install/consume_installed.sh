@@ -32,4 +32,25 @@ done
 # Depth in metres from the camera height (or, for a model this short-trained, a clear "no road plane").
 mkdir -p "$T/metric"
 "$T/example/depth_from_camera" "$T/model.pt" "$T/frames" "$T/metric" 1.65 | grep -q "in metres: "
+# The installed Python package (when the build made one): imported from the prefix alone, with the
+# shipped configs found there, the same depth as geo_infer's.
+py_dir=$(find "$T/prefix" -path '*-packages/geo/__init__.py' -printf '%h\n' | head -1)
+if [ -n "$py_dir" ]; then
+  python=$(sed -n 's/^GEO_PYTHON_EXECUTABLE_USED:[A-Z]*=//p' "$BUILD/CMakeCache.txt")
+  (cd "$T" && PYTHONPATH="$(dirname "$py_dir")" "${python:-python3}" -c "
+import geo, os, sys
+assert geo.__file__.startswith('$T/prefix'), geo.__file__
+assert os.environ['GEO_CONFIG_DIR'] == '$T/prefix/share/geo/configs', os.environ['GEO_CONFIG_DIR']
+model = geo.Model.load('$T/model.pt')
+for name in sorted(os.listdir('$T/frames')):
+    stem = name[:-4]
+    image = geo.io.read_image('$T/frames/' + name, size=(model.spec.height, model.spec.width))
+    geo.io.write_depth_png('$T/py-' + stem + '.png', model.depth(image))
+")
+  for f in "$T"/frames/*.png; do
+    name=$(basename "$f" .png)
+    cmp "$T/infer/$name-depth.png" "$T/py-$name.png"
+  done
+  echo "the installed Python package: $n depth maps identical to geo_infer's"
+fi
 echo "depth_from_camera built against $T/prefix: $n depth maps identical to geo_infer's"
