@@ -16,6 +16,7 @@ SSIM + L1 reconstruction (alpha 0.85), edge-aware disparity smoothness, backward
   python3 scripts/pytorch_reference.py --row depth --threads 2 --iters 9    DepthNet inference, batch 1
   python3 scripts/pytorch_reference.py --row step --batch 4 --iters 3       a stage-1 training step
   python3 scripts/pytorch_reference.py --row ceiling                        a large fp32/bf16 matrix product
+  python3 scripts/pytorch_reference.py --export-onnx depth.onnx                   the DepthNet as ONNX (ONNX Runtime's input)
   options: --precision fp32|bf16 (bf16: the networks under torch.autocast, the losses in fp32),
            --channels-last, --compile (torch.compile, PyTorch >= 2.0)
 prints one JSON line: {"row": ..., "median_ms": x, "times_ms": [...], "torch": version, ...}.
@@ -230,6 +231,7 @@ def main():
     ap.add_argument("--warmup", type=int, default=0, help="default: 5 for depth, 2 for step")
     ap.add_argument("--iters", type=int, default=9)
     ap.add_argument("--params-only", action="store_true")
+    ap.add_argument("--export-onnx", default="", help="write the DepthNet (batch 1, --height x --width) as ONNX here and exit")
     a = ap.parse_args()
     if a.threads > 0:
         torch.set_num_threads(a.threads)
@@ -250,6 +252,12 @@ def main():
     depth_net = DepthNet()
     out["params"] = sum(p.numel() for p in depth_net.parameters())
     if a.params_only:
+        print(json.dumps(out))
+        return
+    if a.export_onnx:
+        torch.onnx.export(depth_net.eval(), torch.rand(1, 3, a.height, a.width), a.export_onnx, input_names=["image"],
+                          opset_version=13)
+        out["onnx"] = a.export_onnx
         print(json.dumps(out))
         return
     if a.compile and not hasattr(torch, "compile"):

@@ -1,0 +1,113 @@
+#!/usr/bin/python3
+"""geo against ONNX Runtime's CPU engine, side by side in one run (scripts/bench_vs_onnxruntime.sh
+sets it up). DepthNet inference at batch 1 and --height x --width on --threads threads:
+
+  geo fp32 / bf16        geo_bench's "infer DepthNet" row (BatchNorm folded), FR off and on
+  ORT geo's DepthNet     geo.nn.DepthNet (the same network in torch.nn) exported with torch.onnx.export
+  ORT GeoNet's DepthNet  scripts/pytorch_reference.py's, exported the same way (the issue's anchor)
+
+Variants are interleaved within each round (a slow spell hits all alike); the table gives each
+one's median over rounds of its per-run medians, and geo / ORT at equal precision and FR.
+"""
+import argparse
+import json
+import os
+import pathlib
+import platform
+import statistics
+import subprocess
+import sys
+
+
+def cpu():
+    model, flags = platform.processor(), ""
+    try:
+        for line in open("/proc/cpuinfo"):
+            if line.startswith("model name") and model in ("", "x86_64"):
+                model = line.split(":", 1)[1].strip()
+            if line.startswith("flags") and not flags:
+                have = set(line.split(":", 1)[1].split())
+                flags = " ".join(f for f in ("avx2", "avx512f", "avx512_vnni", "avx512_bf16", "amx_bf16", "amx_int8") if f in have)
+    except OSError:
+        pass
+    return model, flags
+
+
+def geo_ms(a, fr):
+    """geo_bench's DepthNet rows, fp32 and bf16 from one process: {"geo fp32": ms, "geo bf16": ms}."""
+    out = a.out / f"geo-{fr}.json"
+    cmd = [str(a.build / "apps" / "geo_bench"), "--set", f"data.height={a.height}", f"data.width={a.width}", "--batch", "1",
+           "--fr", fr, "--no-train", "--no-comm", "--no-ceiling", "--threads", str(a.threads), "--iters", str(a.iters),
+           "--warmup", "3", "--precision", "bf16", "--json", str(out)]
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    rows = {r["what"]: r["ms"] for r in json.load(open(out))["rows"] if r["section"] == "infer"}
+    return {"geo fp32": rows["DepthNet"], "geo bf16": rows["DepthNet bf16"]}
+
+
+def ort_ms(a, model):
+    cmd = ["node", str(a.repo / "scripts" / "ort_bench.mjs"), str(model), "--threads", str(a.threads),
+           "--iters", str(a.iters), "--warmup", "3"]
+    r = subprocess.run(cmd, check=True, capture_output=True, text=True, env={**os.environ, "GEO_ORT_DIR": str(a.ort)})
+    line = json.loads(r.stdout.strip().splitlines()[-1])
+    a.ort_version = line["onnxruntime"]
+    return line["median_ms"]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--build", default="build")
+    ap.add_argument("--ort", required=True, help="folder whose node_modules holds onnxruntime-node")
+    ap.add_argument("--out", default="bench-vs-pytorch")
+    ap.add_argument("--height", type=int, default=128)
+    ap.add_argument("--width", type=int, default=416)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--iters", type=int, default=9)
+    ap.add_argument("--rounds", type=int, default=3)
+    a = ap.parse_args()
+    a.repo = pathlib.Path(__file__).resolve().parents[1]
+    a.build, a.ort, a.out = pathlib.Path(a.build).resolve(), pathlib.Path(a.ort).resolve(), pathlib.Path(a.out).resolve()
+    a.out.mkdir(parents=True, exist_ok=True)
+    env = {**os.environ, "PYTHONPATH": str(a.build / "python")}
+    models = {}
+    for fr in ("off", "on"):
+        models[("geo", fr)] = a.out / f"geo-depth-fr-{fr}.onnx"
+        code = ("import sys, torch, geo.nn\n"
+                f"m = {{'encoder_depth': 50, 'use_fr': {fr == 'on'}, 'fr_encoder': True, 'fr_decoder': True, 'fr_ratio': 16,"
+                " 'fr_spatial_bn': False, 'upsample': 'nearest', 'bn_eps': 1e-3}\n"
+                f"torch.onnx.export(geo.nn.DepthNet(m).eval(), torch.rand(1, 3, {a.height}, {a.width}), sys.argv[1],"
+                " input_names=['image'], opset_version=13)\n")
+        subprocess.run([sys.executable, "-c", code, str(models[("geo", fr)])], check=True, env=env,
+                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    models[("geonet", "off")] = a.out / "geonet-depth.onnx"
+    subprocess.run([sys.executable, str(a.repo / "scripts" / "pytorch_reference.py"), "--height", str(a.height), "--width",
+                    str(a.width), "--export-onnx", str(models[("geonet", "off")])], check=True,
+                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    # Each entry: FR, what it runs -> {variant name: ms}.
+    runs = [("off", lambda: geo_ms(a, "off")),
+            ("off", lambda: {"ORT fp32, geo's DepthNet": ort_ms(a, models[("geo", "off")])}),
+            ("off", lambda: {"ORT fp32, GeoNet's DepthNet": ort_ms(a, models[("geonet", "off")])}),
+            ("on", lambda: geo_ms(a, "on")),
+            ("on", lambda: {"ORT fp32, geo's DepthNet": ort_ms(a, models[("geo", "on")])})]
+    times = {}
+    for r in range(a.rounds):
+        for fr, run in runs:
+            for name, ms in run().items():
+                times.setdefault((name, fr), []).append(ms)
+                print(f"round {r + 1}/{a.rounds}: {name}, FR {fr}: {ms:.1f} ms", flush=True)
+    variants = list(times)
+    model, flags = cpu()
+    med = {k: statistics.median(v) for k, v in times.items()}
+    lines = [f"DepthNet inference, batch 1, {a.height}x{a.width}, {a.threads} threads, median of {a.rounds} rounds "
+             f"(each the median of {a.iters} runs); CPU {model} ({flags}); ONNX Runtime {a.ort_version} (onnxruntime-node); "
+             f"command: scripts/bench_vs_onnxruntime.sh --rounds {a.rounds} --iters {a.iters}", "",
+             "| variant | FR | ms | per round | geo fp32 / this |", "|---|---|---|---|---|"]
+    for name, fr in variants:
+        ratio = med[("geo fp32", fr)] / med[(name, fr)]
+        lines.append(f"| {name} | {fr} | {med[(name, fr)]:.1f} | {' '.join(f'{t:.0f}' for t in times[(name, fr)])} | {ratio:.2f} |")
+    table = "\n".join(lines) + "\n"
+    (a.out / "onnxruntime.md").write_text(table)
+    print(table)
+
+
+if __name__ == "__main__":
+    main()
