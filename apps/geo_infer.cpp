@@ -16,11 +16,13 @@
 #include <opencv2/videoio.hpp>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <optional>
 
 #include "core/logging.h"
+#include "core/progress.h"
 #include "core/runtime.h"
 #include "data/calib.h"
 #include "data/image_io.h"
@@ -68,6 +70,10 @@ int main(int argc, char** argv) {
   app.add_option("--ply-max-depth", ply_max_depth,
                  "leave out points farther than this (default: 80 with --camera-height, else 20x the frame's median "
                  "depth: the sky)")->check(geo::app::above_zero());
+  int threads = 0;
+  app.add_option("--threads", threads, "LibTorch's intra-op threads (0 = all cores)")->check(geo::app::non_negative());
+  bool timing = false;
+  app.add_flag("--timing", timing, "print the time of each step (reading, networks, colour maps, encoding, ...) per frame");
   bool force = false;
   app.add_flag("--force", force, "write into a non-empty --output: geo_infer's earlier outputs there are removed first");
   CLI11_PARSE(app, argc, argv);
@@ -75,7 +81,13 @@ int main(int argc, char** argv) {
     geo::LoadOptions load;
     load.device = device;
     load.precision = precision;
-    const geo::Model model = geo::Model::load(checkpoint, load);  // the library's inference path
+    load.threads = threads;
+    const auto started = std::chrono::steady_clock::now();
+    auto seconds_since = [](std::chrono::steady_clock::time_point t) {
+      return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+    };
+    geo::StepTimes times;
+    const geo::Model model = times.time("load the model", [&] { return geo::Model::load(checkpoint, load); });
     const int64_t h = model.spec().height, w = model.spec().width;
     // Frames as (name, image [1,3,h,w]) in order; the original size is kept for the intrinsics.
     std::vector<std::pair<std::string, torch::Tensor>> frames;
@@ -96,6 +108,7 @@ int main(int argc, char** argv) {
       }
       frames.emplace_back(p.stem().string(), std::move(image));
     };
+    const auto reading = std::chrono::steady_clock::now();
     if (fs::is_directory(input)) {
       std::vector<fs::path> files;
       for (const auto& e : fs::directory_iterator(input)) {
@@ -141,6 +154,7 @@ int main(int argc, char** argv) {
         if (frames.empty()) throw std::runtime_error("video '" + input + "' has no readable frames");
       }
     }
+    times.add("read, decode, resize frames", seconds_since(reading));
     if (fs::exists(output)) {
       std::error_code ec;
       if (fs::is_directory(input) && fs::equivalent(input, output, ec))
@@ -193,6 +207,7 @@ int main(int argc, char** argv) {
     K = K.to(torch::kFloat32)[0];
     // Metric scale per frame from the road plane, smoothed over the sequence.
     std::vector<double> scales(frames.size(), 1.0);
+    const auto scaling = std::chrono::steady_clock::now();
     if (camera_height > 0) {
       int64_t found = 0;
       for (size_t i = 0; i < frames.size(); ++i) {
@@ -210,6 +225,7 @@ int main(int argc, char** argv) {
       });
       spdlog::info("metric scale from the camera height {} m: road plane found in {} of {} frames", camera_height, found,
                    frames.size());
+      times.add("road planes (metric scale)", seconds_since(scaling));
     }
     for (const auto f : ply_frames)
       if (f >= static_cast<int64_t>(frames.size()))
@@ -225,12 +241,14 @@ int main(int argc, char** argv) {
     int64_t beyond_png = 0;  // depths that KITTI's 16-bit PNG (depth x 256) cannot hold
     for (size_t i = 0; i < frames.size(); ++i) {
       const auto& [name, img] = frames[i];
-      const auto depth = model.depth(img[0]).cpu() * scales[i];
-      const auto disp_colour = geo::colorize_disparity(1.0 / depth);
-      geo::write_image(output + "/" + name + "-disp.png", disp_colour);
-      geo::write_depth_png(output + "/" + name + "-depth.png", depth);
+      const auto depth = times.time("depth", [&] { return model.depth(img[0]).cpu() * scales[i]; });
+      const auto disp_colour = times.time("colour maps", [&] { return geo::colorize_disparity(1.0 / depth); });
+      times.time("PNG encode + write", [&] {
+        geo::write_image(output + "/" + name + "-disp.png", disp_colour);
+        geo::write_depth_png(output + "/" + name + "-depth.png", depth);
+      });
       beyond_png += (depth > 255.99).sum().item<int64_t>();
-      if (disp_video) disp_video->write(disp_colour);
+      if (disp_video) times.time("video encode", [&] { disp_video->write(disp_colour); });
       if (std::find(ply_frames.begin(), ply_frames.end(), static_cast<int64_t>(i)) != ply_frames.end()) {
         const double limit = ply_max_depth > 0 ? ply_max_depth : camera_height > 0 ? 80.0 : 20 * depth.median().item<double>();
         const auto n = geo::write_point_cloud_ply(output + "/" + name + ".ply", depth, img[0].cpu(), K, limit);
@@ -239,10 +257,13 @@ int main(int argc, char** argv) {
       if (i + 1 < frames.size()) {
         const auto& next = frames[i + 1].second;
         if (model.spec().seq_length == 3) {
-          const auto flow_colour = geo::colorize_flow(model.flow(img[0], next[0], K).cpu());
-          geo::write_image(output + "/" + name + "-flow.png", flow_colour);
-          if (flow_video) flow_video->write(flow_colour);
-          trajectory.add_step(model.pose({i > 0 ? frames[i - 1].second[0] : img[0], img[0], next[0]})[1]);
+          const auto flow = times.time("flow", [&] { return model.flow(img[0], next[0], K).cpu(); });
+          const auto flow_colour = times.time("colour maps", [&] { return geo::colorize_flow(flow); });
+          times.time("PNG encode + write", [&] { geo::write_image(output + "/" + name + "-flow.png", flow_colour); });
+          if (flow_video) times.time("video encode", [&] { flow_video->write(flow_colour); });
+          trajectory.add_step(times.time("pose", [&] {
+            return model.pose({i > 0 ? frames[i - 1].second[0] : img[0], img[0], next[0]})[1];
+          }));
         }
       }
       if ((i + 1) % 10 == 0 || i + 1 == frames.size()) spdlog::info("  {}/{} frames", i + 1, frames.size());
@@ -252,6 +273,7 @@ int main(int argc, char** argv) {
       spdlog::warn("{:.0f}% of the depths are beyond 256, the most a KITTI depth PNG holds: *-depth.png saturates there{}",
                    100 * beyond, camera_height > 0 ? fmt::format(" (is --camera-height {} in metres?)", camera_height) : "");
     std::string written = "*-disp.png, *-depth.png";
+    const auto finishing = std::chrono::steady_clock::now();
     if (trajectory.steps() + 1 == frames.size() && sequence) {
       auto poses = trajectory.poses(scales);  // each step at its frame's depth scale
       geo::write_poses(output + "/trajectory.txt", poses);
@@ -274,7 +296,12 @@ int main(int argc, char** argv) {
       flow_video->close();
       written += ", flow.avi";
     }
+    times.add("trajectory, videos closed", seconds_since(finishing));
     spdlog::info("done: {}/{{{}}}", output, written);
+    if (timing)
+      std::printf("geo_infer --timing: %zu frame(s) at %lldx%lld, %s, %s\n%s", frames.size(), static_cast<long long>(w),
+                  static_cast<long long>(h), model.spec().precision.c_str(), model.device().str().c_str(),
+                  times.table(static_cast<int64_t>(frames.size()), "frame", seconds_since(started)).c_str());
     return 0;
   });
 }

@@ -75,4 +75,39 @@ void Progress::clear() const {
   std::fflush(stderr);
 }
 
+void StepTimes::add(const std::string& step, double seconds) {
+  for (auto& [name, total] : steps_)
+    if (name == step) {
+      total += seconds;
+      return;
+    }
+  steps_.emplace_back(step, seconds);
+}
+
+double StepTimes::total() const {
+  double sum = 0;
+  for (const auto& step : steps_) sum += step.second;
+  return sum;
+}
+
+std::string StepTimes::table(int64_t items, const char* unit, double wall) const {
+  const double n = static_cast<double>(std::max<int64_t>(items, 1));
+  std::string out;
+  char line[160];
+  std::snprintf(line, sizeof line, "%-28s %9s %12s %7s\n", "step", "total s", std::string(std::string("ms/") + unit).c_str(), "share");
+  out += line;
+  for (const auto& [name, seconds] : steps_) {
+    std::snprintf(line, sizeof line, "%-28s %9.2f %12.1f %6.1f%%\n", name.c_str(), seconds, 1000 * seconds / n,
+                  wall > 0 ? 100 * seconds / wall : 0.0);
+    out += line;
+  }
+  std::snprintf(line, sizeof line, "%-28s %9.2f %12.1f %6.1f%%\n", "(not in a step)", wall - total(),
+                1000 * (wall - total()) / n, wall > 0 ? 100 * (wall - total()) / wall : 0.0);
+  out += line;
+  std::snprintf(line, sizeof line, "%-28s %9.2f %12.1f  -> %.1f %s/s\n", "whole run", wall, 1000 * wall / n,
+                wall > 0 ? n / wall : 0.0, unit);
+  out += line;
+  return out;
+}
+
 }  // namespace geo

@@ -7,6 +7,8 @@
 #include <chrono>
 #include <cstdint>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace geo {
 
@@ -31,6 +33,32 @@ class Progress {
   std::chrono::steady_clock::time_point last_log_time_, last_draw_;
   int64_t last_log_done_ = -1;
   double rate_ = 0;  // items per second since the last log line
+};
+
+// Wall time per named step of a run (geo_infer --timing): time("depth", f) runs f and adds its
+// duration to "depth"; table() lists each step's total, its time per item and its share, in the
+// order the steps first ran. Calls from one thread.
+class StepTimes {
+ public:
+  template <class F> decltype(auto) time(const std::string& step, F&& f) {
+    const Scope scope(*this, step);
+    return f();
+  }
+  void add(const std::string& step, double seconds);
+  double total() const;
+  // "<step> <total s> <ms per item> <share>" lines, then the sum and `items` per second over `wall`
+  // seconds (the whole run, which includes what no step timed).
+  std::string table(int64_t items, const char* unit, double wall) const;
+
+ private:
+  struct Scope {
+    Scope(StepTimes& t, const std::string& s) : times(t), step(s), start(std::chrono::steady_clock::now()) {}
+    ~Scope() { times.add(step, std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count()); }
+    StepTimes& times;
+    const std::string& step;
+    std::chrono::steady_clock::time_point start;
+  };
+  std::vector<std::pair<std::string, double>> steps_;
 };
 
 // "1h02m", "3m07s", "12s"; "?" for negative or absurd values.

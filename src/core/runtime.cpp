@@ -76,6 +76,12 @@ void apply_precision(Precision precision) {
   at::globalContext().setAllowTF32CuBLAS(tf32);
 }
 
+int use_all_cores() {
+  const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  torch::set_num_threads(cores);
+  return cores;
+}
+
 int apply_run_settings(const RunConfig& run, const torch::Device& device) {
   const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   if (run.threads > cores)

@@ -23,6 +23,11 @@ torch::Device select_device(const std::string& name);
 // GEO_KEEP_MEMORY=0 in the environment turns this off.
 void keep_freed_memory();
 
+// LibTorch's intra-op threads set to every core of the machine (std::thread::hardware_concurrency):
+// what geo's tools use unless told otherwise (LibTorch's own default can be fewer: one on some
+// 2-core machines). Returns the count.
+int use_all_cores();
+
 // The memory this machine can give without swapping (MemAvailable of /proc/meminfo), in bytes; -1
 // where it cannot be told.
 int64_t available_memory_bytes();
