@@ -241,7 +241,16 @@ int main(int argc, char** argv) {
     int64_t beyond_png = 0;  // depths that KITTI's 16-bit PNG (depth x 256) cannot hold
     for (size_t i = 0; i < frames.size(); ++i) {
       const auto& [name, img] = frames[i];
-      const auto depth = times.time("depth", [&] { return model.depth(img[0]).cpu() * scales[i]; });
+      // With a next frame, one flow_parts call gives this frame's depth, the flow and the motion:
+      // each network runs once per frame.
+      const bool pair = i + 1 < frames.size() && model.spec().seq_length == 3;
+      geo::Model::FlowParts parts;
+      if (pair)
+        parts = times.time("depth, pose, flow", [&] {
+          return model.flow_parts(img[0], frames[i + 1].second[0], K, i > 0 ? frames[i - 1].second[0] : torch::Tensor());
+        });
+      const auto depth = pair ? parts.depth.cpu() * scales[i]
+                              : times.time("depth", [&] { return model.depth(img[0]).cpu() * scales[i]; });
       const auto disp_colour = times.time("colour maps", [&] { return geo::colorize_disparity(1.0 / depth); });
       times.time("PNG encode + write", [&] {
         geo::write_image(output + "/" + name + "-disp.png", disp_colour);
@@ -254,17 +263,11 @@ int main(int argc, char** argv) {
         const auto n = geo::write_point_cloud_ply(output + "/" + name + ".ply", depth, img[0].cpu(), K, limit);
         spdlog::info("{}/{}.ply: {} points (depth up to {:.3g})", output, name, n, limit);
       }
-      if (i + 1 < frames.size()) {
-        const auto& next = frames[i + 1].second;
-        if (model.spec().seq_length == 3) {
-          const auto flow = times.time("flow", [&] { return model.flow(img[0], next[0], K).cpu(); });
-          const auto flow_colour = times.time("colour maps", [&] { return geo::colorize_flow(flow); });
-          times.time("PNG encode + write", [&] { geo::write_image(output + "/" + name + "-flow.png", flow_colour); });
-          if (flow_video) times.time("video encode", [&] { flow_video->write(flow_colour); });
-          trajectory.add_step(times.time("pose", [&] {
-            return model.pose({i > 0 ? frames[i - 1].second[0] : img[0], img[0], next[0]})[1];
-          }));
-        }
+      if (pair) {
+        const auto flow_colour = times.time("colour maps", [&] { return geo::colorize_flow(parts.full.cpu()); });
+        times.time("PNG encode + write", [&] { geo::write_image(output + "/" + name + "-flow.png", flow_colour); });
+        if (flow_video) times.time("video encode", [&] { flow_video->write(flow_colour); });
+        trajectory.add_step(parts.motion);
       }
       if ((i + 1) % 10 == 0 || i + 1 == frames.size()) spdlog::info("  {}/{} frames", i + 1, frames.size());
     }

@@ -41,9 +41,12 @@ void bind_model(py::module_& m) {
                (s.learns_intrinsics ? ", learned camera" : "") + ", " + s.precision + ", '" + s.source + "')";
       });
 
-  py::class_<Model::FlowParts>(m, "FlowParts", "flow_parts(): the full flow and the rigid flow of depth and motion alone.")
+  py::class_<Model::FlowParts>(m, "FlowParts", "flow_parts(): the full flow, the rigid flow of depth and motion alone, and that depth (of from_)\n"
+                                          "and motion (from_ -> to); unpacks as full, rigid.")
       .def_readonly("full", &Model::FlowParts::full)
       .def_readonly("rigid", &Model::FlowParts::rigid)
+      .def_readonly("depth", &Model::FlowParts::depth)
+      .def_readonly("motion", &Model::FlowParts::motion)
       .def("__iter__", [](const Model::FlowParts& p) { return py::iter(py::make_tuple(p.full, p.rigid)); });
 
   py::class_<Model>(m, "Model",

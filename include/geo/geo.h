@@ -100,8 +100,13 @@ class Model {
                      const torch::Tensor& previous = {}) const;
   // flow() with, beside it, the rigid flow of depth and motion alone (no FlowNet residual): what
   // each of the paper's two stages contributes. Same shapes; equal when the model has no FlowNet.
+  // The depth and motion the rigid flow was made of come with them, so that a caller that needs all
+  // three (geo_infer) runs each network once per frame.
   struct FlowParts {
     torch::Tensor full, rigid;
+    torch::Tensor depth;   // `from`'s depth: equal to depth(from)
+    torch::Tensor motion;  // [4,4] ([B,4,4]): `from`'s camera -> `to`'s, equal to pose({previous, from, to})[1]
+                           // (relative_pose(from, to) without `previous`; 3-frame models)
   };
   FlowParts flow_parts(const torch::Tensor& from, const torch::Tensor& to, const torch::Tensor& intrinsics = {},
                        const torch::Tensor& previous = {}) const;

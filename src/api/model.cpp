@@ -327,7 +327,9 @@ Model::FlowParts Model::flow_parts(const torch::Tensor& from, const torch::Tenso
       }
       return batched ? f : f[0];
     };
-    return FlowParts{at_image_size(p.flow), at_image_size(p.rigid_flow)};
+    const auto depth = to_size(1.0 / p.disp, H, W).squeeze(1);  // as depth()
+    return FlowParts{at_image_size(p.flow), at_image_size(p.rigid_flow), batched ? depth : depth[0],
+                     batched ? p.src_from_tgt : p.src_from_tgt[0]};
   });
 }
 

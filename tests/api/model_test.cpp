@@ -67,6 +67,9 @@ TEST(Api, SameDepthPoseAndFlowAsTheNetworksThemselves) {
   const auto K = torch::tensor({100.f, 0.f, 104.f, 0.f, 100.f, 32.f, 0.f, 0.f, 1.f}).view({3, 3});
   const auto parts = m.flow_parts(a, b, K);
   EXPECT_TRUE(torch::equal(m.flow(a, b, K), parts.full));
+  // The depth and motion the rigid flow was made of, exactly as depth() and relative_pose() give them.
+  EXPECT_TRUE(torch::equal(parts.depth, m.depth(a)));
+  EXPECT_TRUE(torch::equal(parts.motion, m.relative_pose(a, b)));
   const auto Kd = K.to(torch::kFloat64);
   const auto T = m.relative_pose(a, b).to(torch::kFloat64);
   const auto xs = torch::arange(208, torch::kFloat64).view({1, 208}).expand({64, 208});

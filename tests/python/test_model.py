@@ -58,6 +58,9 @@ def test_outputs_have_the_documented_shapes(model, frames):
     full, rigid = model.flow_parts(b, c, previous=a)
     assert full.shape == rigid.shape == (2, 64, 208)
     assert torch.equal(full, model.flow(b, c, previous=a))
+    parts = model.flow_parts(b, c, previous=a)  # the depth and motion it was made of, as their own calls give them
+    assert torch.equal(parts.depth, model.depth(b)) and torch.equal(parts.motion, model.pose([a, b, c])[1])
+    assert torch.equal(model.flow_parts(b, c).motion, model.relative_pose(b, c))
     K = geo.kitti_like_intrinsics(64, 208)
     assert torch.allclose(K, torch.tensor([[0.58 * 208, 0, 104], [0, 1.92 * 64, 32], [0, 0, 1]], dtype=torch.float64))
     assert torch.equal(model.depth(b), model.depth(b))  # no state between calls
