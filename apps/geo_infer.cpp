@@ -30,8 +30,6 @@
 #include "data/text_io.h"
 #include "data/visual_outputs.h"
 #include "eval/metrics.h"
-#include "geometry/road_plane.h"
-#include "geometry/trajectory.h"
 #include "app_options.h"
 #include "geo/geo.h"
 
@@ -207,25 +205,17 @@ int main(int argc, char** argv) {
     K = K.to(torch::kFloat32)[0];
     // Metric scale per frame from the road plane, smoothed over the sequence.
     std::vector<double> scales(frames.size(), 1.0);
-    const auto scaling = std::chrono::steady_clock::now();
     if (camera_height > 0) {
-      int64_t found = 0;
-      for (size_t i = 0; i < frames.size(); ++i) {
-        const auto plane = geo::fit_road_plane(model.depth(frames[i].second[0]).cpu(), K);
-        scales[i] = geo::camera_height_scale(plane, camera_height);
-        found += plane.found;
-        if (!plane.found) spdlog::warn("{}: no road plane ({}); its scale comes from its neighbours", frames[i].first, plane.why);
-      }
-      scales = geo::metric_scales(scales, [&](size_t i) {
-        return "--camera-height: no road plane in any frame near " + frames[i].first +
-               (intrinsics.empty() && !model.spec().learns_intrinsics
-                    ? " (with the default KITTI-like camera: give the input's --intrinsics)"
-                    : "") +
-               ": metric scale needs a flat road in front of the camera";
+      std::vector<torch::Tensor> images;
+      for (const auto& f : frames) images.push_back(f.second[0]);
+      std::vector<size_t> without_road;
+      scales = times.time("road planes (metric scale)", [&] {
+        return model.sequence_scales(images, camera_height, intrinsics.size() == 4 || model.spec().learns_intrinsics ? K : torch::Tensor(),
+                                     &without_road);
       });
-      spdlog::info("metric scale from the camera height {} m: road plane found in {} of {} frames", camera_height, found,
-                   frames.size());
-      times.add("road planes (metric scale)", seconds_since(scaling));
+      for (const auto i : without_road) spdlog::warn("{}: no road plane; its scale comes from its neighbours", frames[i].first);
+      spdlog::info("metric scale from the camera height {} m: road plane found in {} of {} frames", camera_height,
+                   frames.size() - without_road.size(), frames.size());
     }
     for (const auto f : ply_frames)
       if (f >= static_cast<int64_t>(frames.size()))
@@ -237,7 +227,7 @@ int main(int argc, char** argv) {
       disp_video.emplace(output + "/disp.avi", fps);
       if (model.spec().seq_length == 3) flow_video.emplace(output + "/flow.avi", fps);
     }
-    geo::TrajectoryChain trajectory;
+    std::vector<torch::Tensor> motions;  // frame i's camera -> frame i+1's
     int64_t beyond_png = 0;  // depths that KITTI's 16-bit PNG (depth x 256) cannot hold
     for (size_t i = 0; i < frames.size(); ++i) {
       const auto& [name, img] = frames[i];
@@ -267,7 +257,7 @@ int main(int argc, char** argv) {
         const auto flow_colour = times.time("colour maps", [&] { return geo::colorize_flow(parts.full.cpu()); });
         times.time("PNG encode + write", [&] { geo::write_image(output + "/" + name + "-flow.png", flow_colour); });
         if (flow_video) times.time("video encode", [&] { flow_video->write(flow_colour); });
-        trajectory.add_step(parts.motion);
+        motions.push_back(parts.motion);
       }
       if ((i + 1) % 10 == 0 || i + 1 == frames.size()) spdlog::info("  {}/{} frames", i + 1, frames.size());
     }
@@ -277,8 +267,9 @@ int main(int argc, char** argv) {
                    100 * beyond, camera_height > 0 ? fmt::format(" (is --camera-height {} in metres?)", camera_height) : "");
     std::string written = "*-disp.png, *-depth.png";
     const auto finishing = std::chrono::steady_clock::now();
-    if (trajectory.steps() + 1 == frames.size() && sequence) {
-      auto poses = trajectory.poses(scales);  // each step at its frame's depth scale
+    if (motions.size() + 1 == frames.size() && sequence) {
+      scales.pop_back();  // one per step: each at its first frame's depth scale
+      auto poses = geo::chain_poses(motions, scales);
       geo::write_poses(output + "/trajectory.txt", poses);
       torch::Tensor truth;
       if (!ground_truth.empty()) {

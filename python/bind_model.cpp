@@ -24,6 +24,17 @@ void bind_model(py::module_& m) {
   m.def("kitti_like_intrinsics", &kitti_like_intrinsics, "height"_a, "width"_a,
         "KITTI's proportions at height x width (fx = 0.58 W, fy = 1.92 H, principal point at the centre): [3,3] float64.");
 
+  m.def(
+      "chain_poses",
+      [](const py::sequence& motions, std::vector<double> scales) {
+        std::vector<torch::Tensor> ms;
+        for (size_t i = 0; i < motions.size(); ++i) ms.push_back(tensor_arg(motions[i], "motions[" + std::to_string(i) + "]"));
+        return chain_poses(ms, scales);
+      },
+      "motions"_a, "scales"_a = std::vector<double>{},
+      "Camera-to-world poses [N+1,4,4] float64 (the first the identity, KITTI's pose files) from N motions [4,4]\n"
+      "(frame i's camera -> frame i+1's: relative_pose(), FlowParts.motion), each step's translation times scales[i].");
+
   py::class_<ModelSpec>(m, "ModelSpec", "What a model expects and has (read from its file).")
       .def_readonly("height", &ModelSpec::height)
       .def_readonly("width", &ModelSpec::width)
@@ -157,6 +168,25 @@ void bind_model(py::module_& m) {
             return model.intrinsics(a, b);
           },
           "from_"_a, "to"_a, "The camera a model that learns it predicts for the pair: [3,3] in pixels of the images.")
+      .def(
+          "sequence_scales",
+          [](const Model& model, const py::sequence& frames, double camera_height, py::handle intrinsics,
+             bool return_without_road) {
+            std::vector<torch::Tensor> xs;
+            for (size_t i = 0; i < frames.size(); ++i) xs.push_back(image_arg(frames[i], "frames[" + std::to_string(i) + "]"));
+            const auto K = optional_tensor_arg(intrinsics, "intrinsics");
+            std::vector<size_t> without;
+            std::vector<double> scales;
+            {
+              py::gil_scoped_release release;
+              scales = model.sequence_scales(xs, camera_height, K, &without);
+            }
+            if (!return_without_road) return py::cast(scales);
+            return py::object(py::make_tuple(scales, without));
+          },
+          "frames"_a, "camera_height"_a = 1.65, "intrinsics"_a = py::none(), py::kw_only(), "return_without_road"_a = false,
+          "Metres per unit of depth of each frame of a sequence: metric_depth()'s factor smoothed over 11 frames\n"
+          "(frames without a road take their neighbours'); return_without_road: also those frames' indices.")
       .def(
           "save",
           [](const Model& model, const std::string& path, bool half) {

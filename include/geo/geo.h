@@ -65,6 +65,12 @@ torch::Tensor rgb8_image(const uint8_t* rgb, int64_t height, int64_t width, int6
 // the intrinsics assumed when none are given. [3,3] float64.
 torch::Tensor kitti_like_intrinsics(int64_t height, int64_t width);
 
+// A camera trajectory: camera-to-world poses [N+1,4,4] float64 with the first the identity (KITTI's
+// pose files), chained from N motions [4,4] (frame i's camera -> frame i+1's, as relative_pose() and
+// FlowParts::motion give them). `scales` (one per step, e.g. Model::sequence_scales) multiply each
+// step's translation; empty: the network's own scale.
+torch::Tensor chain_poses(const std::vector<torch::Tensor>& motions, const std::vector<double>& scales = {});
+
 class Model {
  public:
   // A file written by geo_export, or a training checkpoint / run folder of geo_train.
@@ -114,6 +120,15 @@ class Model {
   // the given images: [3,3] ([B,3,3] for batches). Models that learn it use it wherever an
   // `intrinsics` argument is left out; others throw geo::Error (they assume KITTI's proportions).
   torch::Tensor intrinsics(const torch::Tensor& from, const torch::Tensor& to) const;
+
+  // Metres per unit of depth for each frame of a sequence (one camera, in order): metric_depth()'s
+  // factor per frame, smoothed over 11 frames (the median of the frames found within 5 on each
+  // side), so that a frame whose road is hidden takes its neighbours'. `without_road` receives the
+  // frames whose own road plane was not found. Throws geo::Error naming a frame with no road within
+  // 5 frames. Multiply depth(frames[i]) by it; chain_poses() takes it per step.
+  std::vector<double> sequence_scales(const std::vector<torch::Tensor>& frames, double camera_height,
+                                      const torch::Tensor& intrinsics = {},
+                                      std::vector<size_t>* without_road = nullptr) const;
 
   // Writes the weights only (no optimiser, no training config) with the spec: geo_export.
   // `half`: weights stored as float16 (half the size; loaded back as float32).

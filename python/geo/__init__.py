@@ -35,6 +35,7 @@ from ._geo import (  # noqa: F401
     FlowParts,
     Model,
     ModelSpec,
+    chain_poses,
     Networks,
     eval,
     has_opencv,
@@ -56,5 +57,5 @@ for _name in ("eval", "synth", "kitti", "io"):
         _sys.modules[__name__ + "." + _name] = globals()[_name]
 del _name
 
-__all__ = ["Model", "ModelSpec", "Networks", "FlowParts", "Error", "ConfigError", "image", "kitti_like_intrinsics", "train",
+__all__ = ["Model", "ModelSpec", "Networks", "FlowParts", "Error", "ConfigError", "chain_poses", "image", "kitti_like_intrinsics", "train",
            "resume", "state_dicts", "eval", "synth", "kitti"] + (["io"] if has_opencv else [])

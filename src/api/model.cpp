@@ -8,6 +8,7 @@
 #include "core/runtime.h"
 #include "geometry/pose.h"
 #include "geometry/road_plane.h"
+#include "geometry/trajectory.h"
 #include "pipeline/checkpoint.h"
 #include "pipeline/networks.h"
 
@@ -245,6 +246,48 @@ torch::Tensor Model::metric_depth(const torch::Tensor& image, double camera_heig
       if (scale) scale->push_back(s);
     }
     return out;
+  });
+}
+
+std::vector<double> Model::sequence_scales(const std::vector<torch::Tensor>& frames, double camera_height,
+                                           const torch::Tensor& intrinsics, std::vector<size_t>* without_road) const {
+  return guarded("geo::Model::sequence_scales", [&] {
+    if (!(camera_height > 0) || !std::isfinite(camera_height))
+      throw Error("camera_height must be a positive number of metres, got " + std::to_string(camera_height));
+    if (intrinsics.defined() && intrinsics.sizes() != torch::IntArrayRef{3, 3})
+      throw Error("intrinsics must be [3,3] (pixels of the given images), got " + c10::str(intrinsics.sizes()));
+    if (without_road) without_road->clear();
+    std::vector<double> per_frame;
+    for (size_t i = 0; i < frames.size(); ++i) {
+      const auto d = depth(frames[i]);
+      if (d.dim() != 2) throw Error("sequence_scales takes one image per frame ([3,H,W]), frame " + std::to_string(i) + " is a batch");
+      const auto K = intrinsics.defined()         ? intrinsics.to(torch::kCPU, torch::kFloat64)
+                     : spec().learns_intrinsics ? this->intrinsics(frames[i], frames[i])
+                                                : kitti_like_intrinsics(d.size(0), d.size(1));
+      const auto plane = fit_road_plane(d.cpu(), K);
+      per_frame.push_back(camera_height_scale(plane, camera_height));
+      if (!plane.found && without_road) without_road->push_back(i);
+    }
+    return metric_scales(per_frame, [&](size_t i) {
+      return "no road plane in any frame near frame " + std::to_string(i) + " of " + std::to_string(frames.size()) +
+             (intrinsics.defined() || spec().learns_intrinsics ? "" : " (with the default KITTI-like camera: give the intrinsics)") +
+             ": metric scale needs a flat road in front of the camera";
+    });
+  });
+}
+
+torch::Tensor chain_poses(const std::vector<torch::Tensor>& motions, const std::vector<double>& scales) {
+  return guarded("chain_poses", [&] {
+    if (!scales.empty() && scales.size() != motions.size())
+      throw Error("chain_poses: " + std::to_string(motions.size()) + " motions and " + std::to_string(scales.size()) +
+                  " scales (one per step, or none)");
+    TrajectoryChain chain;
+    for (size_t i = 0; i < motions.size(); ++i) {
+      if (motions[i].sizes() != torch::IntArrayRef{4, 4})
+        throw Error("chain_poses: motion " + std::to_string(i) + " must be [4,4], got " + c10::str(motions[i].sizes()));
+      chain.add_step(motions[i]);
+    }
+    return chain.poses(scales);
   });
 }
 

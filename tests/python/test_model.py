@@ -136,3 +136,18 @@ def test_save_and_load_round_trip(model, frames, tmp_path):
     half = tmp_path / "half.pt"
     model.save(str(half), half=True)
     assert half.stat().st_size < path.stat().st_size * 0.6
+
+
+def test_trajectories_chain_motions_at_their_scales(model, frames):
+    forward = torch.eye(4, dtype=torch.float64)
+    forward[2, 3] = -1  # the camera moves 1 unit along its z: points come 1 unit closer
+    poses = geo.chain_poses([forward, forward])
+    assert torch.equal(poses[:, 2, 3], torch.tensor([0.0, 1.0, 2.0], dtype=torch.float64))
+    assert torch.equal(geo.chain_poses([forward, forward], [2.0, 3.0])[:, 2, 3], torch.tensor([0.0, 2.0, 5.0], dtype=torch.float64))
+    with pytest.raises(geo.Error, match="2 motions and 1 scales"):
+        geo.chain_poses([forward, forward], [1.0])
+    with pytest.raises(geo.Error, match=r"motion 1 must be \[4,4\]"):
+        geo.chain_poses([forward, torch.eye(3)])
+    # A two-step model sees no road: the error names the frame and the default camera.
+    with pytest.raises(geo.Error, match="no road plane in any frame near frame 0 of 3 .with the default KITTI-like camera"):
+        model.sequence_scales(list(frames))
