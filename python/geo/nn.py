@@ -110,8 +110,8 @@ class Encoder(nn.Module):
 
 
 def _resize_like(x, ref):
-    if x.shape[2:] == ref.shape[2:]:
-        return x
+    # Nearest to ref's size, unconditionally (the same pixels when the sizes agree), so that tracers
+    # (torch.fx, torch.onnx) see no branch on a shape.
     return F.interpolate(x, size=ref.shape[2:], mode="nearest")
 
 
