@@ -7,11 +7,7 @@
 #   ignored_options.sh APPS_DIR WORK_DIR
 set -u
 apps="$1"; work="$2"; mkdir -p "$work"
-refused() {  # refused "expected message" command...
-  want="$1"; shift
-  if "$@" > "$work/out.log" 2>&1; then echo "accepted: $*"; exit 1; fi
-  grep -q -- "$want" "$work/out.log" || { echo "no '$want' for: $*"; cat "$work/out.log"; exit 1; }
-}
+. "$(dirname "$0")/refused.sh"
 refused "--resume excludes --init\\|--init excludes --resume" "$apps/geo_train" --resume "$work" --init "$work/x.pt"
 refused "--resume excludes --run-dir\\|--run-dir excludes --resume" "$apps/geo_train" --resume "$work" --run-dir "$work/r"
 refused "--split excludes --compare\\|--compare excludes --split" "$apps/geo_eval" --compare a.json b.json --split eigen
