@@ -3,6 +3,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <map>
 
 #include "core/state_io.h"
 #include "models/depth_net.h"
@@ -104,24 +105,31 @@ TEST(FlowNet, ResidualFlowShapesAt128x416AndOddSize) {
                c10::Error);
 }
 
-// Every parameter gets a finite, non-zero gradient from a loss on the outputs.
+// Every parameter gets a finite, non-zero gradient from a loss on the outputs, with one exception
+// that depends on the initial weights, not on the wiring: an FR block's shared MLP (mlp_in, mlp_out)
+// gets an exactly-zero gradient when every one of its hidden ReLU units is inactive for the whole
+// batch (its inputs, pooled post-ReLU features, are non-negative and it has no bias, so a few
+// random rows of mlp_in can all point away from them). Such a block must still be wired in: its
+// MLP's gradient is defined (autograd reached it) and its spatial convolution's is non-zero. So
+// any seed passes, and a block left out of the graph still fails.
 void expect_all_gradients(torch::nn::Module& net, const std::function<torch::Tensor()>& loss_of) {
   net.train();
-  std::unique_ptr<torch::autograd::DetectAnomalyGuard> ag; if (getenv("ANOM")) ag.reset(new torch::autograd::DetectAnomalyGuard());
   loss_of().backward();
+  std::map<std::string, torch::Tensor> grads;
+  for (const auto& p : net.named_parameters()) grads[p.key()] = p.value().grad();
   std::vector<std::string> without;
-  for (const auto& p : net.named_parameters()) {
-    const auto& g = p.value().grad();
+  for (const auto& [name, g] : grads) {
     if (!g.defined() || !torch::isfinite(g).all().item<bool>()) {
-      without.push_back(p.key() + (g.defined() ? " (not finite)" : " (none)"));
+      without.push_back(name + (g.defined() ? " (not finite)" : " (none)"));
       continue;
     }
-    // The one legitimate exception: the shared MLP of an FR block whose hidden width is clamped
-    // to 1 (C = 16, r = 16) feeds a single ReLU unit; on non-negative features it can be inactive
-    // for a whole batch, and then both MLP weights have an exactly-zero gradient.
-    const bool one_wide_mlp = p.key().find("mlp_") != std::string::npos &&
-                              (p.value().size(0) == 1 || p.value().size(1) == 1);
-    if (g.abs().sum().item<double>() == 0 && !one_wide_mlp) without.push_back(p.key() + " (zero)");
+    if (g.abs().sum().item<double>() != 0) continue;
+    const auto mlp = name.find("mlp_");
+    if (mlp != std::string::npos) {
+      const auto spatial = grads.find(name.substr(0, mlp) + "spatial.weight");
+      if (spatial != grads.end() && spatial->second.defined() && spatial->second.abs().sum().item<double>() > 0) continue;
+    }
+    without.push_back(name + " (zero)");
   }
   EXPECT_TRUE(without.empty()) << "no gradient: " << without.size() << " parameters, first "
                                << (without.empty() ? "" : without[0]);
@@ -154,7 +162,7 @@ TEST(Networks, FlowZeroInitStartsFromTheRigidFlow) {
 }
 
 TEST(Networks, EveryParameterReceivesAGradient) {
-  torch::manual_seed(26);  // 25 left one 8-wide FR MLP (refined7) all-inactive at init once every bottleneck projects
+  torch::manual_seed(25);  // any seed (25 leaves refined7's 8-wide MLP all-inactive at init: see expect_all_gradients)
   geo::DepthNetOptions d50;  // ResNet-50 with FR, small input
   geo::DepthNet depth(d50);
   expect_all_gradients(*depth, [&] { return random_projection(depth(torch::rand({2, 3, 64, 64})).disp); });
