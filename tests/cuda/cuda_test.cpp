@@ -115,14 +115,8 @@ void expect_same_losses(const std::string& a, const std::string& b, double rel) 
 // Killed during stage 2 and resumed on CUDA: the same losses as an uninterrupted CUDA run.
 TEST(Cuda, ResumeOnCudaContinuesTheRun) {
   GEO_REQUIRE_CUDA();
-  const auto base = test::fresh_dir("cuda_resume");
-  TrainOptions a, b;
-  a.run_dir = base + "/whole";
-  b.run_dir = base + "/killed";
-  ASSERT_EQ(train(cuda_run_config(), a), 0);
-  test::train_until_killed(cuda_run_config(), b, 4);
-  ASSERT_EQ(resume(b.run_dir, {}), 0);
-  expect_same_losses(test::metrics(a.run_dir), test::metrics(b.run_dir), 1e-3);
+  const auto r = test::killed_and_resumed(cuda_run_config(), test::fresh_dir("cuda_resume"), 4);
+  expect_same_losses(r.whole, r.resumed, 1e-3);
 }
 
 // A checkpoint written on CUDA resumes on the CPU, and a CPU one on CUDA.

@@ -33,20 +33,13 @@ run: {threads: 2, seed: 3}
 }
 
 TEST(SyntheticTraining, KilledAndResumedRunLogsTheSameLosses) {
-  const auto base = test::fresh_dir("synthetic_resume");
-  TrainOptions a;
-  a.run_dir = base + "/whole";
-  ASSERT_EQ(train(memory_config(), a), 0);
-  TrainOptions b;
-  b.run_dir = base + "/killed";
-  test::train_until_killed(memory_config(), b, 4);  // s1 done (checkpoints 2, 3), killed in s2
-  EXPECT_EQ(test::read_file(b.run_dir + "/checkpoints/latest"), "s1-00000003.pt\n");
-  ASSERT_EQ(resume(b.run_dir, {}), 0);
-  const auto whole = test::metrics(a.run_dir);
-  EXPECT_EQ(std::count(whole.begin(), whole.end(), '\n'), 6);  // header + 5 iterations
-  EXPECT_EQ(whole, test::metrics(b.run_dir));
+  // s1 done (checkpoints 2, 3), killed in s2.
+  const auto r = test::killed_and_resumed(memory_config(), test::fresh_dir("synthetic_resume"), 4);
+  EXPECT_EQ(r.latest_when_killed, "s1-00000003.pt\n");
+  EXPECT_EQ(std::count(r.whole.begin(), r.whole.end(), '\n'), 6);  // header + 5 iterations
+  EXPECT_EQ(r.whole, r.resumed);
   // Validation ran on the world's validation snippets (frame 5): one row per stage and interval.
-  const auto val = test::read_file(a.run_dir + "/val.csv");
+  const auto val = test::read_file(r.whole_dir + "/val.csv");
   EXPECT_EQ(std::count(val.begin(), val.end(), '\n'), 4) << val;  // header + s1 at 2, 3 + s2 at 2
 }
 

@@ -68,23 +68,16 @@ std::map<int64_t, double> val_scores(const std::string& dir, const std::string& 
 }
 
 TEST(Trainer, KilledAndResumedRunLogsTheSameLosses) {
-  const auto base = test::fresh_dir("resume");
-  TrainOptions a;
-  a.run_dir = base + "/whole";
-  ASSERT_EQ(train(tiny_config(), a), 0);
-  TrainOptions b;
-  b.run_dir = base + "/killed";
   // s1: 3 steps (checkpoints 2, 3), s2: 2 steps (checkpoint 2), killed during the 6th step.
-  test::train_until_killed(tiny_config(), b, 6);
-  EXPECT_EQ(test::read_file(b.run_dir + "/checkpoints/latest"), "s2-00000002.pt\n");
-  ASSERT_EQ(resume(b.run_dir, {}), 0);
-  const auto whole = metrics(a.run_dir), resumed = metrics(b.run_dir);
+  const auto r = test::killed_and_resumed(tiny_config(), test::fresh_dir("resume"), 6);
+  EXPECT_EQ(r.latest_when_killed, "s2-00000002.pt\n");
+  const auto& whole = r.whole;
   EXPECT_EQ(std::count(whole.begin(), whole.end(), '\n'), 7);  // header + 6 iterations
-  EXPECT_EQ(whole, resumed);
+  EXPECT_EQ(whole, r.resumed);
 
   // The TensorBoard file of the uninterrupted run: a loss value per iteration, steps 1..6 over both
   // stages, equal to metrics.csv's (as float32).
-  const auto events = test::read_tensorboard_dir(a.run_dir + "/tb");
+  const auto events = test::read_tensorboard_dir(r.whole_dir + "/tb");
   std::map<int64_t, float> rigid;
   for (const auto& e : events)
     for (const auto& v : e.values)

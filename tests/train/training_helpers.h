@@ -73,4 +73,30 @@ inline void train_until_killed(const Config& config, const TrainOptions& options
   EXPECT_EQ(wait_for(child, 900), 128 + SIGKILL) << read_file(log);
 }
 
+// The scenario the resumption tests share: `config` trained uninterrupted into <base>/whole and,
+// from scratch, into <base>/killed, SIGKILLed at step `kill_at` and resumed there (`device` for
+// both). What each logged, and the checkpoint the killed run left as latest.
+struct KilledAndResumed {
+  std::string whole_dir, killed_dir;
+  std::string latest_when_killed;     // checkpoints/latest right after the kill
+  std::string whole, resumed;         // metrics.csv of each
+};
+inline KilledAndResumed killed_and_resumed(const Config& config, const std::string& base, int64_t kill_at,
+                                           const std::string& device = "") {
+  KilledAndResumed r;
+  TrainOptions a, b;
+  a.run_dir = r.whole_dir = base + "/whole";
+  b.run_dir = r.killed_dir = base + "/killed";
+  a.device = b.device = device;
+  EXPECT_EQ(train(config, a), 0);
+  train_until_killed(config, b, kill_at);
+  r.latest_when_killed = read_file(b.run_dir + "/checkpoints/latest");
+  TrainOptions again;
+  again.device = device;
+  EXPECT_EQ(resume(b.run_dir, again), 0);
+  r.whole = metrics(a.run_dir);
+  r.resumed = metrics(b.run_dir);
+  return r;
+}
+
 }  // namespace geo::test
