@@ -29,14 +29,6 @@
 namespace geo {
 namespace {
 
-// The Eigen protocol on the world's held-out drive, median scaling.
-EvalOptions h_median(const std::string& root) {
-  EvalOptions e;
-  e.split = "eigen";
-  e.data_root = root + "/world";
-  return e;
-}
-
 double metric(const EvalResult& r, const std::string& name) {
   for (const auto& [k, v] : r.metrics)
     if (k == name) return v;
@@ -51,16 +43,20 @@ int64_t count_of(const EvalResult& r, const std::string& name) {
   return 0;
 }
 
-TEST(Learning, ShortTrainingBeatsUntrainedAndTrivialBaselines) {
-  const auto root = test::fresh_dir("learning");
-  auto o = SynthOptions::preset_named("tiny");
-  o.seed = 1;
-  o.flow_pairs = 10;
-  o.odometry_frames = 30;
-  write_synth_world(root + "/world", o);
-  // bn_momentum 0.1 (LibTorch's): GeoNet's 0.001 averages BatchNorm's running statistics over
-  // ~1000 batches, so after 300 iterations evaluation would still use near-initial statistics.
-  const std::string yaml = R"(
+// One world and one two-stage training for the checks below (ctest runs them in one process: the
+// e2e_tests executable is one ctest test), each check its own test so that a failure names it.
+class Learning : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    root_ = test::fresh_dir("learning");
+    world_ = SynthOptions::preset_named("tiny");
+    world_.seed = 1;
+    world_.flow_pairs = 10;
+    world_.odometry_frames = 30;
+    write_synth_world(root_ + "/world", world_);
+    // bn_momentum 0.1 (LibTorch's): GeoNet's 0.001 averages BatchNorm's running statistics over
+    // ~1000 batches, so after 300 iterations evaluation would still use near-initial statistics.
+    const std::string yaml = R"(
 model: {encoder_depth: 18, bn_momentum: 0.1, flow_zero_init: true}
 data: {height: 64, width: 208, num_workers: 1, augment: {enabled: false}}
 stages:
@@ -70,18 +66,34 @@ stages:
 logging: {interval: 50, summary_interval: 0, checkpoint_interval: 100, val_interval: 0}
 run: {seed: 1, threads: 2}
 )";
-  const auto cfg = parse_config(yaml, "learning.yaml", {"data.root=" + root + "/world/raw"});
-  TrainOptions t;
-  t.run_dir = root + "/run";
-  ASSERT_EQ(train(cfg, t), 0);
+    config_ = parse_config(yaml, "learning.yaml", {"data.root=" + root_ + "/world/raw"});
+    TrainOptions t;
+    t.run_dir = run_ = root_ + "/run";
+    trained_ok_ = train(config_, t) == 0;
+  }
+  void SetUp() override { ASSERT_TRUE(trained_ok_) << "the learning check's training failed"; }
 
-  Predictor trained(t.run_dir, "cpu"), untrained(cfg, "cpu");
-  auto eval = [&](const std::string& split, Predictor* p) {  // null: the trivial baseline
+  // A protocol on the world, of a model (null: the trivial baseline).
+  static EvalResult eval(const std::string& split, Predictor* p, DepthScaling scaling = DepthScaling::kMedian) {
     EvalOptions e;
     e.split = split;
-    e.data_root = root + "/world";
+    e.data_root = root_ + "/world";
+    e.scaling = scaling;
     return p ? evaluate(e, *p) : evaluate(e, *trivial_source());
-  };
+  }
+
+  static std::string root_, run_;
+  static SynthOptions world_;
+  static Config config_;
+  static bool trained_ok_;
+};
+std::string Learning::root_, Learning::run_;
+SynthOptions Learning::world_;
+Config Learning::config_;
+bool Learning::trained_ok_ = false;
+
+TEST_F(Learning, ShortTrainingBeatsUntrainedAndTrivialBaselines) {
+  Predictor trained(run_, "cpu"), untrained(config_, "cpu");
   struct Check {
     const char* split;
     const char* metric;
@@ -95,6 +107,10 @@ run: {seed: 1, threads: 2}
     std::printf("learning check %-9s %-8s trained %.4f  untrained %.4f  trivial %.4f\n", c.split, c.metric, tr, un, tv);
     EXPECT_LT(tr, c.margin * std::min(un, tv)) << c.split << " " << c.metric;
   }
+}
+
+TEST_F(Learning, ResidualFlowImprovesTheMovingCarsNotTheStaticScene) {
+  Predictor trained(run_, "cpu");
   // Stage 2: the residual flow against the rigid flow of the same model, on the moving cars (obj_map)
   // and on the static scene. Measured on the demo's world (seed 1, 240 + 200 iterations): cars 3.61
   // vs 3.93 px (0.92), static scene 1.50 vs 1.74. The margin 0.97 leaves room for the noise of a
@@ -106,34 +122,32 @@ run: {seed: 1, threads: 2}
               rigid_fg, fg / rigid_fg, bg, rigid_bg, bg / rigid_bg);
   EXPECT_LT(fg, 0.97 * rigid_fg) << "the residual flow does not improve the moving cars";
   EXPECT_LE(bg, rigid_bg) << "the residual flow worsens the static scene";
+}
 
+TEST_F(Learning, CameraHeightScalesDepthWithoutGroundTruth) {
+  Predictor trained(run_, "cpu");
   // Metric depth without ground truth: the scale from the camera's height above the road (geo_synth:
   // 1.65 m). On the demo's model (240 stage-1 iterations) AbsRel 0.237 against 0.217 median-scaled
   // and the factor 1.04 x the ground truth's; the bounds (20%, 0.8..1.25) leave room for a short
   // run's noise and still fail a broken fit (a fitted normal gave 0.43 x).
-  EvalOptions h;
-  h.split = "eigen";
-  h.data_root = root + "/world";
-  const double median_abs_rel = metric(evaluate(h, trained), "abs_rel");
-  h.scaling = DepthScaling::kCameraHeight;
-  const auto height = evaluate(h, trained);
+  const double median_abs_rel = metric(eval("eigen", &trained), "abs_rel");
+  const auto height = eval("eigen", &trained, DepthScaling::kCameraHeight);
   std::printf("learning check camera height: abs_rel %.4f (median scaling %.4f), scale agreement %.3f +- %.3f\n",
               metric(height, "abs_rel"), median_abs_rel, metric(height, "scale_agreement_median"),
               metric(height, "scale_agreement_std"));
   EXPECT_LT(metric(height, "abs_rel"), 1.2 * median_abs_rel);
   EXPECT_NEAR(metric(height, "scale_agreement_median"), 1.0, 0.25);
+}
 
+TEST_F(Learning, MotionInMetresWithoutGroundTruth) {
+  Predictor trained(run_, "cpu");
   // Motion in metres without ground truth: the odometry sequence's trajectory with each step scaled
   // by its frame's road-plane factor. metric_scale_error is the factor a least-squares fit to the
   // true trajectory would still apply (1 = metres exactly). Measured here (seed 1, 300 + 200
   // iterations): 1.16, and the library's unsmoothed steps 0.79 x the true lengths: the PoseNet's
   // translation of so short a run is not yet at its depth's scale. Bound: within a factor 1.5 of
   // metres (the network's own scale is arbitrary; see the printed unscaled ratio).
-  EvalOptions m;
-  m.split = "odometry";
-  m.data_root = root + "/world";
-  m.scaling = DepthScaling::kCameraHeight;
-  const auto odometry = evaluate(m, trained);
+  const auto odometry = eval("odometry", &trained, DepthScaling::kCameraHeight);
   std::printf("learning check metric trajectory: scale error %.3f, road plane in %lld of %lld frames\n",
               metric(odometry, "metric_scale_error"), static_cast<long long>(count_of(odometry, "frames_with_road_plane")),
               static_cast<long long>(count_of(odometry, "frames")));
@@ -143,10 +157,10 @@ run: {seed: 1, threads: 2}
   // The library's metric step: relative_pose's rotation, its translation times metric_depth's factor
   // for the first frame, exactly; in metres, the true step lengths summed over the sequence within
   // the same bounds.
-  const Model model = Model::load(t.run_dir);
-  const std::string seq = root + "/world/odometry/sequences/09";
+  const Model model = Model::load(run_);
+  const std::string seq = root_ + "/world/odometry/sequences/09";
   const auto K = read_odometry_calib(seq + "/calib.txt").P[2].slice(1, 0, 3).clone();
-  const auto truth = read_poses(root + "/world/odometry/poses/09.txt");
+  const auto truth = read_poses(root_ + "/world/odometry/poses/09.txt");
   auto frame = [&](int64_t f) { return read_image(seq + "/image_2/" + zero_padded(f, 6) + ".png"); };
   double predicted = 0, travelled = 0, unscaled = 0;
   int64_t steps = 0;
@@ -176,6 +190,32 @@ run: {seed: 1, threads: 2}
   ASSERT_GT(steps, 3);
   EXPECT_LT(std::abs(std::log(predicted / travelled)), std::log(1.5));
 
+  // The library's sequence: every frame's scale (Model::sequence_scales) finds the road in exactly
+  // the frames geo_eval's metric trajectory found it in (the same depth, camera and fit), and the
+  // chained trajectory (geo::chain_poses) travels the true length within the same bounds.
+  std::vector<torch::Tensor> frames, motions;
+  for (int64_t f = 0; f < truth.size(0); ++f) frames.push_back(frame(f));
+  std::vector<size_t> without_road;
+  auto scales = model.sequence_scales(frames, 1.65, K, &without_road);
+  ASSERT_EQ(scales.size(), frames.size());
+  EXPECT_EQ(static_cast<int64_t>(frames.size() - without_road.size()), count_of(odometry, "frames_with_road_plane"));
+  for (size_t f = 0; f + 1 < frames.size(); ++f) motions.push_back(model.relative_pose(frames[f], frames[f + 1], K));
+  scales.pop_back();
+  const auto poses = chain_poses(motions, scales);
+  const auto length = [](const torch::Tensor& p) {
+    return (p.slice(0, 1).select(2, 3).slice(1, 0, 3) - p.slice(0, 0, -1).select(2, 3).slice(1, 0, 3)).norm(2, 1).sum().item<double>();
+  };
+  std::printf("learning check library trajectory: %.3f m against %.3f m travelled\n", length(poses), length(truth));
+  EXPECT_LT(std::abs(std::log(length(poses) / length(truth))), std::log(1.5));
+}
+
+TEST_F(Learning, LearnedCameraConvergesAndKeepsDepth) {
+  Predictor trained(run_, "cpu");
+  const double median_abs_rel = metric(eval("eigen", &trained), "abs_rel");
+  const std::string seq = root_ + "/world/odometry/sequences/09";
+  const auto truth = read_poses(root_ + "/world/odometry/poses/09.txt");
+  auto frame = [&](int64_t f) { return read_image(seq + "/image_2/" + zero_padded(f, 6) + ".png"); };
+  const auto& o = world_;
   // The learned camera (model.learn_intrinsics: the PoseNet's camera in every warp, the world's
   // calibration never used): after the same stage 1, its focal lengths within 10% of the world's
   // and its depth no worse than 1.15x the calibrated run's AbsRel. Measured 2026-11-25 (AMD EPYC,
@@ -191,10 +231,10 @@ logging: {interval: 50, summary_interval: 0, checkpoint_interval: 100, val_inter
 run: {seed: 1, threads: 2}
 )";
   TrainOptions lt;
-  lt.run_dir = root + "/learned_camera";
-  ASSERT_EQ(train(parse_config(learned_yaml, "learned.yaml", {"data.root=" + root + "/world/raw"}), lt), 0);
+  lt.run_dir = root_ + "/learned_camera";
+  ASSERT_EQ(train(parse_config(learned_yaml, "learned.yaml", {"data.root=" + root_ + "/world/raw"}), lt), 0);
   Predictor learned(lt.run_dir, "cpu");
-  const double learned_abs_rel = metric(evaluate(h_median(root), learned), "abs_rel");
+  const double learned_abs_rel = metric(eval("eigen", &learned), "abs_rel");
   const Model camera_model = Model::load(lt.run_dir);
   std::vector<torch::Tensor> cams;
   for (int64_t f = 0; f + 1 < truth.size(0); f += 3) cams.push_back(camera_model.intrinsics(frame(f), frame(f + 1)));
