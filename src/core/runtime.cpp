@@ -77,6 +77,8 @@ void apply_precision(Precision precision) {
 }
 
 int use_all_cores() {
+  // OMP_NUM_THREADS, where set, is the user's choice (LibTorch's default follows it): kept.
+  if (const char* omp = std::getenv("OMP_NUM_THREADS"); omp && *omp) return torch::get_num_threads();
   const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   torch::set_num_threads(cores);
   return cores;

@@ -25,7 +25,7 @@ void keep_freed_memory();
 
 // LibTorch's intra-op threads set to every core of the machine (std::thread::hardware_concurrency):
 // what geo's tools use unless told otherwise (LibTorch's own default can be fewer: one on some
-// 2-core machines). Returns the count.
+// 2-core machines); OMP_NUM_THREADS in the environment, where set, is kept. Returns the count.
 int use_all_cores();
 
 // The memory this machine can give without swapping (MemAvailable of /proc/meminfo), in bytes; -1
