@@ -10,6 +10,15 @@ using namespace pybind11::literals;
 
 namespace {
 
+// flow() and flow_parts()'s arguments as geo takes them (converted with the GIL held).
+struct PairArgs {
+  torch::Tensor from, to, intrinsics, previous;
+};
+PairArgs pair_args(py::handle from, py::handle to, py::handle intrinsics, py::handle previous) {
+  return {image_arg(from, "from"), image_arg(to, "to"), optional_tensor_arg(intrinsics, "intrinsics"),
+          previous.is_none() ? torch::Tensor() : image_arg(previous, "previous")};
+}
+
 py::object with_scale(torch::Tensor result, std::vector<double> scale, bool wanted) {
   if (!wanted) return py::cast(std::move(result));
   return py::make_tuple(std::move(result), std::move(scale));
@@ -141,22 +150,18 @@ void bind_model(py::module_& m) {
       .def(
           "flow",
           [](const Model& model, py::handle from, py::handle to, py::handle intrinsics, py::handle previous) {
-            const auto a = image_arg(from, "from"), b = image_arg(to, "to");
-            const auto K = optional_tensor_arg(intrinsics, "intrinsics");
-            const auto p = previous.is_none() ? torch::Tensor() : image_arg(previous, "previous");
+            const auto x = pair_args(from, to, intrinsics, previous);
             py::gil_scoped_release release;
-            return model.flow(a, b, K, p);
+            return model.flow(x.from, x.to, x.intrinsics, x.previous);
           },
           "from_"_a, "to"_a, "intrinsics"_a = py::none(), "previous"_a = py::none(),
           "Optical flow from_ -> to in pixels: [2,H,W] (rigid flow plus the FlowNet's residual).")
       .def(
           "flow_parts",
           [](const Model& model, py::handle from, py::handle to, py::handle intrinsics, py::handle previous) {
-            const auto a = image_arg(from, "from"), b = image_arg(to, "to");
-            const auto K = optional_tensor_arg(intrinsics, "intrinsics");
-            const auto p = previous.is_none() ? torch::Tensor() : image_arg(previous, "previous");
+            const auto x = pair_args(from, to, intrinsics, previous);
             py::gil_scoped_release release;
-            return model.flow_parts(a, b, K, p);
+            return model.flow_parts(x.from, x.to, x.intrinsics, x.previous);
           },
           "from_"_a, "to"_a, "intrinsics"_a = py::none(), "previous"_a = py::none(),
           "flow() and the rigid flow alone: FlowParts(full, rigid), which unpacks as full, rigid = ...")
