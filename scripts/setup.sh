@@ -50,8 +50,11 @@ fi
 PACKAGES=(
   libyaml-cpp-dev libcli11-dev libspdlog-dev
   libgtest-dev libgmock-dev
-  cmake g++ make ccache
 )
+# Build tools already on the PATH (a GPU image's cmake from pip, say) will do; ccache is optional
+# away from Debian's LibTorch (an offline image may have none).
+for tool in cmake g++ make; do command -v "$tool" >/dev/null || PACKAGES+=("$tool"); done
+command -v ccache >/dev/null || { [ "$TORCH" != system ] || PACKAGES+=(ccache); }
 # Ninja builds several targets at once (make builds the targets it is given one after another); one
 # already on the PATH (a PyTorch image's) will do.
 command -v ninja >/dev/null || PACKAGES+=(ninja-build)
