@@ -25,9 +25,11 @@
 
 #ifdef GEO_WITH_C10D
 #include <torch/csrc/distributed/c10d/PrefixStore.hpp>
-#include <torch/csrc/distributed/c10d/ProcessGroupGloo.hpp>
 #include <torch/csrc/distributed/c10d/TCPStore.hpp>
-#ifdef USE_C10D_NCCL
+#ifdef GEO_WITH_GLOO
+#include <torch/csrc/distributed/c10d/ProcessGroupGloo.hpp>
+#endif
+#ifdef GEO_WITH_NCCL
 #include <torch/csrc/distributed/c10d/ProcessGroupNCCL.hpp>
 #endif
 #endif
@@ -99,8 +101,12 @@ LaunchInfo launch_from_environment(const std::function<const char*(const char*)>
 
 #ifdef GEO_WITH_C10D
 
+#ifdef GEO_WITH_GLOO
 bool distributed_available() { return true; }
-#ifdef USE_C10D_NCCL
+#else
+bool distributed_available() { return false; }
+#endif
+#ifdef GEO_WITH_NCCL
 bool nccl_available() { return torch::cuda::is_available(); }
 #else
 bool nccl_available() { return false; }
@@ -227,7 +233,7 @@ class C10dGroup : public ProcessGroup {
     auto pg_store = c10::make_intrusive<c10d::PrefixStore>("pg", store_);
     try {
       if (backend == "nccl") {
-#ifdef USE_C10D_NCCL
+#ifdef GEO_WITH_NCCL
         auto o = c10d::ProcessGroupNCCL::Options::create();
         o->timeout = timeout;
         nccl_ = c10::make_intrusive<c10d::ProcessGroupNCCL>(pg_store, l.rank, l.world_size, o);
@@ -235,6 +241,7 @@ class C10dGroup : public ProcessGroup {
         throw std::runtime_error("run.distributed.backend is nccl but this LibTorch has no NCCL (use gloo)");
 #endif
       } else {
+#ifdef GEO_WITH_GLOO
         auto o = c10d::ProcessGroupGloo::Options::create(timeout);
         const char* ifname = std::getenv("GLOO_SOCKET_IFNAME");
         if (ifname && *ifname) o->devices.push_back(c10d::ProcessGroupGloo::createDeviceForInterface(ifname));
@@ -243,6 +250,12 @@ class C10dGroup : public ProcessGroup {
         else o->devices.push_back(c10d::ProcessGroupGloo::createDefaultDevice());
         o->threads = 2;
         gloo_ = c10::make_intrusive<c10d::ProcessGroupGloo>(pg_store, l.rank, l.world_size, o);
+#else
+        throw std::runtime_error("run.distributed.backend is " + config.backend +
+                                 (config.backend == "auto" ? " (gloo on CPU)" : "") +
+                                 " but this geo was built without Gloo (its headers were not found at configure "
+                                 "time; install libgloo-dev): use NCCL on GPUs (--device cuda)");
+#endif
       }
     } catch (const std::exception& e) {
       throw std::runtime_error("rank " + std::to_string(l.rank) + ": could not form the " + backend + " process group of " +
@@ -325,10 +338,13 @@ class C10dGroup : public ProcessGroup {
 
   template <class F> void guarded(const char* what, F&& f) {
     try {
-#ifdef USE_C10D_NCCL
+#ifdef GEO_WITH_NCCL
       if (nccl_) return f(*nccl_);
 #endif
-      f(*gloo_);
+#ifdef GEO_WITH_GLOO
+      if (gloo_) return f(*gloo_);
+#endif
+      throw std::logic_error("no process group");
     } catch (const std::exception& e) {
       throw std::runtime_error("rank " + std::to_string(rank_) + " of " + std::to_string(size_) + ": " + what +
                                " failed: " + lost_processes() + " (or did not answer within run.distributed.timeout_s, " +
@@ -367,8 +383,10 @@ class C10dGroup : public ProcessGroup {
   std::string master_;
   std::string backend_;
   c10::intrusive_ptr<c10d::Store> store_;
+#ifdef GEO_WITH_GLOO
   c10::intrusive_ptr<c10d::ProcessGroupGloo> gloo_;
-#ifdef USE_C10D_NCCL
+#endif
+#ifdef GEO_WITH_NCCL
   c10::intrusive_ptr<c10d::ProcessGroupNCCL> nccl_;
 #endif
 };

@@ -50,8 +50,8 @@ LaunchInfo launch_from_environment(const std::function<const char*(const char*)>
 // (tests, geo_bench).
 int free_local_port();
 
-// True when this build can run distributed (LibTorch's c10d with Gloo); NCCL additionally needs a
-// CUDA LibTorch built with it.
+// True when this build can run distributed on CPU (LibTorch's c10d with Gloo); NCCL needs a CUDA
+// LibTorch built with it and a GPU (a pip wheel's LibTorch has NCCL but no Gloo headers).
 bool distributed_available();
 bool nccl_available();
 
