@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "core/files.h"
 #include "core/logging.h"
 #include "core/runtime.h"
 #include "data/synth_writer.h"
@@ -86,7 +87,11 @@ int main(int argc, char** argv) {
       if (first.rfind("Synthetic KITTI-format world written by geo_synth", 0) != 0)
         throw std::runtime_error("--out '" + out + "' is not empty and holds no world written by geo_synth (no README.txt "
                                  "of one): --force replaces only such a world; choose another --out");
-      for (const char* part : {"raw", "kitti2015", "odometry", "README.txt", "camera_height.txt"}) fs::remove_all(out + "/" + part);
+      for (const char* part : {"raw", "kitti2015", "odometry", "README.txt", "camera_height.txt"}) {
+        std::string error;
+        if (!geo::remove_tree(out + "/" + part, &error))
+          throw std::runtime_error("--force: could not remove the earlier world: " + error);
+      }
       spdlog::info("--force: the earlier world in {} removed", out);
     }
     spdlog::info("geo_synth: preset {} ({}x{}), seed {}, {} training + {} test drives of {} frames, "

@@ -10,6 +10,8 @@
 #include <vector>
 #include <unistd.h>
 
+#include "core/files.h"
+
 namespace geo::test {
 
 // Folders made by fresh_dir in this process, removed when it exits (checkpoints of the trainer
@@ -22,8 +24,7 @@ inline void remove_made_dirs() {
   const char* keep = std::getenv("GEO_KEEP_TEST_DIRS");
   if (keep && std::string(keep) == "1") return;
   for (const auto& d : made_dirs()) {
-    std::error_code ec;
-    std::filesystem::remove_all(d, ec);
+    geo::remove_tree(d);
   }
 }
 
@@ -31,7 +32,8 @@ inline void remove_made_dirs() {
 inline std::string fresh_dir(const std::string& name) {
   const auto dir = std::filesystem::temp_directory_path() /
                    ("geo_test_" + name + "_" + std::to_string(::getpid()));
-  std::filesystem::remove_all(dir);
+  std::string error;
+  if (!geo::remove_tree(dir.string(), &error)) throw std::runtime_error("fresh_dir: " + error);
   std::filesystem::create_directories(dir);
   if (made_dirs().empty()) std::atexit(remove_made_dirs);
   made_dirs().push_back(dir.string());

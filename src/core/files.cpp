@@ -1,6 +1,7 @@
 #include "core/files.h"
 
 #include <fcntl.h>
+#include <ftw.h>
 #include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -227,6 +228,28 @@ void check_outputs(const std::vector<NamedPath>& outputs, const std::vector<std:
     if (!force && fs::is_regular_file(path, ec) && is_zip_archive(path))
       throw std::runtime_error(option + " '" + path + "' is a model or checkpoint (a zip archive): refusing to replace it");
   }
+}
+
+namespace {
+thread_local std::string* remove_tree_error = nullptr;
+int remove_entry(const char* path, const struct stat*, int, struct FTW*) {
+  if (::remove(path) == 0 || errno == ENOENT) return 0;
+  if (remove_tree_error) *remove_tree_error = std::string(path) + ": " + std::strerror(errno);
+  return 1;
+}
+}  // namespace
+
+bool remove_tree(const std::string& path, std::string* error) {
+  struct stat st{};
+  if (::lstat(path.c_str(), &st) != 0 && errno == ENOENT) return true;
+  std::string why;
+  remove_tree_error = &why;
+  // Children before their folder (FTW_DEPTH), links not followed (FTW_PHYS), 16 descriptors at most.
+  const int rc = ::nftw(path.c_str(), remove_entry, 16, FTW_DEPTH | FTW_PHYS);
+  remove_tree_error = nullptr;
+  if (rc == 0) return true;
+  if (error) *error = why.empty() ? path + ": " + std::strerror(errno) : why;
+  return false;
 }
 
 }  // namespace geo

@@ -52,6 +52,13 @@ class FolderLock {
   int fd_ = -1;
 };
 
+// Removes `path` and everything under it (a file, a link, which is not followed, or a folder);
+// true when nothing is left there (also when nothing was). On failure returns false and, with
+// `error`, says which entry and why. geo's own rather than std::filesystem::remove_all: PyTorch's
+// pip LibTorch exports a copy of libstdc++'s filesystem functions that the dynamic linker binds
+// ahead of libstdc++'s own, and its remove_all crashed (a call through a null pointer).
+bool remove_tree(const std::string& path, std::string* error = nullptr);
+
 // `number` in decimal with leading zeros to `digits` digits: KITTI's file names (000042.png,
 // 0000000042.png) and checkpoint numbers.
 std::string zero_padded(long long number, int digits);

@@ -410,8 +410,7 @@ int train(const Config& config, const TrainOptions& options, std::string* run_di
     // A run that could not start (bad data root, ...) leaves no half-made folder behind.
     if (created) {
       setup_logging(config.logging.level);  // release train.log
-      std::error_code ec;
-      fs::remove_all(folder->root(), ec);
+      remove_tree(folder->root());
     }
     throw;
   }

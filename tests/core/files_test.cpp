@@ -74,6 +74,33 @@ TEST(Files, AtomicWriteFollowsLinksAndWritesIntoDevicesAndFifos) {
   EXPECT_TRUE(fs::is_directory(dir));
 }
 
+// remove_tree: nested folders, files and links go, what the links point to outside stays; a missing
+// path is nothing to do.
+TEST(Files, RemoveTreeRemovesFoldersButNotWhatLinksPointTo) {
+  namespace fs = std::filesystem;
+  const auto dir = test::fresh_dir("remove_tree");
+  fs::create_directories(dir + "/tree/a/b");
+  write_file_atomic(dir + "/tree/a/b/x.txt", "x");
+  write_file_atomic(dir + "/tree/y.txt", "y");
+  write_file_atomic(dir + "/kept.txt", "kept");
+  fs::create_directories(dir + "/kept_dir");
+  write_file_atomic(dir + "/kept_dir/z.txt", "z");
+  fs::create_symlink(dir + "/kept.txt", dir + "/tree/a/file_link");
+  fs::create_directory_symlink(dir + "/kept_dir", dir + "/tree/dir_link");
+  EXPECT_TRUE(remove_tree(dir + "/tree"));
+  EXPECT_FALSE(fs::exists(fs::symlink_status(dir + "/tree")));
+  EXPECT_EQ(test::read_file(dir + "/kept.txt"), "kept");
+  EXPECT_EQ(test::read_file(dir + "/kept_dir/z.txt"), "z");
+  EXPECT_TRUE(remove_tree(dir + "/tree"));  // already gone
+  EXPECT_TRUE(remove_tree(dir + "/kept.txt"));  // a single file
+  EXPECT_FALSE(fs::exists(dir + "/kept.txt"));
+  // What cannot be removed, even by root (procfs entries): false, the entry and the OS error named.
+  std::string error;
+  EXPECT_FALSE(remove_tree("/proc/self/fd", &error));
+  EXPECT_EQ(error.rfind("/proc/self/fd", 0), 0u) << error;
+  EXPECT_NE(error.find(": "), std::string::npos) << error;
+}
+
 TEST(Files, OneLockHolderPerFolderAndReleasedWithIt) {
   const auto dir = test::fresh_dir("lock");
   {

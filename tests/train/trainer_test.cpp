@@ -227,7 +227,7 @@ TEST(TrainingData, ADamagedPackedCacheIsNamedNotSkipped) {
   GEO_EXPECT_THROW_WITH(open_training_data(d), "packed cache " + cache + " is incomplete", "re-run geo_prepare");
   test::write_text(cache + "/index.txt", "garbage\n");
   GEO_EXPECT_THROW_WITH(open_training_data(d), cache + "/index.txt", "not a geo packed cache");
-  std::filesystem::remove_all(cache);
+  remove_tree(cache);
   EXPECT_EQ(open_training_data(d).format, "kitti_raw");
 }
 
@@ -341,7 +341,7 @@ TEST(TrainingData, PerTaskSplits) {
   EXPECT_LT(open_training_data(k).train->size(), expected);
   test::write_text(world() + "/splits/stereo/test_scenes_stereo.txt", drives);
   GEO_EXPECT_THROW_WITH(open_training_data(k), "kitti_raw_stereo: no 3-frame snippet", "test_scenes_stereo.txt");
-  std::filesystem::remove_all(world() + "/splits/stereo");
+  remove_tree(world() + "/splits/stereo");
 }
 
 TEST(TrainingData, AMissingNeighbourIsNamed) {
