@@ -418,6 +418,9 @@ struct RunConfig {
   // matrix products in TF32 on Ampere and later, PyTorch's default for convolutions; the same as
   // fp32 on CPU); bf16 (the networks under autocast to bfloat16 on CUDA and on CPU, TF32 elsewhere).
   Precision precision = Precision::kTf32;
+  // CUDA: cuDNN's deterministic algorithms and no autotuning (run to run the same up to the atomic
+  // additions of some backward kernels, e.g. grid_sample's; slower). No effect on CPU.
+  bool deterministic = false;
   DistributedConfig distributed;
 
   template <class V> void fields(V& v) {
@@ -427,6 +430,7 @@ struct RunConfig {
     v("device", device);
     v("threads", threads);
     v("precision", precision);
+    v("deterministic", deterministic);
     v("distributed", distributed);
   }
   void validate(Checker& c) const;

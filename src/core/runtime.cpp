@@ -92,7 +92,8 @@ int apply_run_settings(const RunConfig& run, const torch::Device& device) {
   torch::set_num_threads(threads);
   torch::manual_seed(static_cast<uint64_t>(run.seed));
   apply_precision(run.precision);
-  if (device.is_cuda()) at::globalContext().setBenchmarkCuDNN(true);
+  at::globalContext().setDeterministicCuDNN(run.deterministic);
+  if (device.is_cuda()) at::globalContext().setBenchmarkCuDNN(!run.deterministic);
   return threads;
 }
 

@@ -6,7 +6,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <iostream>
+#include <map>
 #include <sstream>
 
 #include "test_util.h"
@@ -34,46 +37,84 @@ class NoTf32 {
   bool cudnn_, cublas_;
 };
 
-// One fp32 forward + eq. 16 + backward of all three networks on CUDA and on the CPU from the same
-// weights and batch: loss terms within 1e-4 relative, all gradients together within 1e-3 relative
-// (cuDNN and oneDNN sum in different orders; BatchNorm uses the batch's statistics on both).
-TEST(Cuda, Fp32StepMatchesTheCpuStep) {
-  GEO_REQUIRE_CUDA();
+// One fp32 training step (forward, eq. 16, backward of all three networks) from the networks seeded
+// alike: the loss terms and each network's gradients (on the CPU).
+struct Step {
+  std::vector<std::pair<std::string, double>> losses;
+  std::map<std::string, std::vector<torch::Tensor>> grads;  // depth, pose, flow: named_parameters order
+};
+Step fp32_step(const torch::Device& device, const torch::Tensor& tgt, const torch::Tensor& srcs) {
   NoTf32 fp32;
   Config c = parse_config("model: {encoder_depth: 18}\n");
   StageConfig stage = c.stages[0];
   stage.train = NetworkSet{true, true, true};
   torch::manual_seed(7);
-  Networks cpu = Networks::create(NetworkSpec::of(c), true);
-  torch::manual_seed(7);
-  Networks gpu = Networks::create(NetworkSpec::of(c), true);
-  gpu.to(torch::Device(torch::kCUDA, 0));
-  for (Networks* n : {&cpu, &gpu}) {
-    n->set_modes(stage);
-    n->set_trainable(stage);
-  }
-  torch::manual_seed(8);
-  const auto tgt = torch::rand({2, 3, 64, 128}), srcs = torch::rand({2, 2, 3, 64, 128});
+  Networks nets = Networks::create(NetworkSpec::of(c), true);
+  nets.to(device);
+  nets.set_modes(stage);
+  nets.set_trainable(stage);
   const auto K = torch::tensor({60.f, 0.f, 64.f, 0.f, 60.f, 32.f, 0.f, 0.f, 1.f}).view({1, 3, 3}).repeat({2, 1, 1});
-  auto a = compute_losses(cpu, tgt, srcs, K, stage, c);
-  auto b = compute_losses(gpu, tgt.cuda(), srcs.cuda(), K.cuda(), stage, c);
-  a.losses.total.backward();
-  b.losses.total.backward();
-  const auto va = a.losses.values(), vb = b.losses.values();
-  ASSERT_EQ(va.size(), vb.size());
-  for (size_t i = 0; i < va.size(); ++i)
-    EXPECT_NEAR(vb[i].second, va[i].second, 1e-4 * std::abs(va[i].second)) << va[i].first;
-  const auto pa = cpu.trainable_parameters(), pb = gpu.trainable_parameters();
-  ASSERT_EQ(pa.size(), pb.size());
-  double diff = 0, norm = 0;
-  for (size_t i = 0; i < pa.size(); ++i) {
-    ASSERT_TRUE(pa[i].grad().defined() && pb[i].grad().defined()) << "parameter " << i;
-    diff += (pb[i].grad().cpu() - pa[i].grad()).pow(2).sum().item<double>();
-    norm += pa[i].grad().pow(2).sum().item<double>();
-  }
-  EXPECT_LT(std::sqrt(diff / norm), 1e-3);
+  auto out = compute_losses(nets, tgt.to(device), srcs.to(device), K.to(device), stage, c);
+  out.losses.total.backward();
+  Step s;
+  s.losses = out.losses.values();
+  const std::vector<std::pair<std::string, torch::nn::Module*>> modules = {
+      {"depth", nets.depth.get()}, {"pose", nets.pose.get()}, {"flow", nets.flow.get()}};
+  for (const auto& [name, m] : modules)
+    for (const auto& p : m->parameters())
+      if (p.grad().defined()) s.grads[name].push_back(p.grad().cpu());
+  return s;
 }
 
+// |b - a| / |a| over all gradients of one network.
+double gradient_gap(const Step& a, const Step& b, const std::string& net) {
+  const auto &ga = a.grads.at(net), &gb = b.grads.at(net);
+  EXPECT_EQ(ga.size(), gb.size()) << net;
+  double diff = 0, norm = 0;
+  for (size_t i = 0; i < ga.size() && i < gb.size(); ++i) {
+    diff += (gb[i] - ga[i]).pow(2).sum().item<double>();
+    norm += ga[i].pow(2).sum().item<double>();
+  }
+  return std::sqrt(diff / norm);
+}
+
+// CUDA against the CPU. The gradients of this step are not smooth functions of its inputs: eq. 16
+// is built of |x| terms (L1 photometric error, smoothness) that have a kink at 0, and of masks
+// (occlusion, eq. 13; consistency, eq. 15) that switch at thresholds; at initialisation the
+// networks' outputs are nearly flat, so many arguments sit at those kinks and switches. On the CPU
+// alone, the target image perturbed by 1e-7 of its value (float32 rounding) moves the gradients by
+// ~0.5% (DepthNet) and ~5% (FlowNet); 1e-6, by ~3% and ~12%. cuDNN and oneDNN round differently, so
+// a 1e-3 agreement is not to be had (measured on an H200: 1.2%, 1.0%, 5.2%). The test: each
+// network's CUDA gradients are within twice the distance that a 1e-6 perturbation on the CPU gives
+// (a wrong or missing gradient on CUDA is off by far more), and every loss term within 1e-3.
+TEST(Cuda, Fp32StepMatchesTheCpuStep) {
+  GEO_REQUIRE_CUDA();
+  namespace F = torch::nn::functional;
+  torch::manual_seed(8);
+  const auto smooth = [](const torch::Tensor& low) {  // frames with image structure, not white noise
+    return F::interpolate(low, F::InterpolateFuncOptions().size(std::vector<int64_t>{64, 128}).mode(torch::kBilinear)
+                                   .align_corners(false));
+  };
+  const auto tgt = smooth(torch::rand({2, 3, 8, 16}));
+  const auto srcs = smooth(torch::rand({4, 3, 8, 16})).view({2, 2, 3, 64, 128});
+  const auto perturbed = tgt * (1 + 1e-6 * torch::randn_like(tgt));
+  const Step cpu = fp32_step(torch::kCPU, tgt, srcs), cpu_perturbed = fp32_step(torch::kCPU, perturbed, srcs);
+  const Step cuda = fp32_step(torch::Device(torch::kCUDA, 0), tgt, srcs);
+  ASSERT_EQ(cuda.losses.size(), cpu.losses.size());
+  for (size_t i = 0; i < cpu.losses.size(); ++i)
+    EXPECT_NEAR(cuda.losses[i].second, cpu.losses[i].second, 1e-3 * std::abs(cpu.losses[i].second)) << cpu.losses[i].first;
+  for (const char* net : {"depth", "pose", "flow"}) {
+    const double gap = gradient_gap(cpu, cuda, net), yardstick = gradient_gap(cpu, cpu_perturbed, net);
+    std::cout << net << ": CUDA vs CPU gradient gap " << gap << ", CPU vs CPU with the input perturbed by 1e-6: "
+              << yardstick << "\n";
+    EXPECT_GT(yardstick, 0) << net;
+    EXPECT_LT(gap, 2 * yardstick) << net;
+  }
+}
+
+// fp32 with cuDNN's deterministic algorithms (run.deterministic): with TF32 and autotuning each
+// process picks its own algorithms, and a few Adam steps amplify their rounding (measured on an
+// H200: the first stage-2 step of two such runs 5% apart in flow smoothness; with this, within 1e-3).
 Config cuda_run_config() {
   return parse_config(R"(
 model: {encoder_depth: 18}
@@ -82,7 +123,7 @@ stages:
   - {name: s1, iterations: 3, train: [depth, pose], batch_size: 2}
   - {name: s2, iterations: 2, train: [depth, pose, flow], batch_size: 2}
 logging: {interval: 1, summary_interval: 0, checkpoint_interval: 2, val_interval: 2, keep_last: 5}
-run: {threads: 2, seed: 3, device: cuda}
+run: {threads: 2, seed: 3, device: cuda, precision: fp32, deterministic: true}
 )", "cuda.yaml");
 }
 
