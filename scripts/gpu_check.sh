@@ -6,27 +6,81 @@
 #      checkpoints moving between CUDA and CPU) and then the whole suite on that build,
 #   3. trains the smoke config on the in-memory synthetic world on CUDA (both stages, validation,
 #      checkpoints, resume-ready run folder) and prints its speed from metrics.csv,
-#   4. runs scripts/bench.sh cuda (training steps, inference, peak memory) into build-gpu/bench/.
-# Record what it prints, with the GPU, driver, CUDA and PyTorch versions, beside the figures.
-#   GEO_TORCH / GEO_BUILD_DIR / GEO_OPENCV as for scripts/setup.sh (defaults python, build-gpu, auto)
-set -euo pipefail
+#   4. runs scripts/bench.sh cuda (training steps at the paper's batch and size, inference, peak
+#      memory; TF32, the default run.precision) and the same in bf16 into build-gpu/bench/,
+#   5. where this geo has NCCL, trains two processes over NCCL on the first GPU (NCCL itself may
+#      refuse two ranks on one GPU: that is reported, not a failure of geo).
+# Each step runs even when an earlier one failed; the summary at the end names the failed steps and
+# the exit status is non-zero if any did. Record what it prints, with the GPU, driver, CUDA and
+# PyTorch versions, beside the figures.
+#   GEO_TORCH / GEO_BUILD_DIR / GEO_OPENCV / GEO_TARGETS / GEO_JOBS as for scripts/setup.sh
+#                    (defaults python, build-gpu, auto, everything, all cores)
+#   GEO_GPU_SUITE=0  skip the whole suite (step 2's second half; it takes the longest)
+#   GEO_GPU_LOG_DIR  also keep each step's log there (default: none)
+set -uo pipefail
 cd "$(dirname "$0")/.."
 export GEO_TORCH="${GEO_TORCH:-python}"
 export GEO_BUILD_DIR="${GEO_BUILD_DIR:-build-gpu}"
-python3 -c 'import torch; assert torch.cuda.is_available(), "torch.cuda.is_available() is False"; print("geo gpu check: PyTorch", torch.__version__, "CUDA", torch.version.cuda, "cuDNN", torch.backends.cudnn.version(), "on", torch.cuda.get_device_name(0))'
+BUILD="$GEO_BUILD_DIR"
+LOGS="${GEO_GPU_LOG_DIR:-}"
+[ -z "$LOGS" ] || mkdir -p "$LOGS"
+FAILED=()
+
+# step NAME COMMAND...: runs COMMAND, its output also into $LOGS/NAME.log, and records a failure.
+step() {
+  local name="$1"; shift
+  echo "geo gpu check: $name"
+  local t0=$SECONDS rc
+  if [ -n "$LOGS" ]; then "$@" 2>&1 | tee "$LOGS/$name.log"; rc=${PIPESTATUS[0]}; else "$@"; rc=$?; fi
+  echo "geo gpu check: $name: $([ "$rc" = 0 ] && echo ok || echo "FAILED (exit $rc)") in $((SECONDS - t0)) s"
+  [ "$rc" = 0 ] || FAILED+=("$name")
+  return 0
+}
+
+python3 -c 'import torch; assert torch.cuda.is_available(), "torch.cuda.is_available() is False"; print("geo gpu check: PyTorch", torch.__version__, "CUDA", torch.version.cuda, "cuDNN", torch.backends.cudnn.version(), "on", torch.cuda.get_device_name(0))' || exit 1
 command -v nvidia-smi >/dev/null && nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader || true
-scripts/setup.sh
+echo "geo gpu check: CPU $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2-), $(nproc) cores"
 
-echo "geo gpu check: CUDA tests"
-(cd "$GEO_BUILD_DIR" && ctest --output-on-failure -R '^Cuda\.')
-echo "geo gpu check: the whole suite on this build"
-(cd "$GEO_BUILD_DIR" && ctest --output-on-failure -j "${GEO_TEST_JOBS:-4}")
+step build scripts/setup.sh
+[ -x "$BUILD/apps/geo_train" ] || { echo "geo gpu check: no geo_train was built; stopping" >&2; exit 1; }
 
-echo "geo gpu check: training on CUDA (smoke config, in-memory synthetic world)"
-RUN="$GEO_BUILD_DIR/gpu_check_run"
+if [ -x "$BUILD/tests/cuda_tests" ]; then
+  step cuda-tests bash -c "cd '$BUILD' && ctest --output-on-failure -R '^Cuda\.'"
+fi
+if [ "${GEO_GPU_SUITE:-1}" = 1 ]; then
+  step suite bash -c "cd '$BUILD' && ctest --output-on-failure -j '${GEO_TEST_JOBS:-4}'"
+fi
+
+RUN="$BUILD/gpu_check_run"
 rm -rf "$RUN"
-"$GEO_BUILD_DIR/apps/geo_train" --config smoke.yaml --device cuda --run-dir "$RUN" --set data.format=synthetic
-echo "geo gpu check: checkpoints in $RUN/checkpoints, losses in $RUN/metrics.csv"
+step train-cuda "$BUILD/apps/geo_train" --config smoke.yaml --device cuda --run-dir "$RUN" --set data.format=synthetic
+[ -f "$RUN/metrics.csv" ] && echo "geo gpu check: checkpoints in $RUN/checkpoints, losses and step times in $RUN/metrics.csv"
 
-echo "geo gpu check: benchmarks"
-scripts/bench.sh cuda
+step bench-tf32 scripts/bench.sh cuda
+step bench-bf16 env GEO_BENCH_OUT="$BUILD/bench/bf16" scripts/bench.sh cuda --precision bf16
+
+# Two processes over NCCL on GPU 0 (a machine with two GPUs would give each its own).
+if grep -q 'GEO_WITH_NCCL' "$BUILD/build.ninja" "$BUILD/src/CMakeFiles/geo_train_parts.dir/flags.make" 2>/dev/null; then
+  nccl_pair() {
+    local port pids=() rc=0
+    port=$((29500 + RANDOM % 1000))
+    rm -rf "$BUILD/gpu_check_nccl"
+    for r in 0 1; do
+      RANK=$r WORLD_SIZE=2 LOCAL_RANK=0 MASTER_ADDR=127.0.0.1 MASTER_PORT=$port timeout 300 \
+        "$BUILD/apps/geo_train" --config smoke.yaml --device cuda:0 --run-dir "$BUILD/gpu_check_nccl" \
+        --set data.format=synthetic --set run.distributed.backend=nccl --set run.distributed.timeout_s=120 &
+      pids+=($!)
+    done
+    for p in "${pids[@]}"; do wait "$p" || rc=$?; done
+    return $rc
+  }
+  step nccl-two-processes nccl_pair
+else
+  echo "geo gpu check: this geo has no NCCL (configure said NCCL OFF): no multi-process GPU check"
+fi
+
+if [ ${#FAILED[@]} -gt 0 ]; then
+  echo "geo gpu check: FAILED steps: ${FAILED[*]}"
+  exit 1
+fi
+echo "geo gpu check: all steps passed"

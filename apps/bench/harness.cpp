@@ -180,6 +180,7 @@ std::vector<std::string> fr_overheads(const std::vector<Row>& rows) {
 Ceiling measure_ceiling(const torch::Device& device, int64_t n, int iters) {
   Ceiling c;
   c.n = n;
+  c.tf32 = device.is_cuda() && at::globalContext().allowTF32CuBLAS();
   torch::NoGradGuard no_grad;
   for (const bool bf16 : {false, true}) {
     const auto dtype = bf16 ? torch::kBFloat16 : torch::kFloat32;
@@ -229,9 +230,9 @@ void print_table(const std::vector<Row>& rows, const Ceiling& ceiling) {
                 fmt_num(r.gflops_per_s(), "{:.0f}").c_str(), fraction(r, ceiling).c_str());
   }
   if (ceiling.fp32 > 0)
-    std::printf("ceiling: %lldx%lld matrix product %.0f GFLOP/s fp32, %.0f GFLOP/s bf16 "
+    std::printf("ceiling: %lldx%lld matrix product %.0f GFLOP/s %s, %.0f GFLOP/s bf16 "
                 "(ceil: a row's GFLOP/s as a share of its precision's ceiling)\n",
-                static_cast<long long>(ceiling.n), static_cast<long long>(ceiling.n), ceiling.fp32, ceiling.bf16);
+                static_cast<long long>(ceiling.n), static_cast<long long>(ceiling.n), ceiling.fp32, ceiling.float_name(), ceiling.bf16);
   for (const auto& o : fr_overheads(rows)) std::printf("FR overhead, %s\n", o.c_str());
 }
 
@@ -240,8 +241,9 @@ std::string markdown_table(const std::vector<Row>& rows, const Ceiling& ceiling,
   std::string md = fmt::format("Machine: {}; LibTorch {}; {}.\nCommand: `{}`\n\n", machine, TORCH_VERSION,
                                geo::local_date(), command);
   if (ceiling.fp32 > 0)
-    md += fmt::format("Ceiling ({0}x{0} matrix product, same threads): {1:.0f} GFLOP/s fp32, {2:.0f} GFLOP/s bf16. "
-                      "A training step counts 3x its forward FLOPs.\n\n", ceiling.n, ceiling.fp32, ceiling.bf16);
+    md += fmt::format("Ceiling ({0}x{0} matrix product, same threads): {1:.0f} GFLOP/s {3}, {2:.0f} GFLOP/s bf16. "
+                      "A training step counts 3x its forward FLOPs.\n\n", ceiling.n, ceiling.fp32, ceiling.bf16,
+                      ceiling.float_name());
   md += "| section | what | FR | batch | parameters | GFLOPs | ms/call | ms/sample | samples/s | peak MB | GFLOP/s | of ceiling |\n"
         "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& r : rows)
@@ -263,7 +265,8 @@ std::string json_report(const std::vector<Row>& rows, const Ceiling& ceiling, co
      << "\",\n  \"threads\": " << h.threads << ",\n  \"height\": " << h.height << ",\n  \"width\": " << h.width
      << ",\n  \"bn_folded\": " << (h.bn_folded ? "true" : "false") << ",\n  \"cpu_flags\": \"" << cpu_flags()
      << "\",\n  \"ceiling_gflops_fp32\": " << json_num(ceiling.fp32)
-     << ",\n  \"ceiling_gflops_bf16\": " << json_num(ceiling.bf16) << ",\n  \"rows\": [\n";
+     << ",\n  \"ceiling_gflops_bf16\": " << json_num(ceiling.bf16)
+     << ",\n  \"ceiling_tf32\": " << (ceiling.tf32 ? "true" : "false") << ",\n  \"rows\": [\n";
   for (size_t i = 0; i < rows.size(); ++i) {
     const auto& r = rows[i];
     const double ceil = ceiling.of(r), achieved = r.gflops_per_s();

@@ -35,7 +35,9 @@ struct Ceiling {
   double fp32 = -1;
   double bf16 = -1;
   int64_t n = 0;
+  bool tf32 = false;  // CUDA with TF32 allowed (run.precision tf32): the float32 product runs on TF32 tensor cores
   double of(const Row& r) const { return r.bf16 ? bf16 : fp32; }
+  const char* float_name() const { return tf32 ? "fp32 (TF32)" : "fp32"; }
 };
 
 // Times a [n,n] x [n,n] product in fp32 and bf16 on `device`: the fastest of `iters` after two warm-ups.
