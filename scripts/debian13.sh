@@ -6,9 +6,14 @@
 #   scripts/debian13.sh scripts/demo.sh            the demo (its out/ lands in out/debian13/)
 #   GEO_OPENCV=0 scripts/debian13.sh scripts/test.sh   without OpenCV, as on a PyTorch GPU image
 #   scripts/debian13.sh bash                       a shell in the root, in the checkout's copy
+#   GEO_DEBIAN13_CUDA=1 GEO_OPENCV=0 scripts/debian13.sh scripts/test.sh
+#                      the same on Debian's CUDA build of LibTorch 2.6 (contrib: CUDA 12.4, NCCL),
+#                      with nvcc; no GPU needed: the CUDA code is compiled, the CUDA tests skip
 # Environment:
-#   GEO_DEBIAN13_ROOT  where the root lives (default: ~/.cache/geo/debian13; ~1.7 GB, made in
-#                      ~3-6 minutes, reused afterwards; delete the folder to make it anew)
+#   GEO_DEBIAN13_ROOT  where the root lives (default: ~/.cache/geo/debian13, or debian13-cuda with
+#                      GEO_DEBIAN13_CUDA=1; ~1.7 GB / ~9 GB, made in ~3-6 / ~6-10 minutes, reused
+#                      afterwards; delete the folder to make it anew)
+#   GEO_DEBIAN13_CUDA  1: the CUDA root (see above)
 #   GEO_* variables are passed on to the script inside.
 # The root sees the checkout as /src/geo (a copy: build folders inside it are kept between runs, so
 # rebuilds are incremental), ../shared as /src/shared (read-only) and out/debian13 as /src/geo/out.
@@ -17,16 +22,29 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 CHECKOUT="$(pwd)"
-(($#)) || { sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'; exit 2; }
+(($#)) || { sed -n '2,24p' "$0" | sed 's/^# \{0,1\}//'; exit 2; }
 
 if [ "$(id -u)" -ne 0 ]; then
   command -v sudo >/dev/null || { echo "geo debian13: needs root or sudo (mmdebstrap, chroot, mounts)" >&2; exit 1; }
   exec sudo --preserve-env "$0" "$@"
 fi
 
-ROOT="${GEO_DEBIAN13_ROOT:-${HOME:-/root}/.cache/geo/debian13}"
+CUDA="${GEO_DEBIAN13_CUDA:-0}"
+[ "$CUDA" = 0 ] || [ "$CUDA" = 1 ] || { echo "geo debian13: GEO_DEBIAN13_CUDA must be 0 or 1, not '$CUDA'" >&2; exit 1; }
+NAME=debian13
+[ "$CUDA" = 1 ] && NAME=debian13-cuda
+ROOT="${GEO_DEBIAN13_ROOT:-${HOME:-/root}/.cache/geo/$NAME}"
 # Debian 13 packages the root starts with; scripts/setup.sh inside adds what it needs.
-PACKAGES=python3-torch,python3-yaml,python3-numpy,python3-dev,pybind11-dev,python3-pytest,python3-onnx,libtorch-dev,libgloo-dev,libopenblas0-pthread,g++,cmake,make,ninja-build,ccache,libyaml-cpp-dev,libcli11-dev,libspdlog-dev,libgtest-dev,libgmock-dev
+COMMON=python3-yaml,python3-numpy,python3-dev,pybind11-dev,python3-pytest,python3-onnx,libopenblas0-pthread,g++,cmake,make,ninja-build,ccache,libyaml-cpp-dev,libcli11-dev,libspdlog-dev,libgtest-dev,libgmock-dev
+COMPONENTS=main
+if [ "$CUDA" = 1 ]; then
+  # contrib: the CUDA build of LibTorch (with its Gloo and Python packages); non-free: the CUDA
+  # toolkit (nvcc, which LibTorch's CMake config requires), its libraries and NCCL's headers.
+  PACKAGES=python3-torch-cuda,libtorch-cuda-dev,libgloo-cuda-dev,libnccl-dev,nvidia-cuda-toolkit,$COMMON
+  COMPONENTS=main,contrib,non-free
+else
+  PACKAGES=python3-torch,libtorch-dev,libgloo-dev,$COMMON
+fi
 
 # The host's Debian mirror (its main archive, as apt uses it): never written into the repository.
 host_mirror() {
@@ -44,10 +62,57 @@ if [ ! -x "$ROOT/usr/bin/g++" ] || [ ! -f "$ROOT/.geo-root-complete" ]; then
     apt-get update -q >/dev/null
     DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends mmdebstrap >/dev/null
   fi
-  echo "geo debian13: making a Debian 13 root in $ROOT from $MIRROR (~3-6 minutes, ~1.7 GB)"
+  echo "geo debian13: making a Debian 13 root ($NAME) in $ROOT from $MIRROR (a few minutes, several GB)"
   mkdir -p "$(dirname "$ROOT")"
   rm -rf "$ROOT.partial"
-  mmdebstrap --variant=apt --include="$PACKAGES" trixie "$ROOT.partial" "$MIRROR"
+  EXTRA=()
+  if [ "$CUDA" = 1 ]; then
+    # Debian's nvidia-cudnn is an installer: its postinst downloads cuDNN from NVIDIA, which an
+    # offline machine (or one that sees only the Debian mirror) cannot. LibTorch's package needs it
+    # only as libcudnn.so.9 for the dynamic linker; cuDNN's code runs only on a GPU. A stand-in
+    # package satisfies the dependency and a stub libcudnn.so.9 (below) the linker: geo compiles and
+    # links against the CUDA LibTorch and runs its tests on the CPU. On a machine with a GPU, use a
+    # real cuDNN (scripts/gpu_check.sh uses PyTorch's wheels, which bring theirs).
+    # dpkg runs inside the root and apt outside: the package lies at the same path in both.
+    STANDIN="$(mktemp -d /tmp/geo-cudnn-standin.XXXXXX)"
+    mkdir -p "$STANDIN/pkg/DEBIAN"
+    cat > "$STANDIN/pkg/DEBIAN/control" <<'CONTROL'
+Package: nvidia-cudnn
+Version: 9.0.0.312~cuda12+geo1
+Architecture: amd64
+Maintainer: geo <geo@localhost>
+Provides: libcudnn.so.9
+Section: contrib/libs
+Priority: optional
+Description: stand-in for the cuDNN installer in geo's CUDA compile root
+ No cuDNN: scripts/debian13.sh adds a stub libcudnn.so.9 so that programs link against
+ Debian's CUDA LibTorch and run on the CPU. Not for use with a GPU.
+CONTROL
+    dpkg-deb --build "$STANDIN/pkg" "$STANDIN/nvidia-cudnn-standin.deb" >/dev/null
+    EXTRA=(--include="$STANDIN/nvidia-cudnn-standin.deb"
+           --setup-hook="mkdir -p \"\$1$STANDIN\" && cp '$STANDIN/nvidia-cudnn-standin.deb' \"\$1$STANDIN/\""
+           --customize-hook="rm -rf \"\$1$STANDIN\"")
+  fi
+  mmdebstrap --variant=apt --components="$COMPONENTS" --include="$PACKAGES" "${EXTRA[@]}" trixie "$ROOT.partial" "$MIRROR"
+  if [ "$CUDA" = 1 ]; then
+    rm -rf "$STANDIN"
+    # The stub: every cuDNN function that LibTorch's libraries and its Python module name
+    # (versioned libcudnn.so.9, as cuDNN's), none of which runs without a GPU. /usr/local/lib is on
+    # the loader's and the linker's path.
+    chroot "$ROOT.partial" /bin/bash -euo pipefail -c '
+      syms=$({ find /usr/lib/x86_64-linux-gnu /usr/lib/python3/dist-packages/torch -name "*.so*" -type f \
+                 \( -name "libtorch*" -o -name "libc10*" -o -name "libcaffe2*" -o -name "_C*" \) 2>/dev/null || true; } |
+             xargs -r nm -D --undefined-only 2>/dev/null |
+             awk "\$2 ~ /^cudnn.*@libcudnn.so.9\$/ { sub(/@.*/, \"\", \$2); print \$2 }" | sort -u)
+      [ -n "$syms" ] || { echo "geo debian13: no cuDNN functions named by LibTorch" >&2; exit 1; }
+      cd /tmp
+      { echo "/* stub: geo compile root, no cuDNN */"; for s in $syms; do echo "int $s(void) { return 1; }"; done; } > cudnn_stub.c
+      echo "libcudnn.so.9 { global: *; };" > cudnn_stub.map
+      gcc -shared -fPIC -o /usr/local/lib/libcudnn.so.9 -Wl,-soname,libcudnn.so.9 -Wl,--version-script=cudnn_stub.map cudnn_stub.c
+      rm cudnn_stub.c cudnn_stub.map
+      ldconfig
+      echo "geo debian13: stub libcudnn.so.9 with $(echo "$syms" | wc -w) functions"'
+  fi
   touch "$ROOT.partial/.geo-root-complete"
   rm -rf "$ROOT"
   mv "$ROOT.partial" "$ROOT"

@@ -59,12 +59,16 @@ command -v ccache >/dev/null || { [ "$TORCH" != system ] || PACKAGES+=(ccache); 
 # already on the PATH (a PyTorch image's) will do.
 command -v ninja >/dev/null || PACKAGES+=(ninja-build)
 if [ "$TORCH" = system ]; then
+  # Debian's LibTorch: the CPU build (main), or its CUDA build where that is installed (contrib,
+  # Debian 13: libtorch-cuda-dev, which conflicts with libtorch-dev; scripts/debian13.sh's CUDA root)
+  # with its own Gloo and Python packages.
+  if installed libtorch-cuda-dev; then TORCH_PACKAGES=(libtorch-cuda-dev libgloo-cuda-dev libnccl-dev python3-torch-cuda)
+  else TORCH_PACKAGES=(libtorch-dev libgloo-dev python3-torch); fi
   PACKAGES+=(
-    libtorch-dev
-    libgloo-dev  # the headers of LibTorch's Gloo backend: multi-process training (train/distributed.h)
+    "${TORCH_PACKAGES[@]}"  # libgloo*-dev: the headers of LibTorch's Gloo backend (train/distributed.h)
     libopenblas0-pthread  # without it Debian's LibTorch uses the reference BLAS: 17-25x slower matmuls
     # The Python module (python/) on the same LibTorch, and its tests.
-    python3-torch python3-numpy python3-yaml python3-dev pybind11-dev python3-pytest python3-onnx
+    python3-numpy python3-yaml python3-dev pybind11-dev python3-pytest python3-onnx
   )
 fi
 if [ "$OPENCV" = 1 ]; then PACKAGES+=(libopencv-dev); fi
