@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "models/fr.h"
+#include "models/conv_bn.h"
 #include "models/layers.h"
 #include "models/resnet_encoder.h"
 

@@ -1,7 +1,7 @@
 #include "models/fr.h"
 
 #include "core/tensor_checks.h"
-#include "models/layers.h"
+#include "models/conv.h"
 
 #include <ATen/Dispatch.h>
 #include <ATen/Parallel.h>

@@ -5,7 +5,7 @@
 
 #include <vector>
 
-#include "models/layers.h"
+#include "models/conv_bn.h"
 
 namespace geo {
 

@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "models/fr.h"
-#include "models/layers.h"
+#include "models/conv_bn.h"
 
 namespace geo {
 

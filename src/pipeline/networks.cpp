@@ -5,6 +5,7 @@
 #include "geometry/warp.h"
 #include "losses/photometric.h"
 #include "losses/rigid_view.h"
+#include "models/conv_bn.h"
 #include "models/layers.h"
 
 #include <yaml-cpp/yaml.h>

@@ -17,7 +17,7 @@
 #pragma once
 
 #include "core/config.h"
-#include "models/layers.h"
+#include "models/conv_bn.h"
 #include "pipeline/networks.h"
 
 #include <torch/torch.h>
@@ -149,7 +149,7 @@ class GradientAverager {
 };
 
 // An in-place sum over the group (all_reduce_sum of one tensor) for synchronised BatchNorm
-// (models/layers.h: set_batchnorm_sync). The group must outlive it.
+// (models/conv_bn.h: set_batchnorm_sync). The group must outlive it.
 std::shared_ptr<const SumAcrossProcesses> sum_across(ProcessGroup& group);
 
 // rank 0's parameters and buffers copied into every process's module.

@@ -7,7 +7,10 @@
 #include <thread>
 
 #include "models/depth_net.h"
+#include "models/conv_bn.h"
 #include "models/layers.h"
+#include "models/sync_batch_norm.h"
+#include "models/upsample_conv.h"
 
 namespace geo {
 namespace {

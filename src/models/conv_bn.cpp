@@ -1,0 +1,130 @@
+#include "models/conv_bn.h"
+
+#include <torch/version.h>
+
+#include "core/runtime.h"
+#include "models/upsample_conv.h"
+
+namespace geo {
+
+ConvBnImpl::ConvBnImpl(int64_t in, int64_t out, int64_t kernel, int64_t stride, bool relu_)
+    : relu(relu_) {
+  conv = register_module("conv", Conv2d(torch::nn::Conv2dOptions(in, out, kernel)
+                                                       .stride(stride)
+                                                       .padding(kernel / 2)
+                                                       .bias(false)));
+  bn = register_module("bn", torch::nn::BatchNorm2d(out));
+}
+
+torch::Tensor ConvBnImpl::conv_bn_relu(const torch::Tensor& x, const ConvFn& conv_fn) {
+  torch::Tensor y;
+  if (folded()) {
+    TORCH_CHECK(!is_training(), "ConvBn: BatchNorm was folded for inference; this module cannot train");
+    y = conv_fn(x, folded_weight_, folded_bias_);
+  } else {
+    const auto c = conv_fn(x, conv->weight, conv->bias);
+    y = sync && is_training() ? sync_batch_norm(c, *bn, sync) : bn(c);
+  }
+  return relu ? torch::relu(y) : y;
+}
+
+namespace {
+
+// A convolution with kernels prepacked by at::mkldnn_reorder_conv2d_weight: the activations are
+// reordered into oneDNN's layout and back, the weights not.
+torch::Tensor packed_conv(const torch::Tensor& x, const torch::Tensor& weight, const torch::Tensor& bias,
+                          torch::IntArrayRef padding, torch::IntArrayRef stride) {
+  return at::mkldnn_convolution(x.contiguous().to_mkldnn(), weight, bias, padding, stride, {1, 1}, 1).to_dense();
+}
+
+}  // namespace
+
+bool ConvBnImpl::uses_packed(const torch::Tensor& x, const torch::Tensor& packed) const {
+  if (!packed.defined() || !x.device().is_cpu() || x.scalar_type() != folded_weight_.scalar_type()) return false;
+  TORCH_CHECK(!is_training(), "ConvBn: BatchNorm was folded for inference; this module cannot train");
+  return true;
+}
+
+torch::Tensor ConvBnImpl::forward(const torch::Tensor& x) {
+  const auto& o = conv->options;
+  const auto k = *o.kernel_size();
+  const int64_t pad = onednn_channel_padding(x);
+  if (uses_packed(x, packed_weight_)) {  // (packed with the padded channels)
+    const auto y = packed_conv(pad_channels(x, pad), packed_weight_, packed_bias_, {k[0] / 2, k[1] / 2}, *o.stride());
+    return relu ? torch::relu(y) : y;
+  }
+  return conv_bn_relu(x, [&](const torch::Tensor& in, const torch::Tensor& w, const torch::Tensor& b) {
+    return conv2d(in, w, b, *o.stride(), {k[0] / 2, k[1] / 2});  // padding as constructed
+  });
+}
+
+torch::Tensor ConvBnImpl::forward_upsampled(const torch::Tensor& x) {
+  const auto& o = conv->options;
+  TORCH_CHECK((*o.kernel_size())[0] == 3 && (*o.kernel_size())[1] == 3 && (*o.stride())[0] == 1 &&
+                  (*o.stride())[1] == 1,
+              "forward_upsampled needs a 3x3 stride-1 ConvBn");
+  if (x.size(2) * x.size(3) < kMinSubpixelArea) return forward(upsample2(x, UpsampleMode::kNearest));
+  if (uses_packed(x, packed_phase_weight_)) {
+    const int64_t B = x.size(0), Co = folded_weight_.size(0), h = x.size(2), w = x.size(3);
+    const auto y = interleave_phases(
+        packed_conv(x, packed_phase_weight_, packed_phase_bias_, {1, 1}, {1, 1}).view({B, 2, 2, Co, h + 1, w + 1}));
+    return relu ? torch::relu(y) : y;
+  }
+  return conv_bn_relu(x, conv3x3_of_upsampled);
+}
+
+int set_batchnorm_sync(torch::nn::Module& module, std::shared_ptr<const SumAcrossProcesses> sum) {
+  int n = 0;
+  for (auto& m : module.modules(/*include_self=*/true)) {
+    if (auto* cb = m->as<ConvBnImpl>()) {
+      cb->sync = sum;
+      ++n;
+    }
+  }
+  return n;
+}
+
+void ConvBnImpl::fold_batchnorm(torch::Dtype dtype) {
+  if (folded()) return;
+  torch::NoGradGuard no_grad;
+  const auto scale = bn->weight / torch::sqrt(bn->running_var + bn->options.eps());
+  const auto weight = conv->weight * scale.view({-1, 1, 1, 1}), bias = bn->bias - bn->running_mean * scale;
+  folded_weight_ = weight.to(dtype).contiguous();
+  folded_bias_ = bias.to(dtype);
+  if (conv->weight.device().is_cpu() && at::hasMKLDNN() && at::globalContext().userEnabledMkldnn())
+    prepack(weight, bias.to(torch::kFloat32));  // oneDNN adds a float32 bias to bf16 products
+}
+
+void ConvBnImpl::prepack(const torch::Tensor& w32, const torch::Tensor& b32) {
+  const auto& o = conv->options;
+  const auto k = *o.kernel_size();
+  const std::vector<int64_t> pad = {k[0] / 2, k[1] / 2};
+  try {
+    const auto w = pad_channels(folded_weight_, onednn_channel_padding(folded_weight_));  // as forward pads x
+    packed_weight_ = at::mkldnn_reorder_conv2d_weight(w.contiguous().to_mkldnn(), pad, *o.stride(), {1, 1}, 1);
+    packed_bias_ = b32;
+    if (k[0] == 3 && k[1] == 3 && (*o.stride())[0] == 1 && (*o.stride())[1] == 1) {
+      packed_phase_weight_ = at::mkldnn_reorder_conv2d_weight(
+          phase_kernels(w32).to(folded_weight_.scalar_type()).contiguous().to_mkldnn(), {1, 1}, {1, 1}, {1, 1}, 1);
+      packed_phase_bias_ = b32.repeat({4});
+    }
+    // A CPU without oneDNN's kernels for this type (bf16 without AVX-512) fails here, not later.
+    packed_conv(torch::zeros({1, w.size(1), k[0], k[1]}, folded_weight_.options()), packed_weight_,
+                packed_bias_, pad, *o.stride());
+  } catch (const c10::Error&) {
+    packed_weight_ = packed_phase_weight_ = packed_bias_ = packed_phase_bias_ = torch::Tensor();
+  }
+}
+
+int fold_batchnorm(torch::nn::Module& module, torch::Dtype dtype) {
+  int n = 0;
+  for (auto& m : module.modules(/*include_self=*/true)) {
+    if (auto* cb = m->as<ConvBnImpl>()) {
+      cb->fold_batchnorm(dtype);
+      ++n;
+    }
+  }
+  return n;
+}
+
+}  // namespace geo
