@@ -10,10 +10,10 @@
 #                      the same on Debian's CUDA build of LibTorch 2.6 (contrib: CUDA 12.4, NCCL),
 #                      with nvcc; no GPU needed: the CUDA code is compiled, the CUDA tests skip
 # Environment:
-#   GEO_DEBIAN13_ROOT  where the root lives (default: ~/.cache/geo/debian13, or debian13-cuda with
-#                      GEO_DEBIAN13_CUDA=1; ~1.7 GB / ~9 GB, made in ~3-6 / ~6-10 minutes, reused
-#                      afterwards; delete the folder to make it anew)
+#   GEO_DEBIAN13_ROOT  where the root lives (default: ~/.cache/geo/debian13; ~1.7 GB, made in ~3-6
+#                      minutes, reused afterwards; delete the folder to make it anew)
 #   GEO_DEBIAN13_CUDA  1: the CUDA root (see above)
+#   GEO_DEBIAN13_CUDA_ROOT  where that one lives (default: ~/.cache/geo/debian13-cuda; ~8 GB, ~3 min)
 #   GEO_* variables are passed on to the script inside.
 # The root sees the checkout as /src/geo (a copy: build folders inside it are kept between runs, so
 # rebuilds are incremental), ../shared as /src/shared (read-only) and out/debian13 as /src/geo/out.
@@ -31,9 +31,13 @@ fi
 
 CUDA="${GEO_DEBIAN13_CUDA:-0}"
 [ "$CUDA" = 0 ] || [ "$CUDA" = 1 ] || { echo "geo debian13: GEO_DEBIAN13_CUDA must be 0 or 1, not '$CUDA'" >&2; exit 1; }
-NAME=debian13
-[ "$CUDA" = 1 ] && NAME=debian13-cuda
-ROOT="${GEO_DEBIAN13_ROOT:-${HOME:-/root}/.cache/geo/$NAME}"
+if [ "$CUDA" = 1 ]; then NAME=debian13-cuda ROOT="${GEO_DEBIAN13_CUDA_ROOT:-${HOME:-/root}/.cache/geo/debian13-cuda}"
+else NAME=debian13 ROOT="${GEO_DEBIAN13_ROOT:-${HOME:-/root}/.cache/geo/debian13}"; fi
+# A root made for the other flavour (a folder named for both) is refused, not used.
+if [ -f "$ROOT/.geo-root-complete" ] && [ -s "$ROOT/.geo-root-complete" ] && [ "$(cat "$ROOT/.geo-root-complete")" != "$NAME" ]; then
+  echo "geo debian13: $ROOT holds the $(cat "$ROOT/.geo-root-complete") root, not $NAME: give each its own folder (GEO_DEBIAN13_ROOT, GEO_DEBIAN13_CUDA_ROOT)" >&2
+  exit 1
+fi
 # Debian 13 packages the root starts with; scripts/setup.sh inside adds what it needs.
 COMMON=python3-yaml,python3-numpy,python3-dev,pybind11-dev,python3-pytest,python3-onnx,libopenblas0-pthread,g++,cmake,make,ninja-build,ccache,libyaml-cpp-dev,libcli11-dev,libspdlog-dev,libgtest-dev,libgmock-dev
 COMPONENTS=main
@@ -113,7 +117,7 @@ CONTROL
       ldconfig
       echo "geo debian13: stub libcudnn.so.9 with $(echo "$syms" | wc -w) functions"'
   fi
-  touch "$ROOT.partial/.geo-root-complete"
+  echo "$NAME" > "$ROOT.partial/.geo-root-complete"
   rm -rf "$ROOT"
   mv "$ROOT.partial" "$ROOT"
 fi
