@@ -13,6 +13,7 @@
 #include "core/logging.h"
 #include "core/runtime.h"
 #include "data/synth_writer.h"
+#include "data/video/frame_stream.h"
 #include "data/video/video_clips.h"
 #include "app_options.h"
 

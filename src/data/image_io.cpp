@@ -79,17 +79,19 @@ torch::Tensor read_image(const std::string& path) {
 
 torch::Tensor read_image_resized(const std::string& path, int64_t height, int64_t width,
                                  int64_t* original_height, int64_t* original_width) {
-  cv::Mat m = read_raw(path, cv::IMREAD_UNCHANGED);
+  const cv::Mat m = read_raw(path, cv::IMREAD_UNCHANGED);
   if (original_height) *original_height = m.rows;
   if (original_width) *original_width = m.cols;
-  if (m.rows != height || m.cols != width) {
-    const bool shrink = height < m.rows && width < m.cols;
-    cv::Mat r;
-    cv::resize(m, r, cv::Size(static_cast<int>(width), static_cast<int>(height)), 0, 0,
-               shrink ? cv::INTER_AREA : cv::INTER_LINEAR);
-    m = r;
-  }
-  return mat_to_tensor(m, path);
+  return resized_mat_to_tensor(m, height, width, path);
+}
+
+torch::Tensor resized_mat_to_tensor(const cv::Mat& bgr_any, int64_t height, int64_t width, const std::string& path) {
+  if (bgr_any.rows == height && bgr_any.cols == width) return mat_to_tensor(bgr_any, path);
+  const bool shrink = height < bgr_any.rows && width < bgr_any.cols;
+  cv::Mat r;
+  cv::resize(bgr_any, r, cv::Size(static_cast<int>(width), static_cast<int>(height)), 0, 0,
+             shrink ? cv::INTER_AREA : cv::INTER_LINEAR);
+  return mat_to_tensor(r, path);
 }
 
 void write_image(const std::string& path, const torch::Tensor& image) {

@@ -5,6 +5,7 @@
 
 #include "data/video/clip_camera.h"
 #include "data/video/frame_selection.h"
+#include "data/video/frame_stream.h"
 #include "geometry/camera.h"
 
 #include <opencv2/imgcodecs.hpp>
@@ -93,14 +94,6 @@ class ClipSnippets : public SnippetSource {
   int64_t seq_length_;
 };
 
-bool is_image_name(const fs::path& p) {
-  auto ext = p.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
-  for (const char* e : {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp"})
-    if (ext == e) return true;
-  return false;
-}
-
 std::string ordinal(int64_t n) {
   if (n == 1) return "every frame";
   const int64_t m100 = n % 100, m10 = n % 10;
@@ -121,80 +114,40 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
   c.height = d.height;
   c.width = d.width;
   const auto& v = d.video;
-  int64_t H0 = 0, W0 = 0;
-  std::string first;  // the frame that fixed the size, for messages
-  auto check_size = [&](const cv::Mat& m, const std::string& what) {
-    if (first.empty()) {
-      first = what;
-      H0 = m.rows;
-      W0 = m.cols;
+  FrameStream stream(path, "clip");
+  const double source_fps = stream.is_video() && v.source_fps == 0 ? stream.fps() : v.source_fps;
+  FrameSelector selector(frame_rate_stride(source_fps, v.fps), v.static_threshold);
+  std::string name;
+  cv::Mat m;
+  while (true) {
+    const int64_t idx = stream.index() + 1;
+    const bool wanted = selector.wants(idx);
+    if (!stream.next(name, wanted ? &m : nullptr)) break;  // a folder's unwanted files stay unread
+    if (!wanted) {
+      selector.offer(idx, {});
+      continue;
+    }
+    if (!c.K.defined()) {
+      // The crop window and the camera from the first frame's size, before the clip is decoded
+      // further. No camera given: the networks learn it (model.learn_intrinsics, set by the config
+      // for such data); the snippets carry a nominal one.
+      const int64_t W0 = stream.width(), H0 = stream.height();
       c.window = v.crop ? crop_to_aspect(W0, H0, d.width, d.height, v.crop_y) : CropWindow{0, 0, W0, H0};
-      // The camera is checked before the clip is decoded further.
-      // No camera given: the networks learn it (model.learn_intrinsics, set by the config for such
-      // data); the snippets carry a nominal one.
       c.K = cropped_resized_intrinsics(clip_camera(d.camera, W0, H0, path, !d.camera.given()), c.window, d.height, d.width)
                 .to(torch::kFloat32);
-    } else if (m.rows != H0 || m.cols != W0) {
-      throw std::runtime_error("clip '" + path + "': " + what + " is " + std::to_string(m.cols) + "x" +
-                               std::to_string(m.rows) + " but " + first + " is " + std::to_string(W0) + "x" +
-                               std::to_string(H0) + ": the frames of one clip must have one size");
     }
-  };
-  double source_fps = v.source_fps;
-  std::unique_ptr<FrameSelector> selector;
-  const bool folder = fs::is_directory(path);
-  int64_t total = 0;
-  if (folder) {
-    const auto files = frame_files(path);
-    if (files.empty())
-      throw std::runtime_error("clip '" + path + "': the folder holds no image files (png, jpg, jpeg, bmp, tif, webp)");
-    selector = std::make_unique<FrameSelector>(frame_rate_stride(source_fps, v.fps), v.static_threshold);
-    for (size_t i = 0; i < files.size(); ++i) {
-      const auto idx = static_cast<int64_t>(i);
-      if (!selector->wants(idx)) {
-        selector->offer(idx, {});
-        continue;
-      }
-      const cv::Mat m = read_colour(files[i]);
-      check_size(m, "'" + files[i] + "'");
-      const auto frame = mat_to_tensor(crop_resize(m, c.window, d.height, d.width), path);
-      if (selector->offer(idx, motion_thumbnail(frame))) {
-        c.files.push_back(files[i]);
-        c.index.push_back(idx);
-      }
+    const cv::Mat small = crop_resize(m, c.window, d.height, d.width);
+    if (!selector.offer(idx, motion_thumbnail(mat_to_tensor(small, path)))) continue;
+    c.index.push_back(idx);
+    if (stream.is_video()) {  // kept in memory as JPEG; a folder's frames are read again from disk
+      c.jpeg.emplace_back();
+      cv::imencode(".jpg", small, c.jpeg.back(), {cv::IMWRITE_JPEG_QUALITY, kJpegQuality});
+    } else {
+      c.files.push_back(stream.files()[static_cast<size_t>(idx)]);
     }
-    total = static_cast<int64_t>(files.size());
-  } else {
-    if (!fs::exists(path)) throw std::runtime_error("clip '" + path + "' does not exist (data.videos)");
-    // OpenCV's FFmpeg back-end (Debian's OpenCV has it); the GStreamer one prints pages of errors for
-    // a file it cannot read.
-    cv::VideoCapture cap(path, cv::CAP_FFMPEG);
-    if (!cap.isOpened())
-      throw std::runtime_error("clip '" + path + "': OpenCV cannot open it as a video (not a video, or a codec "
-                               "this OpenCV lacks); a folder of its frames works too");
-    const double fps = cap.get(cv::CAP_PROP_FPS);
-    if (source_fps == 0 && std::isfinite(fps) && fps > 0 && fps < 1000) source_fps = fps;
-    selector = std::make_unique<FrameSelector>(frame_rate_stride(source_fps, v.fps), v.static_threshold);
-    cv::Mat m;
-    int64_t idx = 0;
-    while (cap.read(m)) {
-      if (m.empty()) break;
-      if (!selector->wants(idx)) {
-        selector->offer(idx++, {});
-        continue;
-      }
-      check_size(m, "frame " + std::to_string(idx));
-      const cv::Mat small = crop_resize(m, c.window, d.height, d.width);
-      if (selector->offer(idx, motion_thumbnail(mat_to_tensor(small, path)))) {
-        c.jpeg.emplace_back();
-        cv::imencode(".jpg", small, c.jpeg.back(), {cv::IMWRITE_JPEG_QUALITY, kJpegQuality});
-        c.index.push_back(idx);
-      }
-      ++idx;
-    }
-    total = idx;
-    if (total == 0) throw std::runtime_error("clip '" + path + "': no frame could be decoded (an empty or damaged video)");
   }
+  const int64_t total = stream.index() + 1, W0 = stream.width(), H0 = stream.height();
+  if (total == 0) throw std::runtime_error("clip '" + path + "': no frame could be decoded (an empty or damaged video)");
   const auto kept = static_cast<int64_t>(c.index.size());
   if (total < d.seq_length)
     throw std::runtime_error("clip '" + path + "' has " + std::to_string(total) + " frame" + (total == 1 ? "" : "s") +
@@ -202,7 +155,7 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
   if (kept < d.seq_length)
     throw std::runtime_error(
         "clip '" + path + "': only " + std::to_string(kept) + " of its " + std::to_string(total) +
-        " frames move (at most " + fixed(100 * selector->largest_change(), 1) + "% of the pixels changed between the " +
+        " frames move (at most " + fixed(100 * selector.largest_change(), 1) + "% of the pixels changed between the " +
         "frames looked at; data.video.static_threshold is " + fixed(100 * v.static_threshold, 1) + "%): a clip without " +
         "camera motion teaches neither depth nor motion. Lower data.video.static_threshold if the camera does move");
   char fps_text[32];
@@ -211,7 +164,7 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
   const int64_t stride = frame_rate_stride(source_fps, v.fps);
   *report = "clip '" + path + "': " + std::to_string(total) + " frames (" + std::to_string(W0) + "x" + std::to_string(H0) +
             ", " + rate + "); " + ordinal(stride) + (stride > 1 ? " for " + fixed(v.fps, 0) + " fps" : "") + ", " +
-            std::to_string(selector->skipped_static()) + " static frames left out (under " +
+            std::to_string(selector.skipped_static()) + " static frames left out (under " +
             fixed(100 * v.static_threshold, 1) + "% of the pixels changed): " + std::to_string(kept) + " kept";
   if (c.window.width != W0 || c.window.height != H0)
     *report += "; cropped to " + std::to_string(c.window.width) + "x" + std::to_string(c.window.height) + " at (" +
@@ -222,16 +175,6 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
 }
 
 }  // namespace
-
-std::vector<std::string> frame_files(const std::string& folder) {
-  std::vector<std::string> files;
-  for (const auto& e : fs::directory_iterator(folder))
-    if (e.is_regular_file() && is_image_name(e.path())) files.push_back(e.path().string());
-  std::sort(files.begin(), files.end(), [](const std::string& a, const std::string& b) {
-    return natural_less(fs::path(a).filename().string(), fs::path(b).filename().string());
-  });
-  return files;
-}
 
 void write_video_file(const std::vector<std::string>& frames, const std::string& path, double fps) {
   if (frames.empty()) throw std::runtime_error("video '" + path + "': no frames to write");

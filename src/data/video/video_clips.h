@@ -31,7 +31,4 @@ VideoData open_video_clips(const DataConfig& data);
 // every OpenCV build): geo_synth --video, and clips for tests. Throws naming the file.
 void write_video_file(const std::vector<std::string>& frames, const std::string& path, double fps);
 
-// The image files of a frame folder in natural order (png, jpg, jpeg, bmp, tif, tiff, webp).
-std::vector<std::string> frame_files(const std::string& folder);
-
 }  // namespace geo
