@@ -3,6 +3,7 @@
 #include <torch/version.h>
 
 #include "core/runtime.h"
+#include "models/layers.h"
 #include "models/upsample_conv.h"
 
 namespace geo {
