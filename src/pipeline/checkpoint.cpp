@@ -8,7 +8,6 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <optional>
 #include <stdexcept>
 
 namespace fs = std::filesystem;
@@ -176,15 +175,15 @@ bool CheckpointFile::load_optimizer(torch::optim::Optimizer& optimizer) {
   optimizer.load(opt);
   // The state comes back on the device it was saved from: a CUDA run resumed on the CPU (or the
   // reverse) moves it to its parameters' device (all of them train on one).
-  std::optional<torch::Device> device;
-  for (const auto& group : optimizer.param_groups())
-    if (!group.params().empty() && !device) device = group.params().front().device();
-  if (!device) return true;
+  const auto& groups = optimizer.param_groups();
+  const auto with_params = std::find_if(groups.begin(), groups.end(), [](const auto& g) { return !g.params().empty(); });
+  if (with_params == groups.end()) return true;
+  const torch::Device device = with_params->params().front().device();
   for (auto& entry : optimizer.state())
     if (auto* adam = dynamic_cast<torch::optim::AdamParamState*>(entry.second.get())) {
-      if (adam->exp_avg().defined()) adam->exp_avg(adam->exp_avg().to(*device));
-      if (adam->exp_avg_sq().defined()) adam->exp_avg_sq(adam->exp_avg_sq().to(*device));
-      if (adam->max_exp_avg_sq().defined()) adam->max_exp_avg_sq(adam->max_exp_avg_sq().to(*device));
+      if (adam->exp_avg().defined()) adam->exp_avg(adam->exp_avg().to(device));
+      if (adam->exp_avg_sq().defined()) adam->exp_avg_sq(adam->exp_avg_sq().to(device));
+      if (adam->max_exp_avg_sq().defined()) adam->max_exp_avg_sq(adam->max_exp_avg_sq().to(device));
     }
   return true;
 }
