@@ -6,8 +6,6 @@
 #include <spdlog/spdlog.h>
 
 #include <chrono>
-#include <filesystem>
-#include <fstream>
 
 #include "core/files.h"
 #include "core/logging.h"
@@ -58,43 +56,10 @@ int main(int argc, char** argv) {
     if (frames > 0) o.frames_per_drive = frames;
     if (flow_pairs >= 0) o.flow_pairs = flow_pairs;
     if (odometry_frames > 0) o.odometry_frames = odometry_frames;
-    namespace fs = std::filesystem;
-    {
-      // What the world will take on disk, before minutes of rendering: every raw frame as an RGB
-      // image, a depth map and a Velodyne scan (upper bounds: PNG compresses), flow pairs as three
-      // images and four ground-truth maps, the odometry frames as images.
-      const double image = 3.0 * o.height * o.width, scan = 16.0 * o.lidar_beams * (360.0 / o.lidar_azimuth_step_deg);
-      const double frames = static_cast<double>(o.train_drives + o.test_drives) * static_cast<double>(o.frames_per_drive);
-      const double bytes = frames * (image + 2.0 * o.height * o.width + scan) + o.flow_pairs * (3 * image + 4 * 6.0 * o.height * o.width) +
-                           static_cast<double>(o.odometry_frames) * image;
-      fs::path probe = fs::absolute(out);
-      while (!probe.empty() && !fs::exists(probe)) probe = probe.parent_path();
-      std::error_code ec;
-      const auto space = fs::space(probe, ec);
-      spdlog::info("geo_synth: {:.0f} frames, at most {:.2f} GB", frames + 3.0 * o.flow_pairs + o.odometry_frames, bytes / 1e9);
-      if (!ec && bytes / 2 > static_cast<double>(space.available))
-        throw std::runtime_error("this world needs about " + std::to_string(static_cast<int64_t>(bytes / 2e9)) + "-" +
-                                 std::to_string(static_cast<int64_t>(bytes / 1e9)) + " GB and " + probe.string() + " has " +
-                                 std::to_string(static_cast<int64_t>(space.available / 1000000000)) +
-                                 " GB free: fewer --drives, --frames, --flow-pairs or --odometry-frames");
-    }
-    if (fs::exists(out) && !fs::is_empty(out)) {
-      if (!force) throw std::runtime_error("--out '" + out + "' exists and is not empty (use --force to replace the world there)");
-      // A new world replaces the old one whole: files the new one does not write (more drives, pairs
-      // or frames before) would otherwise be scored with it. Only a world geo_synth wrote is removed.
-      std::ifstream readme(out + "/README.txt");
-      std::string first;
-      std::getline(readme, first);
-      if (first.rfind("Synthetic KITTI-format world written by geo_synth", 0) != 0)
-        throw std::runtime_error("--out '" + out + "' is not empty and holds no world written by geo_synth (no README.txt "
-                                 "of one): --force replaces only such a world; choose another --out");
-      for (const char* part : {"raw", "kitti2015", "odometry", "README.txt", "camera_height.txt"}) {
-        std::string error;
-        if (!geo::remove_tree(out + "/" + part, &error))
-          throw std::runtime_error("--force: could not remove the earlier world: " + error);
-      }
-      spdlog::info("--force: the earlier world in {} removed", out);
-    }
+    spdlog::info("geo_synth: {} frames, at most {:.2f} GB",
+                 (o.train_drives + o.test_drives) * o.frames_per_drive + 3 * o.flow_pairs + o.odometry_frames,
+                 geo::synth_world_bytes(o) / 1e9);
+    if (geo::prepare_synth_root(out, o, force)) spdlog::info("--force: the earlier world in {} removed", out);
     spdlog::info("geo_synth: preset {} ({}x{}), seed {}, {} training + {} test drives of {} frames, "
                  "{} flow pairs, {} odometry frames -> {}",
                  preset, o.width, o.height, seed, o.train_drives, o.test_drives, o.frames_per_drive,

@@ -8,12 +8,16 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <sstream>
 
 namespace fs = std::filesystem;
 
 namespace geo {
 namespace {
+
+// The first words of the README.txt every world starts with: how prepare_synth_root knows one.
+const std::string kReadmeStart = "Synthetic KITTI-format world written by geo_synth";
 
 // P = K [I | 0] for a rectified camera at the reference camera's centre.
 torch::Tensor projection(const SynthOptions& o) {
@@ -148,7 +152,7 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
   write_file_atomic(seq + "/times.txt", times.str());
   write_poses(root + "/odometry/poses/09.txt", relative_poses(odo, 0, o.odometry_frames));
   write_file_atomic(root + "/README.txt",
-                    "Synthetic KITTI-format world written by geo_synth (preset " + o.preset +
+                    kReadmeStart + " (preset " + o.preset +
                         ", seed " + std::to_string(o.seed) + ", " + std::to_string(o.width) + "x" +
                         std::to_string(o.height) + ").\nraw/ = KITTI raw layout with Eigen-style "
                         "splits in raw/splits; kitti2015/ = KITTI 2015 flow layout (obj_map: the moving cars); odometry/ = "
@@ -158,6 +162,40 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
   std::ostringstream height;
   height << kSynthCameraHeight << "\n";
   write_file_atomic(root + "/camera_height.txt", height.str());
+}
+
+double synth_world_bytes(const SynthOptions& o) {
+  const double image = 3.0 * o.height * o.width, scan = 16.0 * o.lidar_beams * (360.0 / o.lidar_azimuth_step_deg);
+  const double frames = static_cast<double>(o.train_drives + o.test_drives) * static_cast<double>(o.frames_per_drive);
+  return frames * (image + 2.0 * o.height * o.width + scan) + o.flow_pairs * (3 * image + 4 * 6.0 * o.height * o.width) +
+         static_cast<double>(o.odometry_frames) * image;
+}
+
+bool prepare_synth_root(const std::string& root, const SynthOptions& options, bool force) {
+  const double bytes = synth_world_bytes(options);
+  fs::path probe = fs::absolute(root);
+  while (!probe.empty() && !fs::exists(probe)) probe = probe.parent_path();
+  std::error_code ec;
+  const auto space = fs::space(probe, ec);
+  if (!ec && bytes / 2 > static_cast<double>(space.available))
+    throw std::runtime_error("this world needs about " + std::to_string(static_cast<int64_t>(bytes / 2e9)) + "-" +
+                             std::to_string(static_cast<int64_t>(bytes / 1e9)) + " GB and " + probe.string() + " has " +
+                             std::to_string(static_cast<int64_t>(space.available / 1000000000)) +
+                             " GB free: fewer --drives, --frames, --flow-pairs or --odometry-frames");
+  if (!fs::exists(root) || fs::is_empty(root)) return false;
+  if (!force) throw std::runtime_error("--out '" + root + "' exists and is not empty (use --force to replace the world there)");
+  std::ifstream readme(root + "/README.txt");
+  std::string first;
+  std::getline(readme, first);
+  if (first.rfind(kReadmeStart, 0) != 0)
+    throw std::runtime_error("--out '" + root + "' is not empty and holds no world written by geo_synth (no README.txt "
+                             "of one): --force replaces only such a world; choose another --out");
+  for (const char* part : {"raw", "kitti2015", "odometry", "README.txt", "camera_height.txt"}) {
+    std::string error;
+    if (!remove_tree(root + "/" + part, &error))
+      throw std::runtime_error("--force: could not remove the earlier world: " + error);
+  }
+  return true;
 }
 
 }  // namespace geo

@@ -22,4 +22,15 @@ namespace geo {
 void write_synth_world(const std::string& root, const SynthOptions& options,
                        const std::function<void(int64_t, int64_t, const std::string&)>& progress = {});
 
+// An upper bound of the bytes the world takes on disk (PNG compresses: about half of it in
+// practice): every raw frame as an RGB image, a depth map and a Velodyne scan, flow pairs as three
+// images and four ground-truth maps, the odometry frames as images.
+double synth_world_bytes(const SynthOptions& options);
+
+// Readies `root` for a new world before any rendering: refuses when the disk where it goes has less
+// than half of synth_world_bytes free; a non-empty root needs `force`, and then only a world
+// geo_synth wrote (its README.txt) is removed, whole, so that files a smaller world does not write
+// are not scored with it. Returns whether an earlier world was removed.
+bool prepare_synth_root(const std::string& root, const SynthOptions& options, bool force);
+
 }  // namespace geo
