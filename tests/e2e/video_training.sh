@@ -6,6 +6,7 @@
 set -eu
 apps="$1"
 work="$2"
+data="${3:-$(dirname "$0")/../data}"
 rm -rf "$work"
 mkdir -p "$work"
 "$apps/geo_synth" --preset tiny --drives 1 --test-drives 1 --frames 24 --flow-pairs 0 --odometry-frames 5 \
@@ -43,4 +44,11 @@ grep -q "learned camera" "$work/infer_learned.log" || { cat "$work/infer_learned
   > "$work/infer.log" 2>&1 || { cat "$work/infer.log"; exit 1; }
 test -f "$work/infer/000003-depth.png"
 test -f "$work/infer/trajectory.txt"
+# Real frames (grey PNGs of a KITTI odometry run), no camera: the networks learn it.
+real="$data/kitti_real/odometry_forward/frames"
+"$apps/geo_train" --config video.yaml --run-dir "$work/run_real" --set "data.videos=[$real]" \
+  --set $small > "$work/real.log" 2>&1 || { cat "$work/real.log"; exit 1; }
+grep -q "clip '$real': 51 frames (424x128, rate unknown)" "$work/real.log" || { cat "$work/real.log"; exit 1; }
+grep -q "camera not given: learned by the networks" "$work/real.log" || { cat "$work/real.log"; exit 1; }
+test -f "$work/run_real/checkpoints/stage1-00000002.pt"
 echo "video training: ok"
