@@ -11,7 +11,6 @@
 #include <filesystem>
 
 #include "core/files.h"
-#include "core/logging.h"
 #include "eval/protocols.h"
 #include "app_options.h"
 

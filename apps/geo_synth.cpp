@@ -7,9 +7,6 @@
 
 #include <chrono>
 
-#include "core/files.h"
-#include "core/logging.h"
-#include "core/runtime.h"
 #include "data/synth_writer.h"
 #include "data/video/frame_stream.h"
 #include "data/video/video_clips.h"
