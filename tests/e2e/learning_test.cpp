@@ -24,24 +24,14 @@
 
 #include <cmath>
 
+#include "eval_result.h"
 #include "test_util.h"
 
 namespace geo {
 namespace {
 
-double metric(const EvalResult& r, const std::string& name) {
-  for (const auto& [k, v] : r.metrics)
-    if (k == name) return v;
-  ADD_FAILURE() << "no metric " << name;
-  return 0;
-}
-
-int64_t count_of(const EvalResult& r, const std::string& name) {
-  for (const auto& [k, v] : r.counts)
-    if (k == name) return v;
-  ADD_FAILURE() << "no count " << name;
-  return 0;
-}
+using test::count_of;
+using test::metric_of;
 
 // One world and one two-stage training for the checks below (ctest runs them in one process: the
 // e2e_tests executable is one ctest test), each check its own test so that a failure names it.
@@ -101,9 +91,9 @@ TEST_F(Learning, ShortTrainingBeatsUntrainedAndTrivialBaselines) {
   };
   for (const Check c : {Check{"eigen", "abs_rel", 0.92}, Check{"odometry", "ate_mean", 0.5},
                         Check{"kitti2015", "epe_all", 0.8}}) {
-    const double tr = metric(eval(c.split, &trained), c.metric);
-    const double un = metric(eval(c.split, &untrained), c.metric);
-    const double tv = metric(eval(c.split, nullptr), c.metric);
+    const double tr = metric_of(eval(c.split, &trained), c.metric);
+    const double un = metric_of(eval(c.split, &untrained), c.metric);
+    const double tv = metric_of(eval(c.split, nullptr), c.metric);
     std::printf("learning check %-9s %-8s trained %.4f  untrained %.4f  trivial %.4f\n", c.split, c.metric, tr, un, tv);
     EXPECT_LT(tr, c.margin * std::min(un, tv)) << c.split << " " << c.metric;
   }
@@ -116,8 +106,8 @@ TEST_F(Learning, ResidualFlowImprovesTheMovingCarsNotTheStaticScene) {
   // vs 3.93 px (0.92), static scene 1.50 vs 1.74. The margin 0.97 leaves room for the noise of a
   // short run while still requiring a gain that a zero residual (ratio exactly 1) cannot give.
   const auto flow = eval("kitti2015", &trained);
-  const double fg = metric(flow, "epe_fg"), rigid_fg = metric(flow, "rigid_epe_fg");
-  const double bg = metric(flow, "epe_bg"), rigid_bg = metric(flow, "rigid_epe_bg");
+  const double fg = metric_of(flow, "epe_fg"), rigid_fg = metric_of(flow, "rigid_epe_fg");
+  const double bg = metric_of(flow, "epe_bg"), rigid_bg = metric_of(flow, "rigid_epe_bg");
   std::printf("learning check stage 2: cars full %.4f rigid %.4f (%.3f), static full %.4f rigid %.4f (%.3f)\n", fg,
               rigid_fg, fg / rigid_fg, bg, rigid_bg, bg / rigid_bg);
   EXPECT_LT(fg, 0.97 * rigid_fg) << "the residual flow does not improve the moving cars";
@@ -130,13 +120,13 @@ TEST_F(Learning, CameraHeightScalesDepthWithoutGroundTruth) {
   // 1.65 m). On the demo's model (240 stage-1 iterations) AbsRel 0.237 against 0.217 median-scaled
   // and the factor 1.04 x the ground truth's; the bounds (20%, 0.8..1.25) leave room for a short
   // run's noise and still fail a broken fit (a fitted normal gave 0.43 x).
-  const double median_abs_rel = metric(eval("eigen", &trained), "abs_rel");
+  const double median_abs_rel = metric_of(eval("eigen", &trained), "abs_rel");
   const auto height = eval("eigen", &trained, DepthScaling::kCameraHeight);
   std::printf("learning check camera height: abs_rel %.4f (median scaling %.4f), scale agreement %.3f +- %.3f\n",
-              metric(height, "abs_rel"), median_abs_rel, metric(height, "scale_agreement_median"),
-              metric(height, "scale_agreement_std"));
-  EXPECT_LT(metric(height, "abs_rel"), 1.2 * median_abs_rel);
-  EXPECT_NEAR(metric(height, "scale_agreement_median"), 1.0, 0.25);
+              metric_of(height, "abs_rel"), median_abs_rel, metric_of(height, "scale_agreement_median"),
+              metric_of(height, "scale_agreement_std"));
+  EXPECT_LT(metric_of(height, "abs_rel"), 1.2 * median_abs_rel);
+  EXPECT_NEAR(metric_of(height, "scale_agreement_median"), 1.0, 0.25);
 }
 
 TEST_F(Learning, MotionInMetresWithoutGroundTruth) {
@@ -149,9 +139,9 @@ TEST_F(Learning, MotionInMetresWithoutGroundTruth) {
   // metres (the network's own scale is arbitrary; see the printed unscaled ratio).
   const auto odometry = eval("odometry", &trained, DepthScaling::kCameraHeight);
   std::printf("learning check metric trajectory: scale error %.3f, road plane in %lld of %lld frames\n",
-              metric(odometry, "metric_scale_error"), static_cast<long long>(count_of(odometry, "frames_with_road_plane")),
+              metric_of(odometry, "metric_scale_error"), static_cast<long long>(count_of(odometry, "frames_with_road_plane")),
               static_cast<long long>(count_of(odometry, "frames")));
-  EXPECT_LT(std::abs(std::log(metric(odometry, "metric_scale_error"))), std::log(1.5));
+  EXPECT_LT(std::abs(std::log(metric_of(odometry, "metric_scale_error"))), std::log(1.5));
   EXPECT_GT(count_of(odometry, "frames_with_road_plane"), count_of(odometry, "frames") / 2);
 
   // The library's metric step: relative_pose's rotation, its translation times metric_depth's factor
@@ -211,7 +201,7 @@ TEST_F(Learning, MotionInMetresWithoutGroundTruth) {
 
 TEST_F(Learning, LearnedCameraConvergesAndKeepsDepth) {
   Predictor trained(run_, "cpu");
-  const double median_abs_rel = metric(eval("eigen", &trained), "abs_rel");
+  const double median_abs_rel = metric_of(eval("eigen", &trained), "abs_rel");
   const std::string seq = root_ + "/world/odometry/sequences/09";
   const auto truth = read_poses(root_ + "/world/odometry/poses/09.txt");
   auto frame = [&](int64_t f) { return read_image(seq + "/image_2/" + zero_padded(f, 6) + ".png"); };
@@ -234,7 +224,7 @@ run: {seed: 1, threads: 2}
   lt.run_dir = root_ + "/learned_camera";
   ASSERT_EQ(train(parse_config(learned_yaml, "learned.yaml", {"data.root=" + root_ + "/world/raw"}), lt), 0);
   Predictor learned(lt.run_dir, "cpu");
-  const double learned_abs_rel = metric(eval("eigen", &learned), "abs_rel");
+  const double learned_abs_rel = metric_of(eval("eigen", &learned), "abs_rel");
   const Model camera_model = Model::load(lt.run_dir);
   std::vector<torch::Tensor> cams;
   for (int64_t f = 0; f + 1 < truth.size(0); f += 3) cams.push_back(camera_model.intrinsics(frame(f), frame(f + 1)));

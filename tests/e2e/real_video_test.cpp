@@ -11,6 +11,7 @@
 // must fail: what passes is learnt from the images, not from the schedule or the smoothness prior.
 #include "core/config.h"
 #include "core/files.h"
+#include "data/calib.h"
 #include "eval/predictor.h"
 #include "eval/protocols.h"
 #include "eval/sources.h"
@@ -21,6 +22,7 @@
 #include <cstdio>
 #include <filesystem>
 
+#include "eval_result.h"
 #include "test_util.h"
 
 namespace geo {
@@ -32,12 +34,8 @@ const std::string kData = GEO_TEST_DATA_DIR "/kitti_real";
 const std::vector<std::string> kRuns = {"forward", "turn"};
 constexpr int kTrainFrames = 36;  // frames 0..35 train; snippets centred on 39..48 are scored
 
-double metric(const EvalResult& r, const std::string& name) {
-  for (const auto& [k, v] : r.metrics)
-    if (k == name) return v;
-  ADD_FAILURE() << "no metric " << name;
-  return 0;
-}
+using test::metric_of;
+
 
 struct Scores {
   double abs_rel = 0;
@@ -59,12 +57,16 @@ class RealVideo : public ::testing::Test {
       }
       clips.push_back(clip);
     }
+    // The camera of the frames: P0 of the committed calib.txt (both runs: one sequence).
+    const auto P0 = read_key_values(kData + "/odometry_forward/calib.txt").projection("P0");
+    const std::string P = format_numbers(P0);
+    const std::string intrinsics = "[" + format_numbers(P0[0][0]) + "," + format_numbers(P0[1][1]) + "," +
+                                   format_numbers(P0[0][2]) + "," + format_numbers(P0[1][2]) + "]";
     // The scoring root: KITTI raw (eigen) as committed, and each run as a KITTI odometry sequence.
     // The odometry protocol reads image_2/ with P2 of calib.txt; these frames are the grey left
     // camera's (P0), whose matrix stands in for all four.
     fs::create_directories(root_ + "/eval/odometry/poses");
     fs::create_directory_symlink(kData + "/raw", root_ + "/eval/raw");
-    const std::string P = "244.5443 0 208.1615 0 0 244.6167 63.3466 0 0 0 1 0";
     for (size_t i = 0; i < kRuns.size(); ++i) {
       const std::string seq = root_ + "/eval/odometry/sequences/" + sequence(i);
       fs::create_directories(seq);
@@ -85,7 +87,7 @@ class RealVideo : public ::testing::Test {
     for (size_t i = 0; i < clips.size(); ++i) videos += (i ? "," : "") + clips[i];
     videos += "]";
     const std::vector<std::string> common = {
-        videos, "data.camera.intrinsics=[244.5443,244.6167,208.1615,63.3466]", "data.video.val_fraction=0",
+        videos, "data.camera.intrinsics=" + intrinsics, "data.video.val_fraction=0",
         "data.height=64", "data.width=208", "data.num_workers=1", "model.encoder_depth=18",
         "model.bn_momentum=0.1", "stages.0.iterations=400", "stages.0.learning_rate=5.0e-4", "logging.interval=100",
         "logging.summary_interval=0", "logging.checkpoint_interval=400", "logging.val_interval=0", "run.seed=1",
@@ -115,14 +117,14 @@ class RealVideo : public ::testing::Test {
     depth.split = "eigen";
     depth.data_root = root_ + "/eval";
     depth.split_file = root_ + "/eval/depth_frames.txt";
-    s.abs_rel = metric(run(depth), "abs_rel");
+    s.abs_rel = metric_of(run(depth), "abs_rel");
     for (size_t i = 0; i < kRuns.size(); ++i) {
       EvalOptions odometry;
       odometry.split = "odometry";
       odometry.data_root = root_ + "/eval";
       odometry.sequence = sequence(i);
       odometry.split_file = root_ + "/eval/heldout_" + sequence(i) + ".txt";
-      s.ate.push_back(metric(run(odometry), "ate_mean"));
+      s.ate.push_back(metric_of(run(odometry), "ate_mean"));
     }
     return s;
   }

@@ -17,6 +17,7 @@
 
 #include <spdlog/fmt/fmt.h>
 
+#include "eval_result.h"
 #include "synth_world.h"
 
 namespace geo {
@@ -125,19 +126,8 @@ TEST(PoseMetrics, SnippetAteIsScaleAndOffsetInvariantAndHandComputed) {
   EXPECT_NEAR(aligned_trajectory_rmse(traj, 2.5 * traj.matmul(R.t()) + 1.0), 0.0, 1e-9);
 }
 
-int64_t count_of(const EvalResult& r, const std::string& name) {
-  for (const auto& [key, value] : r.counts)
-    if (key == name) return value;
-  ADD_FAILURE() << "no count '" << name << "' in the result";
-  return -1;
-}
-
-double metric_of(const EvalResult& r, const std::string& name) {
-  for (const auto& [k, v] : r.metrics)
-    if (k == name) return v;
-  ADD_FAILURE() << "no metric '" << name << "' in the result";
-  return -1;
-}
+using test::count_of;
+using test::metric_of;
 
 // KITTI odometry's t_err / r_err (devkit, kitti-odom-eval) on a hand-made pair: 21 frames 1 m apart
 // along z, segment lengths 5 and 10 m, every 10th frame: segments (0 -> 6), (0 -> 11), (10 -> 16)
