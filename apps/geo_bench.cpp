@@ -24,7 +24,6 @@
 #include <mutex>
 #include <thread>
 
-#include "api/model_access.h"
 #include "app_options.h"
 #include "bench/harness.h"
 #include "core/config.h"
@@ -272,8 +271,10 @@ std::vector<Row> inference_rows(const geo::Config& config, const std::vector<boo
         if (what == "FlowNet") fn = [&nets, &flow_in] { nets.flow(flow_in); };
         if (what == "pipeline") fn = [&nets, &img, &img2, &K] { geo::predict_pair(nets, img, img2, K); };
         if (what == "Model::depth") {  // the library's call: an 8-bit RGB frame in, depth at its size out
-          models.push_back(std::make_unique<geo::Model>(geo::ModelAccess::untrained(
-              geo::NetworkSpec::of(made[k].first), "untrained", device.str(), made_bf16[k] ? "bf16" : "fp32")));
+          geo::LoadOptions lo;
+          lo.device = device.str();
+          lo.precision = made_bf16[k] ? "bf16" : "fp32";
+          models.push_back(std::make_unique<geo::Model>(geo::Model::create(geo::to_yaml(made[k].first), lo)));
           fn = [m = models.back().get(), &frame8] { m->depth(frame8); };
         }
         calls.emplace_back(&batch_rows.back(), fn);

@@ -86,8 +86,23 @@ void bind_model(py::module_& m) {
           "path"_a, py::kw_only(), "device"_a = "cpu", "precision"_a = "fp32", "threads"_a = 0,
           "A geo_export model file, a training checkpoint or a run folder. device: cpu, cuda, cuda:N or auto;\n"
           "precision: fp32, bf16 or auto; threads > 0 sets LibTorch's intra-op threads (process-wide).")
+      .def_static(
+          "create",
+          [](const std::string& config_yaml, const std::string& device, const std::string& precision, int threads) {
+            LoadOptions options;
+            options.device = device, options.precision = precision, options.threads = threads;
+            py::gil_scoped_release release;
+            return Model::create(config_yaml, options);
+          },
+          "config_yaml"_a = "{}", py::kw_only(), "device"_a = "cpu", "precision"_a = "fp32", "threads"_a = 0,
+          "Untrained networks (torch.manual_seed first for fixed weights) of a geo config given as YAML text\n"
+          "(model.*, data.height/width/seq_length, loss.*; absent keys: geo's defaults, \"{}\": the paper's model\n"
+          "at 128x416): for measuring speed or trying a program before a model is trained.")
       .def_property_readonly("spec", &Model::spec)
       .def_property_readonly("device", &Model::device)
+      .def_property_readonly("training_configs", &Model::training_configs,
+                             "The YAML configs the weights were trained with: the checkpoint's own, then those of the\n"
+                             "checkpoints its training started from (--init), nearest first; [] for geo_export files.")
       .def(
           "depth",
           [](const Model& model, py::handle image) {

@@ -75,9 +75,20 @@ class Model {
  public:
   // A file written by geo_export, or a training checkpoint / run folder of geo_train.
   static Model load(const std::string& path, const LoadOptions& options = {});
+  // Untrained networks (LibTorch's random initialisation; seed torch first for fixed weights) of a
+  // geo config given as YAML text (a configs/*.yaml file's text): its model.*, data.height/width/
+  // seq_length and loss.* keys decide them, absent keys take geo's defaults ("{}": the paper's model
+  // at 128x416). For measuring speed or trying a program before a model is trained; spec().source
+  // is "untrained". Throws geo::Error naming a malformed or unknown key.
+  static Model create(const std::string& config_yaml, const LoadOptions& options = {});
 
   const ModelSpec& spec() const;
   torch::Device device() const;
+  // What the weights were trained with, as geo config YAML texts: the training checkpoint's own
+  // config first, then those of the checkpoints its training started from (geo_train --init),
+  // nearest first; a link that carried none reads "unknown: <why>". Empty for geo_export model
+  // files and created models (they carry no training config).
+  const std::vector<std::string>& training_configs() const;
 
   // Depth of each image, at the image's size: [H,W] for [3,H,W], [B,H,W] for [B,3,H,W].
   torch::Tensor depth(const torch::Tensor& image) const;
@@ -137,7 +148,6 @@ class Model {
   struct Impl;
 
  private:
-  friend struct ModelAccess;  // geo's own tools (evaluation) reach the networks' config through it
   explicit Model(std::shared_ptr<Impl> impl) : impl_(std::move(impl)) {}
   std::shared_ptr<Impl> impl_;  // shared by copies; the networks are only read after loading
 };

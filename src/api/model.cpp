@@ -3,8 +3,6 @@
 // checkpoint format), as training and evaluation are, so inference is the computation geo_eval scores.
 #include "geo/geo.h"
 
-#include "api/model_access.h"
-
 #include "core/runtime.h"
 #include "geometry/pose.h"
 #include "geometry/road_plane.h"
@@ -26,8 +24,7 @@ struct Model::Impl {
   Networks nets;  // and their NetworkSpec
   torch::Device device = torch::kCPU;
   ModelSpec spec;
-  std::optional<Config> training_config;  // a training checkpoint's config (none for model files)
-  std::vector<std::string> init_configs;   // its init chain (CheckpointContents::init_configs)
+  std::vector<std::string> training_configs;  // CheckpointFile::lineage() of a training checkpoint
 };
 
 namespace {
@@ -170,18 +167,17 @@ void make_ready(Model::Impl& impl, const std::string& device, const std::string&
 
 }  // namespace
 
-Model ModelAccess::untrained(const NetworkSpec& spec, const std::string& name, const std::string& device,
-                             const std::string& precision) {
-  return guarded("an untrained model", [&] {
-    auto impl = std::make_shared<Model::Impl>();
-    impl->nets = Networks::create(spec, true);  // the caller seeds
-    make_ready(*impl, device, precision, true, name);
+Model Model::create(const std::string& config_yaml, const LoadOptions& options) {
+  return guarded("creating an untrained geo model", [&] {
+    auto impl = std::make_shared<Impl>();
+    impl->nets = Networks::create(NetworkSpec::parse(config_yaml, "the config given"), true);  // the caller seeds
+    if (options.threads > 0) torch::set_num_threads(options.threads);
+    make_ready(*impl, options.device, options.precision, true, "untrained");
     return Model(impl);
   });
 }
 
-const std::optional<Config>& ModelAccess::training_config(const Model& model) { return model.impl_->training_config; }
-const std::vector<std::string>& ModelAccess::init_configs(const Model& model) { return model.impl_->init_configs; }
+const std::vector<std::string>& Model::training_configs() const { return impl_->training_configs; }
 
 Model Model::load(const std::string& path, const LoadOptions& options) {
   return guarded("loading geo model '" + path + "'", [&] {
@@ -192,8 +188,7 @@ Model Model::load(const std::string& path, const LoadOptions& options) {
     checkpoint.load_networks(impl->nets, false);
     if (options.threads > 0) torch::set_num_threads(options.threads);
     make_ready(*impl, options.device, options.precision, checkpoint.has_flow(), file);
-    impl->training_config = checkpoint.config();
-    impl->init_configs = checkpoint.init_configs();
+    if (checkpoint.config()) impl->training_configs = checkpoint.lineage();
     return Model(impl);
   });
 }

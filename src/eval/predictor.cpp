@@ -1,6 +1,5 @@
 #include "eval/predictor.h"
 
-#include "api/model_access.h"
 #include "pipeline/checkpoint.h"
 
 #include <filesystem>
@@ -14,16 +13,22 @@ Predictor::Predictor(const std::string& checkpoint, const std::string& device)
   LoadOptions o;
   o.device = device.empty() ? "auto" : device;
   model_ = Model::load(path_, o);
+  const auto& configs = model_->training_configs();
+  if (!configs.empty()) training_config_ = parse_config(configs.front(), path_ + " [config]");
 }
 
 Predictor::Predictor(const Config& config, const std::string& device)
     : path_("untrained (" + config.run.name + ", seed " + std::to_string(config.run.seed) + ")") {
   torch::manual_seed(static_cast<uint64_t>(config.run.seed));
-  model_ = ModelAccess::untrained(NetworkSpec::of(config), path_, device.empty() ? "auto" : device);
+  LoadOptions o;
+  o.device = device.empty() ? "auto" : device;
+  model_ = Model::create(to_yaml(config), o);
 }
 
-const std::optional<Config>& Predictor::training_config() const { return ModelAccess::training_config(*model_); }
-const std::vector<std::string>& Predictor::init_configs() const { return ModelAccess::init_configs(*model_); }
+std::vector<std::string> Predictor::init_configs() const {
+  const auto& configs = model_->training_configs();
+  return configs.empty() ? configs : std::vector<std::string>(configs.begin() + 1, configs.end());
+}
 
 torch::Tensor Predictor::depth(const torch::Tensor& image) { return model_->depth(image).unsqueeze(1); }
 

@@ -26,10 +26,10 @@ class Predictor {
   torch::Device device() const { return model_->device(); }
   // The config a training checkpoint carries: what the model was trained on. nullopt for model
   // files (geo_export) and untrained models.
-  const std::optional<Config>& training_config() const;
+  const std::optional<Config>& training_config() const { return training_config_; }
   // The configs its initial weights were trained with, nearest first ("unknown: ..." where a link
-  // carried none): CheckpointContents::init_configs.
-  const std::vector<std::string>& init_configs() const;
+  // carried none): geo::Model::training_configs() after the first.
+  std::vector<std::string> init_configs() const;
 
   // image [B,3,H,W] -> depth [B,1,H,W] in the network's (unknown) scale: 1 / disparity.
   torch::Tensor depth(const torch::Tensor& image);
@@ -46,6 +46,7 @@ class Predictor {
  private:
   std::string path_;
   std::optional<Model> model_;
+  std::optional<Config> training_config_;
 };
 
 // The most recent run's best checkpoint under `runs_dir` (newest folder with checkpoints), or "".

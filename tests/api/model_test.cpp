@@ -139,6 +139,34 @@ TEST(Api, ExportedFilesGiveTheCheckpointsOutputs) {
             static_cast<double>(std::filesystem::file_size(dir + "/m.pt")) * 1.01);
 }
 
+TEST(Api, CreatedModelsAreTheConfigsNetworksAndOnlyCheckpointsCarryTrainingConfigs) {
+  const std::string yaml = "model: {encoder_depth: 18}\ndata: {height: 64, width: 208}\n";
+  const Model trained = Model::load(checkpoint());  // its networks: created from `yaml` after manual_seed(1)
+  torch::manual_seed(1);
+  const Model created = Model::create(yaml);
+  EXPECT_EQ(created.spec().source, "untrained");
+  EXPECT_EQ(created.spec().encoder_depth, 18);
+  EXPECT_EQ(created.spec().width, 208);
+  EXPECT_TRUE(created.spec().has_flow);
+  const auto a = image(64, 208), b = image(64, 208, 0.1);
+  EXPECT_TRUE(torch::equal(created.depth(a), trained.depth(a)));
+  EXPECT_TRUE(torch::equal(created.flow(a, b), trained.flow(a, b)));
+  // Only a training checkpoint says what it was trained with: its config, whole.
+  ASSERT_EQ(trained.training_configs().size(), 1u);
+  EXPECT_EQ(trained.training_configs()[0], to_yaml(parse_config(yaml)));
+  EXPECT_TRUE(created.training_configs().empty());
+  const std::string exported = test::fresh_dir("api_create") + "/m.pt";
+  trained.save(exported);
+  EXPECT_TRUE(Model::load(exported).training_configs().empty());
+  // A key the config does not have is named.
+  try {
+    Model::create("model: {encoder_dept: 18}");
+    ADD_FAILURE() << "no error for an unknown key";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("encoder_dept"), std::string::npos) << e.what();
+  }
+}
+
 TEST(Api, ConcurrentCallsAndNoGlobalState) {
   const std::string& file = checkpoint();  // written first: writing it seeds and draws
   torch::manual_seed(5);

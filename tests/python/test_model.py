@@ -23,6 +23,21 @@ def test_spec_is_the_trained_architecture(model, model_file):
     assert model.device == torch.device("cpu")
 
 
+def test_created_models_follow_the_seed_and_only_checkpoints_carry_training_configs(trained, model, frames):
+    yaml = "model: {encoder_depth: 18}\ndata: {height: 64, width: 208}\n"
+    torch.manual_seed(3)
+    a = geo.Model.create(yaml)
+    torch.manual_seed(3)
+    b = geo.Model.create(yaml)
+    assert (a.spec.source, a.spec.encoder_depth, a.spec.width) == ("untrained", 18, 208)
+    assert torch.equal(a.depth(frames[0]), b.depth(frames[0]))
+    assert a.training_configs == [] and model.training_configs == []  # created, geo_export file
+    configs = geo.Model.load(str(trained[0])).training_configs
+    assert len(configs) == 1 and "encoder_depth: 18" in configs[0]
+    with pytest.raises(geo.Error, match="encoder_dept"):
+        geo.Model.create("model: {encoder_dept: 18}")
+
+
 def test_numpy_images_are_viewed_channels_last_without_a_copy(frames):
     hwc = np.ascontiguousarray(frames[0].permute(1, 2, 0).numpy())
     seen = geo.image(hwc)
