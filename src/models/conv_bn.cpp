@@ -14,7 +14,7 @@ ConvBnImpl::ConvBnImpl(int64_t in, int64_t out, int64_t kernel, int64_t stride, 
                                                        .stride(stride)
                                                        .padding(kernel / 2)
                                                        .bias(false)));
-  bn = register_module("bn", torch::nn::BatchNorm2d(out));
+  bn = register_module("bn", SyncBatchNorm2d(out));
 }
 
 torch::Tensor ConvBnImpl::conv_bn_relu(const torch::Tensor& x, const ConvFn& conv_fn) {
@@ -24,7 +24,7 @@ torch::Tensor ConvBnImpl::conv_bn_relu(const torch::Tensor& x, const ConvFn& con
     y = conv_fn(x, folded_weight_, folded_bias_);
   } else {
     const auto c = conv_fn(x, conv->weight, conv->bias);
-    y = sync && is_training() ? sync_batch_norm(c, *bn, sync) : bn(c);
+    y = bn(c);
   }
   return relu ? torch::relu(y) : y;
 }
@@ -72,17 +72,6 @@ torch::Tensor ConvBnImpl::forward_upsampled(const torch::Tensor& x) {
     return relu ? torch::relu(y) : y;
   }
   return conv_bn_relu(x, conv3x3_of_upsampled);
-}
-
-int set_batchnorm_sync(torch::nn::Module& module, std::shared_ptr<const SumAcrossProcesses> sum) {
-  int n = 0;
-  for (auto& m : module.modules(/*include_self=*/true)) {
-    if (auto* cb = m->as<ConvBnImpl>()) {
-      cb->sync = sum;
-      ++n;
-    }
-  }
-  return n;
 }
 
 void ConvBnImpl::fold_batchnorm(torch::Dtype dtype) {

@@ -35,10 +35,8 @@ struct ConvBnImpl : torch::nn::Module {
   bool folded() const { return folded_weight_.defined(); }
   bool prepacked() const { return packed_weight_.defined(); }
   Conv2d conv{nullptr};
-  torch::nn::BatchNorm2d bn{nullptr};
+  SyncBatchNorm2d bn{nullptr};  // synchronised across processes in data-parallel training
   bool relu;
-  // Set: BatchNorm in training mode is sync_batch_norm over the processes `sync` sums over.
-  std::shared_ptr<const SumAcrossProcesses> sync;
 
  private:
   using ConvFn = std::function<torch::Tensor(const torch::Tensor&, const torch::Tensor&, const torch::Tensor&)>;
@@ -53,10 +51,6 @@ struct ConvBnImpl : torch::nn::Module {
   torch::Tensor packed_weight_, packed_phase_weight_, packed_bias_, packed_phase_bias_;
 };
 TORCH_MODULE(ConvBn);
-
-// Every ConvBn inside `module` normalises with statistics over all processes (`sum`) in training
-// mode, or with its own batch's again (nullptr); returns how many.
-int set_batchnorm_sync(torch::nn::Module& module, std::shared_ptr<const SumAcrossProcesses> sum);
 
 // Folds every ConvBn inside `module` (see ConvBnImpl::fold_batchnorm); returns how many.
 int fold_batchnorm(torch::nn::Module& module, torch::Dtype dtype = torch::kFloat32);

@@ -153,7 +153,7 @@ FeatureRefinementImpl::FeatureRefinementImpl(const FeatureRefinementOptions& o) 
                             Conv2d(torch::nn::Conv2dOptions(hidden, o.channels, 1).bias(false)));
   spatial = register_module(
       "spatial", Conv2d(torch::nn::Conv2dOptions(2, 1, o.kernel).padding(o.kernel / 2).bias(false)));
-  if (o.spatial_bn) spatial_bn = register_module("spatial_bn", torch::nn::BatchNorm2d(1));
+  if (o.spatial_bn) spatial_bn = register_module("spatial_bn", SyncBatchNorm2d(1));
 }
 
 torch::Tensor FeatureRefinementImpl::channel_gate(const torch::Tensor& x) {

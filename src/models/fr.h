@@ -5,6 +5,7 @@
 #include <torch/torch.h>
 
 #include "models/conv.h"
+#include "models/sync_batch_norm.h"
 
 #include <utility>
 
@@ -32,7 +33,7 @@ struct FeatureRefinementImpl : torch::nn::Module {
 
   FeatureRefinementOptions options;
   Conv2d mlp_in{nullptr}, mlp_out{nullptr}, spatial{nullptr};
-  torch::nn::BatchNorm2d spatial_bn{nullptr};
+  SyncBatchNorm2d spatial_bn{nullptr};
 };
 TORCH_MODULE(FeatureRefinement);
 

@@ -1,5 +1,7 @@
 #include "models/layers.h"
 
+#include "models/sync_batch_norm.h"
+
 namespace geo {
 
 torch::Tensor upsample2(const torch::Tensor& x, UpsampleMode mode) {
@@ -23,7 +25,7 @@ void init_weights(torch::nn::Module& module) {
     if (auto* conv = m->as<torch::nn::Conv2dImpl>()) {
       torch::nn::init::xavier_uniform_(conv->weight);
       if (conv->bias.defined()) conv->bias.zero_();
-    } else if (auto* bn = m->as<torch::nn::BatchNorm2d>()) {
+    } else if (auto* bn = m->as<SyncBatchNorm2d>()) {
       bn->weight.fill_(1);
       bn->bias.zero_();
     }
@@ -32,13 +34,13 @@ void init_weights(torch::nn::Module& module) {
 
 void set_batchnorm_style(torch::nn::Module& module, double eps, double momentum) {
   for (auto& m : module.modules(/*include_self=*/true))
-    if (auto* bn = m->as<torch::nn::BatchNorm2d>()) bn->options.eps(eps).momentum(momentum);
+    if (auto* bn = m->as<SyncBatchNorm2d>()) bn->options.eps(eps).momentum(momentum);
 }
 
 std::vector<torch::Tensor> batchnorm_scales(const torch::nn::Module& module) {
   std::vector<torch::Tensor> out;
   for (const auto& m : module.modules(/*include_self=*/true))
-    if (const auto* bn = m->as<torch::nn::BatchNorm2d>())
+    if (const auto* bn = m->as<SyncBatchNorm2d>())
       if (bn->weight.defined()) out.push_back(bn->weight);
   return out;
 }

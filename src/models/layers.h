@@ -19,12 +19,12 @@ torch::Tensor resize_like(const torch::Tensor& x, const torch::Tensor& ref);
 // biases (TF-slim's default, which GeoNet uses), BatchNorm weight 1 and bias 0.
 void init_weights(torch::nn::Module& module);
 
-// BatchNorm convention of every BatchNorm2d inside `module`: epsilon and momentum (PyTorch's
+// BatchNorm convention of every BatchNorm (SyncBatchNorm2d) inside `module`: epsilon and momentum (PyTorch's
 // convention: running = (1 - momentum) * running + momentum * batch; TF-slim's decay d is
 // momentum 1 - d). Call right after construction, before training or loading.
 void set_batchnorm_style(torch::nn::Module& module, double eps, double momentum);
 
-// The scale (gamma) parameters of every BatchNorm2d inside `module`: what stays fixed at 1 when the
+// The scale (gamma) parameters of every BatchNorm (SyncBatchNorm2d) inside `module`: what stays fixed at 1 when the
 // model does not learn BatchNorm scales (GeoNet's slim batch_norm has scale=False).
 std::vector<torch::Tensor> batchnorm_scales(const torch::nn::Module& module);
 

@@ -50,7 +50,7 @@ struct SyncBatchNormFn : torch::autograd::Function<SyncBatchNormFn> {
 
 }  // namespace
 
-torch::Tensor sync_batch_norm(const torch::Tensor& x, torch::nn::BatchNorm2dImpl& bn,
+torch::Tensor sync_batch_norm(const torch::Tensor& x, SyncBatchNorm2dImpl& bn,
                               std::shared_ptr<const SumAcrossProcesses> sum) {
   TORCH_CHECK(sum, "sync_batch_norm: no reduction given");
   TORCH_CHECK(x.dim() == 4 && x.size(1) == bn.options.num_features(), "sync_batch_norm: input ", x.sizes(),
@@ -72,12 +72,51 @@ torch::Tensor sync_batch_norm(const torch::Tensor& x, torch::nn::BatchNorm2dImpl
     mean = mean64.to(torch::kFloat32);
     const auto var = var64.to(torch::kFloat32);
     invstd = torch::rsqrt(var64 + bn.options.eps()).to(torch::kFloat32);
-    const double m = bn.options.momentum().value_or(0.1);
+    TORCH_CHECK(bn.options.momentum(), "sync_batch_norm: momentum must be a value");
+    const double m = *bn.options.momentum();
     bn.running_mean.mul_(1 - m).add_(mean.to(bn.running_mean.scalar_type()), m);
     bn.running_var.mul_(1 - m).add_((var * (count / (count - 1))).to(bn.running_var.scalar_type()), m);
     bn.num_batches_tracked.add_(1);
   }
   return SyncBatchNormFn::apply(x, bn.weight, bn.bias, mean, invstd, count, sum);
+}
+
+SyncBatchNorm2dImpl::SyncBatchNorm2dImpl(const torch::nn::BatchNormOptions& o) : options(o) { reset(); }
+
+void SyncBatchNorm2dImpl::reset() {
+  TORCH_CHECK(options.affine() && options.track_running_stats(),
+              "SyncBatchNorm2d: only affine BatchNorm with running statistics");
+  const int64_t C = options.num_features();
+  weight = register_parameter("weight", torch::ones({C}));
+  bias = register_parameter("bias", torch::zeros({C}));
+  running_mean = register_buffer("running_mean", torch::zeros({C}));
+  running_var = register_buffer("running_var", torch::ones({C}));
+  num_batches_tracked = register_buffer("num_batches_tracked", torch::tensor(0, torch::kLong));
+}
+
+torch::Tensor SyncBatchNorm2dImpl::forward(const torch::Tensor& x) {
+  TORCH_CHECK(x.dim() == 4, "BatchNorm2d: expected a [B,C,H,W] input, got ", x.sizes());
+  if (sync && is_training()) return sync_batch_norm(x, *this, sync);
+  TORCH_CHECK(options.momentum(), "SyncBatchNorm2d: momentum must be a value");
+  if (is_training()) num_batches_tracked += 1;  // as torch::nn::BatchNorm2d
+  return torch::batch_norm(x, weight, bias, running_mean, running_var, is_training(), *options.momentum(),
+                           options.eps(), at::globalContext().userEnabledCuDNN());
+}
+
+void SyncBatchNorm2dImpl::pretty_print(std::ostream& stream) const {
+  stream << "geo::SyncBatchNorm2d(" << options.num_features() << ", eps=" << options.eps()
+         << ", momentum=" << options.momentum().value_or(0) << (sync ? ", synchronised" : "") << ")";
+}
+
+int set_batchnorm_sync(torch::nn::Module& module, std::shared_ptr<const SumAcrossProcesses> sum) {
+  int n = 0;
+  for (auto& m : module.modules(/*include_self=*/true)) {
+    if (auto* bn = m->as<SyncBatchNorm2dImpl>()) {
+      bn->sync = sum;
+      ++n;
+    }
+  }
+  return n;
 }
 
 }  // namespace geo

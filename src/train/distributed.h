@@ -149,7 +149,7 @@ class GradientAverager {
 };
 
 // An in-place sum over the group (all_reduce_sum of one tensor) for synchronised BatchNorm
-// (models/conv_bn.h: set_batchnorm_sync). The group must outlive it.
+// (models/sync_batch_norm.h: set_batchnorm_sync). The group must outlive it.
 std::shared_ptr<const SumAcrossProcesses> sum_across(ProcessGroup& group);
 
 // rank 0's parameters and buffers copied into every process's module.

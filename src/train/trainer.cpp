@@ -65,9 +65,8 @@ class Run {
     if (group_ && cfg_.run.distributed.sync_batchnorm) {
       const int layers = synchronise_batchnorm(*group_, nets_);
       if (writer_)
-        spdlog::info("BatchNorm synchronised across the {} processes ({} layers: 2 all-reduces each per step){}",
-                     group_->size(), layers,
-                     cfg_.model.use_fr && cfg_.model.fr_spatial_bn ? "; FR's spatial BatchNorm keeps per-process statistics" : "");
+        spdlog::info("BatchNorm synchronised across the {} processes ({} layers: 2 all-reduces each per step)",
+                     group_->size(), layers);
     }
     if (resuming) restore();
     else init_networks(stage());  // here, so that a bad --init stops the run before it starts

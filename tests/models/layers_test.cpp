@@ -7,6 +7,7 @@
 #include <thread>
 
 #include "models/depth_net.h"
+#include "models/fr.h"
 #include "models/conv_bn.h"
 #include "models/layers.h"
 #include "models/sync_batch_norm.h"
@@ -167,12 +168,45 @@ class ThreadSum {
   std::condition_variable cv_;
 };
 
-torch::nn::BatchNorm2d bn_of(int64_t c) {
-  torch::nn::BatchNorm2d bn(torch::nn::BatchNorm2dOptions(c).eps(1e-3).momentum(0.3));
+// PyTorch's BatchNorm2d or geo's, with the same settings and affine parameters.
+template <class BN = torch::nn::BatchNorm2d> BN bn_of(int64_t c) {
+  BN bn(torch::nn::BatchNormOptions(c).eps(1e-3).momentum(0.3));
   torch::NoGradGuard g;
   bn->weight.copy_(torch::tensor({1.5f, 0.5f, 2.0f}));
   bn->bias.copy_(torch::tensor({0.1f, -0.2f, 0.3f}));
   return bn;
+}
+
+TEST(SyncBatchNorm, WithoutAGroupItIsPyTorchsBatchNorm2d) {
+  torch::manual_seed(4);
+  auto ref = bn_of(3);
+  auto ours = bn_of<SyncBatchNorm2d>(3);
+  // The same parameters and buffers under the same names: checkpoints load either way.
+  std::vector<std::string> ref_names, our_names;
+  for (const auto& p : ref->named_parameters()) ref_names.push_back(p.key());
+  for (const auto& b : ref->named_buffers()) ref_names.push_back(b.key());
+  for (const auto& p : ours->named_parameters()) our_names.push_back(p.key());
+  for (const auto& b : ours->named_buffers()) our_names.push_back(b.key());
+  EXPECT_EQ(our_names, ref_names);
+  for (int step = 0; step < 3; ++step) {  // training: batch statistics, running averages, gradients
+    const auto x = torch::randn({2, 3, 4, 5}) * 3 + 1, r = torch::randn({2, 3, 4, 5});
+    const auto xa = x.clone().requires_grad_(), xb = x.clone().requires_grad_();
+    const auto ya = ref(xa), yb = ours(xb);
+    EXPECT_TRUE(torch::equal(ya, yb));
+    (ya * r).sum().backward();
+    (yb * r).sum().backward();
+    EXPECT_TRUE(torch::equal(xa.grad(), xb.grad()));
+  }
+  EXPECT_TRUE(torch::equal(ref->weight.grad(), ours->weight.grad()));
+  EXPECT_TRUE(torch::equal(ref->running_mean, ours->running_mean));
+  EXPECT_TRUE(torch::equal(ref->running_var, ours->running_var));
+  EXPECT_EQ(ours->num_batches_tracked.item<int64_t>(), 3);
+  EXPECT_EQ(ref->num_batches_tracked.item<int64_t>(), 3);
+  ref->eval();
+  ours->eval();
+  const auto x = torch::randn({2, 3, 4, 5});
+  EXPECT_TRUE(torch::equal(ref(x), ours(x)));  // running statistics
+  EXPECT_EQ(ours->num_batches_tracked.item<int64_t>(), 3);
 }
 
 TEST(SyncBatchNorm, TwoProcessesEqualOneOverTheConcatenatedBatch) {
@@ -186,7 +220,7 @@ TEST(SyncBatchNorm, TwoProcessesEqualOneOverTheConcatenatedBatch) {
   // Two processes of two samples each; each backpropagates its own part of the same loss.
   ThreadSum sum(2);
   const auto reduce = std::make_shared<const SumAcrossProcesses>(std::ref(sum));
-  std::vector<torch::nn::BatchNorm2d> bns = {bn_of(3), bn_of(3)};
+  std::vector<SyncBatchNorm2d> bns = {bn_of<SyncBatchNorm2d>(3), bn_of<SyncBatchNorm2d>(3)};
   std::vector<torch::Tensor> xs(2), ys(2);
   std::vector<std::thread> threads;
   for (int p = 0; p < 2; ++p)
@@ -229,6 +263,15 @@ TEST(SyncBatchNorm, ConvBnUsesItInTrainingOnly) {
   EXPECT_TRUE(torch::allclose(synced(x), plain(x), 1e-5, 1e-6));  // running statistics, no collective
   EXPECT_EQ(calls, 1);
   EXPECT_EQ(set_batchnorm_sync(*synced, nullptr), 1);
+  // Every BatchNorm of the networks is one: FR's optional spatial BatchNorm too.
+  FeatureRefinementOptions fo(4);
+  fo.spatial_bn = true;
+  FeatureRefinement fr(fo);
+  EXPECT_EQ(set_batchnorm_sync(*fr, one), 1);
+  fr->train();
+  const auto f = torch::randn({2, 4, 3, 5});
+  fr(f);
+  EXPECT_EQ(calls, 2);
 }
 
 }  // namespace
@@ -239,9 +282,9 @@ namespace {
 // Running mean after k training steps on a constant batch c from 0: c * (1 - (1 - momentum)^k).
 TEST(Layers, BatchNormStyleSetsEpsAndMomentum) {
   for (const auto& [momentum, eps] : {std::pair<double, double>{0.001, 1e-3}, {0.1, 1e-5}}) {
-    torch::nn::Sequential seq(torch::nn::BatchNorm2d(2));
+    torch::nn::Sequential seq(geo::SyncBatchNorm2d(2));
     geo::set_batchnorm_style(*seq, eps, momentum);
-    auto* bn = seq[0]->as<torch::nn::BatchNorm2d>();
+    auto* bn = seq[0]->as<geo::SyncBatchNorm2d>();
     ASSERT_NE(bn, nullptr);
     EXPECT_EQ(bn->options.eps(), eps);
     seq->train();
@@ -257,7 +300,7 @@ TEST(Layers, BatchNormStyleSetsEpsAndMomentum) {
     const double rv = std::pow(1 - momentum, 3);
     EXPECT_NEAR(seq->forward(x)[0][0][0][0].item<double>(), (2.0 - want) / std::sqrt(rv + eps), 1e-9);
   }
-  torch::nn::Sequential seq(torch::nn::Conv2d(1, 1, 1), torch::nn::BatchNorm2d(3), torch::nn::BatchNorm2d(4));
+  torch::nn::Sequential seq(torch::nn::Conv2d(1, 1, 1), geo::SyncBatchNorm2d(3), geo::SyncBatchNorm2d(4));
   EXPECT_EQ(geo::batchnorm_scales(*seq).size(), 2u);
   EXPECT_EQ(geo::batchnorm_scales(*seq)[1].numel(), 4);
 }

@@ -1,6 +1,7 @@
 // The training loop's parts on their own: TensorBoard encoding, the CSV sink's resume trimming, the
 // LR schedule, checkpoint rotation and best files, and run-folder resolution.
 #include "core/runtime.h"
+#include "models/sync_batch_norm.h"
 #include "train/checkpoints.h"
 #include "train/metrics.h"
 #include "train/tensorboard.h"
@@ -321,7 +322,7 @@ TEST(Networks, GeoNetBatchNormByDefaultAndTrainableSetOncePerStage) {
   Networks n = Networks::create(NetworkSpec::of(c), true);
   int bns = 0;
   for (const auto& m : n.depth->modules())
-    if (const auto* bn = m->as<torch::nn::BatchNorm2d>()) {
+    if (const auto* bn = m->as<SyncBatchNorm2d>()) {
       ++bns;
       EXPECT_EQ(bn->options.eps(), 1e-3);            // slim's epsilon
       EXPECT_EQ(bn->options.momentum().value(), 1e-3);  // slim's decay 0.999
@@ -346,7 +347,7 @@ TEST(Networks, GeoNetBatchNormByDefaultAndTrainableSetOncePerStage) {
   t.set_trainable(c.stages[0]);
   EXPECT_EQ(t.trainable_parameters().size(), t.depth->parameters().size() + t.pose->parameters().size());
   for (const auto& m : t.pose->modules())
-    if (const auto* bn = m->as<torch::nn::BatchNorm2d>()) {
+    if (const auto* bn = m->as<SyncBatchNorm2d>()) {
       EXPECT_EQ(bn->options.momentum().value(), 0.1);
     }
 }
