@@ -368,6 +368,73 @@ Row loader_row(const geo::Config& config, const Options& o) {
   return r;
 }
 
+// The whole measurement; `command_line` is written into the markdown report.
+int bench(Options& o, const std::string& command_line) {
+  if (!o.precision.empty()) o.overrides.push_back("run.precision=" + o.precision);
+  const std::string config_file = o.config_path.empty() ? "" : geo::resolve_config_path(o.config_path);
+  const geo::Config config = config_file.empty() ? geo::parse_config("", "<defaults>", o.overrides)
+                                                 : geo::load_config(config_file, o.overrides);
+  geo::check_outputs({{"--json", o.json_path}, {"--markdown", o.markdown_path}},
+                     {config_file, o.data_root, config.data.root});
+  const torch::Device device = geo::select_device(o.device_name);
+  geo::RunConfig settings = config.run;  // as geo_train applies them, with --threads
+  settings.threads = o.threads;
+  const int nthreads = geo::apply_run_settings(settings, device);
+  spdlog::info("geo_bench: LibTorch {}, device {} ({}), {} threads, {}x{}, {}-frame snippets, encoder ResNet-{}",
+               TORCH_VERSION, device.str(), geo::name_of(config.run.precision), nthreads, config.data.height,
+               config.data.width, config.data.seq_length, config.model.encoder_depth);
+
+  std::vector<bool> frs;
+  if (o.fr_mode != "off") frs.push_back(true);
+  if (o.fr_mode != "on") frs.push_back(false);
+  std::vector<geo::StageConfig> stages;
+  for (const auto& s : stages_to_time(config, !o.config_path.empty()))
+    if (o.stages.empty() || std::find(o.stages.begin(), o.stages.end(), s.name) != o.stages.end()) stages.push_back(s);
+  if (stages.empty() && !o.no_train && !o.summary)
+    throw std::runtime_error("--stage " + geo::join_list(o.stages, ",") + ": no such stage in the config");
+
+  std::vector<Row> rows = parameter_rows(config, frs);
+  const std::vector<Row> params = rows;
+  geo::bench::Ceiling ceiling;
+  if (!o.summary && !o.no_ceiling) {
+    const int64_t n = o.ceiling_size > 0 ? o.ceiling_size : device.is_cuda() ? 8192 : 2048;
+    // Three n x n float32 matrices at once (a, b, the product).
+    if (!device.is_cuda()) geo::check_memory_available("--ceiling-size " + std::to_string(n), 12.0 * n * n);
+    ceiling = geo::bench::measure_ceiling(device, n, 7);
+    spdlog::info("ceiling: {}x{} matrix product {:.0f} GFLOP/s {}, {:.0f} GFLOP/s bf16", ceiling.n, ceiling.n,
+                 ceiling.fp32, ceiling.float_name(), ceiling.bf16);
+  }
+  if (!o.summary && !o.no_infer) {
+    auto r = inference_rows(config, frs, o, device, params);
+    rows.insert(rows.end(), r.begin(), r.end());
+  }
+  if (!o.summary && !o.no_train) {
+    auto r = training_rows(config, stages, frs, o, device);
+    rows.insert(rows.end(), r.begin(), r.end());
+  }
+  // Data-parallel training: the gradient all-reduce each step adds (2 ranks, Gloo, loopback).
+  if (!o.summary && !o.no_train && !o.no_comm && geo::distributed_available())
+    for (const auto& stage : stages) {
+      spdlog::info("gradient all-reduce of {} between 2 ranks (Gloo, 127.0.0.1) ...", stage.name);
+      rows.push_back(time_allreduce(config, stage, frs.front(), 2, o.train_warmup, o.train_iters));
+    }
+  if (!o.summary && (!o.data_root.empty() || !config.data.videos.empty())) rows.push_back(loader_row(config, o));
+
+  geo::bench::print_table(rows, ceiling);
+  if (!o.markdown_path.empty()) {
+    geo::write_file_atomic(o.markdown_path, geo::bench::markdown_table(rows, ceiling, machine_of(device, nthreads),
+                                                                       command_line));
+    spdlog::info("wrote {}", o.markdown_path);
+  }
+  if (!o.json_path.empty()) {
+    geo::write_file_atomic(o.json_path, geo::bench::json_report(rows, ceiling,
+                                                                {device.str(), nthreads, config.data.height,
+                                                                 config.data.width, !o.no_fold}));
+    spdlog::info("wrote {}", o.json_path);
+  }
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -376,71 +443,7 @@ int main(int argc, char** argv) {
   Options o;
   o.add_to(app);
   CLI11_PARSE(app, argc, argv);
-  return geo::app::run_tool([&] {
-    if (!o.precision.empty()) o.overrides.push_back("run.precision=" + o.precision);
-    const std::string config_file = o.config_path.empty() ? "" : geo::resolve_config_path(o.config_path);
-    const geo::Config config = config_file.empty() ? geo::parse_config("", "<defaults>", o.overrides)
-                                                   : geo::load_config(config_file, o.overrides);
-    geo::check_outputs({{"--json", o.json_path}, {"--markdown", o.markdown_path}},
-                       {config_file, o.data_root, config.data.root});
-    const torch::Device device = geo::select_device(o.device_name);
-    geo::RunConfig settings = config.run;  // as geo_train applies them, with --threads
-    settings.threads = o.threads;
-    const int nthreads = geo::apply_run_settings(settings, device);
-    spdlog::info("geo_bench: LibTorch {}, device {} ({}), {} threads, {}x{}, {}-frame snippets, encoder ResNet-{}",
-                 TORCH_VERSION, device.str(), geo::name_of(config.run.precision), nthreads, config.data.height,
-                 config.data.width, config.data.seq_length, config.model.encoder_depth);
-
-    std::vector<bool> frs;
-    if (o.fr_mode != "off") frs.push_back(true);
-    if (o.fr_mode != "on") frs.push_back(false);
-    std::vector<geo::StageConfig> stages;
-    for (const auto& s : stages_to_time(config, !o.config_path.empty()))
-      if (o.stages.empty() || std::find(o.stages.begin(), o.stages.end(), s.name) != o.stages.end()) stages.push_back(s);
-    if (stages.empty() && !o.no_train && !o.summary)
-      throw std::runtime_error("--stage " + geo::join_list(o.stages, ",") + ": no such stage in the config");
-
-    std::vector<Row> rows = parameter_rows(config, frs);
-    const std::vector<Row> params = rows;
-    geo::bench::Ceiling ceiling;
-    if (!o.summary && !o.no_ceiling) {
-      const int64_t n = o.ceiling_size > 0 ? o.ceiling_size : device.is_cuda() ? 8192 : 2048;
-      // Three n x n float32 matrices at once (a, b, the product).
-      if (!device.is_cuda()) geo::check_memory_available("--ceiling-size " + std::to_string(n), 12.0 * n * n);
-      ceiling = geo::bench::measure_ceiling(device, n, 7);
-      spdlog::info("ceiling: {}x{} matrix product {:.0f} GFLOP/s {}, {:.0f} GFLOP/s bf16", ceiling.n, ceiling.n,
-                   ceiling.fp32, ceiling.float_name(), ceiling.bf16);
-    }
-    if (!o.summary && !o.no_infer) {
-      auto r = inference_rows(config, frs, o, device, params);
-      rows.insert(rows.end(), r.begin(), r.end());
-    }
-    if (!o.summary && !o.no_train) {
-      auto r = training_rows(config, stages, frs, o, device);
-      rows.insert(rows.end(), r.begin(), r.end());
-    }
-    // Data-parallel training: the gradient all-reduce each step adds (2 ranks, Gloo, loopback).
-    if (!o.summary && !o.no_train && !o.no_comm && geo::distributed_available())
-      for (const auto& stage : stages) {
-        spdlog::info("gradient all-reduce of {} between 2 ranks (Gloo, 127.0.0.1) ...", stage.name);
-        rows.push_back(time_allreduce(config, stage, frs.front(), 2, o.train_warmup, o.train_iters));
-      }
-    if (!o.summary && (!o.data_root.empty() || !config.data.videos.empty())) rows.push_back(loader_row(config, o));
-
-    geo::bench::print_table(rows, ceiling);
-    if (!o.markdown_path.empty()) {
-      std::vector<std::string> args(argv, argv + argc);
-      args[0] = "geo_bench";
-      geo::write_file_atomic(o.markdown_path, geo::bench::markdown_table(rows, ceiling, machine_of(device, nthreads),
-                                                                         geo::join_list(args, " ")));
-      spdlog::info("wrote {}", o.markdown_path);
-    }
-    if (!o.json_path.empty()) {
-      geo::write_file_atomic(o.json_path, geo::bench::json_report(rows, ceiling,
-                                                                  {device.str(), nthreads, config.data.height,
-                                                                   config.data.width, !o.no_fold}));
-      spdlog::info("wrote {}", o.json_path);
-    }
-    return 0;
-  });
+  std::vector<std::string> args(argv, argv + argc);
+  args[0] = "geo_bench";
+  return geo::app::run_tool([&] { return bench(o, geo::join_list(args, " ")); });
 }

@@ -13,48 +13,46 @@
 
 namespace fs = std::filesystem;
 
-int main(int argc, char** argv) {
-  CLI::App app{"geo_export: weights-only model file (for geo::Model, geo_infer) from a geo_train checkpoint"};
+namespace {
+
+struct ExportCommand {
   std::string checkpoint, out;
   bool half = false, force = false;
-  app.add_option("--checkpoint", checkpoint, "checkpoint file or run folder (its best checkpoint)")->required();
-  app.add_option("--out", out, "model file to write")->required();
-  app.add_flag("--force", force, "replace --out even when it is not a geo_export model file");
-  app.add_flag("--half", half, "store the weights as float16 (half the size; computed in float32 when loaded)");
+};
+
+void add_options(CLI::App& app, ExportCommand& c) {
+  app.add_option("--checkpoint", c.checkpoint, "checkpoint file or run folder (its best checkpoint)")->required();
+  app.add_option("--out", c.out, "model file to write")->required();
+  app.add_flag("--force", c.force, "replace --out even when it is not a geo_export model file");
+  app.add_flag("--half", c.half, "store the weights as float16 (half the size; computed in float32 when loaded)");
+}
+
+int export_model(const ExportCommand& c) {
+  const geo::Model model = geo::Model::load(c.checkpoint);
+  const auto& s = model.spec();
+  geo::check_model_file_target(c.out, s.source, c.force);
+  model.save(c.out, c.half);
+  // Check what was written: the same depth from both on a fixed image.
+  const geo::Model back = geo::Model::load(c.out);
+  auto image = torch::linspace(0, 1, 3 * s.height * s.width).view({3, s.height, s.width});
+  const double diff = (model.depth(image) - back.depth(image)).abs().max().item<double>();
+  const double scale = model.depth(image).abs().max().item<double>();
+  const auto in_size = fs::file_size(s.source), out_size = fs::file_size(c.out);
+  spdlog::info("{} -> {}: {}x{} input, {}-frame PoseNet, ResNet-{}, FR {}, FlowNet {}, {} weights", s.source, c.out,
+               s.height, s.width, s.seq_length, s.encoder_depth, s.feature_refinement ? "on" : "off",
+               s.has_flow ? "yes" : "no", c.half ? "float16" : "float32");
+  spdlog::info("{:.1f} MB -> {:.1f} MB ({:.0f}%); depth from the written file differs by at most {:.3g} ({:.2g} relative)",
+               static_cast<double>(in_size) / 1e6, static_cast<double>(out_size) / 1e6,
+               100.0 * static_cast<double>(out_size) / static_cast<double>(in_size), diff, diff / scale);
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"geo_export: weights-only model file (for geo::Model, geo_infer) from a geo_train checkpoint"};
+  ExportCommand command;
+  add_options(app, command);
   CLI11_PARSE(app, argc, argv);
-  return geo::app::run_tool([&] {
-    const geo::Model model = geo::Model::load(checkpoint);
-    // Never replace the input (a run folder's best-<stage>.pt is a hard link to a checkpoint), nor,
-    // unasked, a file that is not a model file (a training checkpoint holds Adam's state and the run's
-    // config, which a model file does not).
-    std::error_code ec;
-    if (fs::exists(out) && fs::equivalent(out, model.spec().source, ec))
-      throw std::runtime_error("--out '" + out + "' is the checkpoint being exported (" + model.spec().source +
-                               "): refusing to replace it");
-    if (fs::exists(out) && !force) {
-      bool model_file = false;
-      try {
-        model_file = geo::CheckpointFile(out).is_model_file();
-      } catch (const std::exception&) {
-      }
-      if (!model_file)
-        throw std::runtime_error("--out '" + out + "' exists and is not a geo_export model file (a training "
-                                 "checkpoint or another file): refusing to replace it; remove it or pass --force");
-    }
-    model.save(out, half);
-    // Check what was written: the same depth from both on a fixed image.
-    const geo::Model back = geo::Model::load(out);
-    const auto& s = model.spec();
-    auto image = torch::linspace(0, 1, 3 * s.height * s.width).view({3, s.height, s.width});
-    const double diff = (model.depth(image) - back.depth(image)).abs().max().item<double>();
-    const double scale = model.depth(image).abs().max().item<double>();
-    const auto in_size = fs::file_size(s.source), out_size = fs::file_size(out);
-    spdlog::info("{} -> {}: {}x{} input, {}-frame PoseNet, ResNet-{}, FR {}, FlowNet {}, {} weights", s.source, out,
-                 s.height, s.width, s.seq_length, s.encoder_depth, s.feature_refinement ? "on" : "off",
-                 s.has_flow ? "yes" : "no", half ? "float16" : "float32");
-    spdlog::info("{:.1f} MB -> {:.1f} MB ({:.0f}%); depth from the written file differs by at most {:.3g} ({:.2g} relative)",
-                 static_cast<double>(in_size) / 1e6, static_cast<double>(out_size) / 1e6,
-                 100.0 * static_cast<double>(out_size) / static_cast<double>(in_size), diff, diff / scale);
-    return 0;
-  });
+  return geo::app::run_tool([&] { return export_model(command); });
 }

@@ -12,38 +12,17 @@
 #include "data/video/video_clips.h"
 #include "app_options.h"
 
-int main(int argc, char** argv) {
-  CLI::App app{
-      "geo_synth: render a procedural driving world (road, facades, poles, boxes, moving cars) "
-      "with exact ground truth, written in KITTI's raw, 2015-flow and odometry formats"};
-  std::string preset = "tiny", out;
+namespace {
+
+struct SynthCommand {
+  std::string preset = "tiny", out, video;
   uint64_t seed = 1;
   int drives = -1, test_drives = -1, flow_pairs = -1, threads = 0;
   int64_t frames = -1, odometry_frames = -1;
   bool force = false;
   double turns = 1.0;
-  std::string video;
-  app.add_option("--preset", preset, "tiny (64x208, for CI and tests) or kitti (375x1242, KITTI intrinsics)")
-      ->check(CLI::IsMember({"tiny", "kitti"}));
-  app.add_option("--seed", seed, "world seed (0 .. 2^63-1): the same seed writes the same files")
-      ->check(CLI::Range(uint64_t{0}, uint64_t{1} << 63));
-  app.add_option("--out", out, "output root (created); holds raw/, kitti2015/, odometry/")->required();
-  app.add_option("--drives", drives, "training drives, 1..1000 (default: preset's)")->check(CLI::Range(1, 1000));
-  app.add_option("--test-drives", test_drives, "held-out test drives, 1..1000 (default: preset's)")->check(CLI::Range(1, 1000));
-  app.add_option("--frames", frames, "frames per drive (default: preset's)")->check(CLI::Range(3, 100000));
-  app.add_option("--flow-pairs", flow_pairs, "KITTI-2015-style flow pairs, 0..100000 (default: preset's)")
-      ->check(CLI::Range(0, 100000));
-  app.add_option("--odometry-frames", odometry_frames, "frames of odometry sequence 09 (default: preset's)")->check(CLI::Range(5, 100000));
-  app.add_option("--threads", threads, "render threads (0 = all cores)")->check(geo::app::non_negative());
-  app.add_option("--turns", turns, "how winding the road is: 1 gentle (~1 degree of heading per frame), "
-                 "2 four times the heading change (a learned camera needs rotation to pin its focal length)")
-      ->check(CLI::Range(0.1, 10.0));
-  app.add_flag("--force", force, "write into a non-empty --out");
-  app.add_option("--video", video,
-                 "also write the first training drive as a Motion-JPEG AVI at 10 fps (train on it with "
-                 "data.videos and the camera printed at the end)");
-  CLI11_PARSE(app, argc, argv);
-  return geo::app::run_tool([&] {
+
+  geo::SynthOptions options() const {  // the preset with the options given
     auto o = geo::SynthOptions::preset_named(preset);
     o.seed = seed;
     o.threads = threads;
@@ -53,34 +32,74 @@ int main(int argc, char** argv) {
     if (frames > 0) o.frames_per_drive = frames;
     if (flow_pairs >= 0) o.flow_pairs = flow_pairs;
     if (odometry_frames > 0) o.odometry_frames = odometry_frames;
-    spdlog::info("geo_synth: {} frames, at most {:.2f} GB",
-                 (o.train_drives + o.test_drives) * o.frames_per_drive + 3 * o.flow_pairs + o.odometry_frames,
-                 geo::synth_world_bytes(o) / 1e9);
-    if (geo::prepare_synth_root(out, o, force)) spdlog::info("--force: the earlier world in {} removed", out);
-    spdlog::info("geo_synth: preset {} ({}x{}), seed {}, {} training + {} test drives of {} frames, "
-                 "{} flow pairs, {} odometry frames -> {}",
-                 preset, o.width, o.height, seed, o.train_drives, o.test_drives, o.frames_per_drive,
-                 o.flow_pairs, o.odometry_frames, out);
-    const auto t0 = std::chrono::steady_clock::now();
-    int last_pct = -1;
-    geo::write_synth_world(out, o, [&](int64_t done, int64_t total, const std::string& what) {
-      const int pct = static_cast<int>(100 * done / total);
-      if (pct / 10 != last_pct / 10 || done == total) {
-        spdlog::info("  {:3d}% ({}/{} frames, {})", pct, done, total, what);
-        last_pct = pct;
-      }
-    });
-    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    spdlog::info("done in {:.1f} s: {}/raw (train with data.root={}/raw), {}/kitti2015, {}/odometry",
-                 s, out, out, out, out);
-    if (!video.empty()) {
-      const std::string frames = out + "/raw/" + geo::synth_drive_folder(1) + "/image_02/data";
-      geo::write_video_file(geo::frame_files(frames), video, 10.0);
-      const auto& k = o.intrinsics;
-      spdlog::info("video: {} ({} frames of {}, 10 fps): train with --set data.videos=[{}] "
-                   "--set data.camera.intrinsics=[{},{},{},{}]",
-                   video, o.frames_per_drive, frames, video, k.fx, k.fy, k.cx, k.cy);
+    return o;
+  }
+};
+
+void add_options(CLI::App& app, SynthCommand& c) {
+  app.add_option("--preset", c.preset, "tiny (64x208, for CI and tests) or kitti (375x1242, KITTI intrinsics)")
+      ->check(CLI::IsMember({"tiny", "kitti"}));
+  app.add_option("--seed", c.seed, "world seed (0 .. 2^63-1): the same seed writes the same files")
+      ->check(CLI::Range(uint64_t{0}, uint64_t{1} << 63));
+  app.add_option("--out", c.out, "output root (created); holds raw/, kitti2015/, odometry/")->required();
+  app.add_option("--drives", c.drives, "training drives, 1..1000 (default: preset's)")->check(CLI::Range(1, 1000));
+  app.add_option("--test-drives", c.test_drives, "held-out test drives, 1..1000 (default: preset's)")->check(CLI::Range(1, 1000));
+  app.add_option("--frames", c.frames, "frames per drive (default: preset's)")->check(CLI::Range(3, 100000));
+  app.add_option("--flow-pairs", c.flow_pairs, "KITTI-2015-style flow pairs, 0..100000 (default: preset's)")
+      ->check(CLI::Range(0, 100000));
+  app.add_option("--odometry-frames", c.odometry_frames, "frames of odometry sequence 09 (default: preset's)")
+      ->check(CLI::Range(5, 100000));
+  app.add_option("--threads", c.threads, "render threads (0 = all cores)")->check(geo::app::non_negative());
+  app.add_option("--turns", c.turns, "how winding the road is: 1 gentle (~1 degree of heading per frame), "
+                 "2 four times the heading change (a learned camera needs rotation to pin its focal length)")
+      ->check(CLI::Range(0.1, 10.0));
+  app.add_flag("--force", c.force, "write into a non-empty --out");
+  app.add_option("--video", c.video,
+                 "also write the first training drive as a Motion-JPEG AVI at 10 fps (train on it with "
+                 "data.videos and the camera printed at the end)");
+}
+
+int synthesise(const SynthCommand& c) {
+  const auto o = c.options();
+  const std::string& out = c.out;
+  spdlog::info("geo_synth: {} frames, at most {:.2f} GB",
+               (o.train_drives + o.test_drives) * o.frames_per_drive + 3 * o.flow_pairs + o.odometry_frames,
+               geo::synth_world_bytes(o) / 1e9);
+  if (geo::prepare_synth_root(out, o, c.force)) spdlog::info("--force: the earlier world in {} removed", out);
+  spdlog::info("geo_synth: preset {} ({}x{}), seed {}, {} training + {} test drives of {} frames, "
+               "{} flow pairs, {} odometry frames -> {}",
+               c.preset, o.width, o.height, o.seed, o.train_drives, o.test_drives, o.frames_per_drive, o.flow_pairs,
+               o.odometry_frames, out);
+  const auto t0 = std::chrono::steady_clock::now();
+  int last_pct = -1;
+  geo::write_synth_world(out, o, [&](int64_t done, int64_t total, const std::string& what) {
+    const int pct = static_cast<int>(100 * done / total);
+    if (pct / 10 != last_pct / 10 || done == total) {
+      spdlog::info("  {:3d}% ({}/{} frames, {})", pct, done, total, what);
+      last_pct = pct;
     }
-    return 0;
   });
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  spdlog::info("done in {:.1f} s: {}/raw (train with data.root={}/raw), {}/kitti2015, {}/odometry", s, out, out, out, out);
+  if (!c.video.empty()) {
+    const std::string frames = out + "/raw/" + geo::synth_drive_folder(1) + "/image_02/data";
+    geo::write_video_file(geo::frame_files(frames), c.video, 10.0);
+    const auto& k = o.intrinsics;
+    spdlog::info("video: {} ({} frames of {}, 10 fps): train with --set data.videos=[{}] "
+                 "--set data.camera.intrinsics=[{},{},{},{}]",
+                 c.video, o.frames_per_drive, frames, c.video, k.fx, k.fy, k.cx, k.cy);
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "geo_synth: render a procedural driving world (road, facades, poles, boxes, moving cars) "
+      "with exact ground truth, written in KITTI's raw, 2015-flow and odometry formats"};
+  SynthCommand command;
+  add_options(app, command);
+  CLI11_PARSE(app, argc, argv);
+  return geo::app::run_tool([&] { return synthesise(command); });
 }

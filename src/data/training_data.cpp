@@ -1,6 +1,7 @@
 #include "data/training_data.h"
 
 #include "core/logging.h"
+#include "core/progress.h"
 #include "data/packed.h"
 #include "data/splits.h"
 #include "data/training_lists.h"
@@ -203,6 +204,28 @@ TrainingData open_training_data(const DataConfig& d) {
   DataConfig dr = d;
   dr.root = out.root;
   return open_at(dr, std::move(out));
+}
+
+bool write_packed_cache(const TrainingData& data, const DataConfig& config, const std::string& out) {
+  // One identifier for train/ and val/: the trainer refuses a val/ left by another run.
+  const std::string pack_id = new_pack_id();
+  auto pack = [&](const SnippetSource& src, const std::string& dir) {
+    PackedWriter w(dir, config.height, config.width, config.seq_length, pack_id);
+    Progress progress(dir, static_cast<int64_t>(src.size()), 500, "snippets");
+    for (size_t i = 0; i < src.size(); ++i) {
+      w.add(src.get(i));
+      progress.update(static_cast<int64_t>(i + 1));
+    }
+    w.finish();
+  };
+  pack(*data.train, out + "/train");
+  if (data.val) {
+    pack(*data.val, out + "/val");
+  } else if (has_packed_cache_files(out + "/val")) {  // an earlier run's: no longer this cache's
+    remove_packed_cache_files(out + "/val");
+    return true;
+  }
+  return false;
 }
 
 }  // namespace geo

@@ -31,4 +31,10 @@ struct TrainingData {
 
 TrainingData open_training_data(const DataConfig& data);
 
+// Packs `data`'s training and validation snippets (of `config`'s size and sequence length) into a
+// cache at `out` (train/, val/; data/packed.h) that training reads with data.root=`out`, with
+// progress lines. A val/ an earlier cache left there is removed when `data` has no validation set
+// (returns true then).
+bool write_packed_cache(const TrainingData& data, const DataConfig& config, const std::string& out);
+
 }  // namespace geo

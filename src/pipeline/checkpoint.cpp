@@ -65,6 +65,23 @@ void write_model_file(const std::string& path, const Networks& nets, bool half) 
   save_archive(a, path);
 }
 
+void check_model_file_target(const std::string& out, const std::string& source, bool force) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (!fs::exists(out)) return;
+  if (fs::equivalent(out, source, ec))
+    throw std::runtime_error("--out '" + out + "' is the checkpoint being exported (" + source + "): refusing to replace it");
+  if (force) return;
+  bool model_file = false;
+  try {
+    model_file = CheckpointFile(out).is_model_file();
+  } catch (const std::exception&) {
+  }
+  if (!model_file)
+    throw std::runtime_error("--out '" + out + "' exists and is not a geo_export model file (a training "
+                             "checkpoint or another file): refusing to replace it; remove it or pass --force");
+}
+
 CheckpointFile::CheckpointFile(std::string path) : path_(std::move(path)), archive_(open_archive(path_)) {
   torch::serialize::InputArchive flow;
   has_flow_ = archive_.try_read("flow", flow);
