@@ -256,6 +256,40 @@ std::string write_outputs(const InferOptions& o, const geo::Model& model, const 
   return written;
 }
 
+// The whole command: load, read, infer, write, report.
+int infer(const InferOptions& o) {
+  const auto started = std::chrono::steady_clock::now();
+  geo::StepTimes times;
+  geo::LoadOptions load;
+  load.device = o.device;
+  load.precision = o.precision;
+  load.threads = o.threads;
+  const geo::Model model = times.time("load the model", [&] { return geo::Model::load(o.checkpoint, load); });
+  const int64_t h = model.spec().height, w = model.spec().width;
+  const auto reading = std::chrono::steady_clock::now();
+  const Frames frames = read_frames(o, h, w);
+  times.add("read, decode, resize frames", std::chrono::duration<double>(std::chrono::steady_clock::now() - reading).count());
+  for (const auto f : o.ply_frames)
+    if (f >= static_cast<int64_t>(frames.size()))
+      throw std::runtime_error("--ply " + std::to_string(f) + ": the input has " + std::to_string(frames.size()) +
+                               " frames (numbered from 0)");
+  prepare_output(o);
+  spdlog::info("{} frame(s) from {} at {}x{} -> {}", frames.size(), o.input, w, h, o.output);
+  if (frames.size() > 1 && model.spec().seq_length != 3)
+    spdlog::warn("this model's PoseNet takes {}-frame snippets: geo_infer writes flow and trajectory.txt for "
+                 "3-frame models only; depth is written for every frame", model.spec().seq_length);
+  const auto K = camera(o, model, frames, h, w);
+  const auto scales = metric_scales(o, model, frames, K, times);
+  const std::string written = write_outputs(o, model, frames, K, scales, times);
+  spdlog::info("done: {}/{{{}}}", o.output, written);
+  if (o.timing)
+    std::printf("geo_infer --timing: %zu frame(s) at %lldx%lld, %s, %s\n%s", frames.size(), static_cast<long long>(w),
+                static_cast<long long>(h), model.spec().precision.c_str(), model.device().str().c_str(),
+                times.table(static_cast<int64_t>(frames.size()), "frame",
+                            std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count()).c_str());
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -263,36 +297,5 @@ int main(int argc, char** argv) {
   InferOptions o;
   o.add_to(app);
   CLI11_PARSE(app, argc, argv);
-  return geo::app::run_tool([&] {
-    const auto started = std::chrono::steady_clock::now();
-    geo::StepTimes times;
-    geo::LoadOptions load;
-    load.device = o.device;
-    load.precision = o.precision;
-    load.threads = o.threads;
-    const geo::Model model = times.time("load the model", [&] { return geo::Model::load(o.checkpoint, load); });
-    const int64_t h = model.spec().height, w = model.spec().width;
-    const auto reading = std::chrono::steady_clock::now();
-    const Frames frames = read_frames(o, h, w);
-    times.add("read, decode, resize frames", std::chrono::duration<double>(std::chrono::steady_clock::now() - reading).count());
-    for (const auto f : o.ply_frames)
-      if (f >= static_cast<int64_t>(frames.size()))
-        throw std::runtime_error("--ply " + std::to_string(f) + ": the input has " + std::to_string(frames.size()) +
-                                 " frames (numbered from 0)");
-    prepare_output(o);
-    spdlog::info("{} frame(s) from {} at {}x{} -> {}", frames.size(), o.input, w, h, o.output);
-    if (frames.size() > 1 && model.spec().seq_length != 3)
-      spdlog::warn("this model's PoseNet takes {}-frame snippets: geo_infer writes flow and trajectory.txt for "
-                   "3-frame models only; depth is written for every frame", model.spec().seq_length);
-    const auto K = camera(o, model, frames, h, w);
-    const auto scales = metric_scales(o, model, frames, K, times);
-    const std::string written = write_outputs(o, model, frames, K, scales, times);
-    spdlog::info("done: {}/{{{}}}", o.output, written);
-    if (o.timing)
-      std::printf("geo_infer --timing: %zu frame(s) at %lldx%lld, %s, %s\n%s", frames.size(), static_cast<long long>(w),
-                  static_cast<long long>(h), model.spec().precision.c_str(), model.device().str().c_str(),
-                  times.table(static_cast<int64_t>(frames.size()), "frame",
-                              std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count()).c_str());
-    return 0;
-  });
+  return geo::app::run_tool([&] { return infer(o); });
 }
