@@ -57,22 +57,22 @@ void verify_same_weights(ProcessGroup& group, const std::vector<torch::Tensor>& 
 std::unique_ptr<ProcessGroup> join_launched_group(const DistributedConfig& config, const std::string& device_name,
                                                   const std::string& master_addr) {
   const LaunchInfo launch = launch_from_environment(nullptr, master_addr);
-  if (!launch.distributed()) return nullptr;
+  if (!launch.distributed()) return std::make_unique<SingleProcess>();
   return ProcessGroup::connect(launch, config, select_device(device_name));
 }
 
-torch::Device process_device(const std::string& name, const ProcessGroup* group) {
+torch::Device process_device(const std::string& name, const ProcessGroup& group) {
   const torch::Device d = select_device(name);
-  if (group && d.is_cuda() && (name == "auto" || name == "cuda"))
-    return select_device("cuda:" + std::to_string(group->local_rank()));
+  if (group.size() > 1 && d.is_cuda() && (name == "auto" || name == "cuda"))
+    return select_device("cuda:" + std::to_string(group.local_rank()));
   return d;
 }
 
-int agreed_signal(ProcessGroup* group, int local, const torch::Device& device) {
-  if (!group) return local;
+int agreed_signal(ProcessGroup& group, int local, const torch::Device& device) {
+  if (group.size() == 1) return local;
   std::vector<torch::Tensor> flag{torch::full(
-      {1}, local, torch::TensorOptions(torch::kInt32).device(group->backend() == "nccl" ? device : torch::kCPU))};
-  group->all_reduce_max(flag);
+      {1}, local, torch::TensorOptions(torch::kInt32).device(group.backend() == "nccl" ? device : torch::kCPU))};
+  group.all_reduce_max(flag);
   return flag[0].cpu().item<int>();
 }
 
@@ -88,7 +88,7 @@ void check_same_config(ProcessGroup& group, const std::string& config_yaml, cons
     if (!diff.empty()) report += "\n  rank " + std::to_string(r) + " vs rank 0: " + join_list(diff, "; ");
   }
   // Also the barrier that keeps rank 0's store alive until every process has read every config.
-  if (agreed_signal(&group, report.empty() ? 0 : 1, device) != 0)
+  if (agreed_signal(group, report.empty() ? 0 : 1, device) != 0)
     throw std::runtime_error("rank " + std::to_string(group.rank()) + ": the processes were started with different "
                              "configurations (every rank must train the same run: same config and --set options):" + report);
 }

@@ -91,6 +91,23 @@ class ProcessGroup {
   virtual std::vector<std::string> all_gather_strings(const std::string& key, const std::string& value) = 0;
 };
 
+// The group of a process that trains alone: rank 0 of 1, on GPU 0; every collective leaves the
+// tensors as they are (a sum over one process), share_from_rank0 returns the value given (a failure
+// is the caller's own, thrown by it), all_gather_strings the one value. The trainer's code is the
+// same for one process and for many.
+class SingleProcess : public ProcessGroup {
+ public:
+  int rank() const override { return 0; }
+  int size() const override { return 1; }
+  int local_rank() const override { return 0; }
+  std::string backend() const override { return "none"; }
+  void broadcast(std::vector<torch::Tensor>&, int) override {}
+  void all_reduce_sum(std::vector<torch::Tensor>&) override {}
+  void all_reduce_max(std::vector<torch::Tensor>&) override {}
+  std::string share_from_rank0(const std::string&, const std::string& value, bool) override { return value; }
+  std::vector<std::string> all_gather_strings(const std::string&, const std::string& value) override { return {value}; }
+};
+
 // Averages gradients over the group on flattened buckets of at most `bucket_bytes` (one all-reduce
 // per bucket instead of one per tensor), in place, as DistributedDataParallel does. Buckets are
 // filled in reverse parameter order (the order backward computes gradients in). Parameters without a
@@ -161,17 +178,17 @@ void verify_same_weights(ProcessGroup& group, const std::vector<torch::Tensor>& 
 
 // What a training process does as part of a group:
 
-// This process's group when it was launched as one process of several (torchrun, srun: the
-// environment says so); null for a single process. `device_name`: run.device or --device.
+// This process's group: the launched group when it was started as one process of several (torchrun,
+// srun: the environment says so), else a SingleProcess. `device_name`: run.device or --device.
 std::unique_ptr<ProcessGroup> join_launched_group(const DistributedConfig& config, const std::string& device_name,
                                                   const std::string& master_addr);
 // This process's device: `name` as select_device reads it, except that "cuda" or "auto" with CUDA
-// in a group is this process's own GPU, cuda:LOCAL_RANK.
-torch::Device process_device(const std::string& name, const ProcessGroup* group);
+// in a group of several is this process's own GPU, cuda:LOCAL_RANK.
+torch::Device process_device(const std::string& name, const ProcessGroup& group);
 // The signal (SIGINT/SIGTERM number, 0 for none) any process of the group received, agreed on at
 // the same step by one tiny all-reduce, so that all processes stop at the step rank 0 checkpoints.
-// `local` alone without a group.
-int agreed_signal(ProcessGroup* group, int local, const torch::Device& device);
+// `local` alone for a single process.
+int agreed_signal(ProcessGroup& group, int local, const torch::Device& device);
 // Every process trains with the same configuration: the configs (to_yaml) are compared at start-up,
 // and a difference outside the keys that are each process's own (run.name, run.dir, run.device,
 // run.threads, run.distributed.timeout_s, data.root, data.videos, data.num_workers, logging.level)

@@ -18,6 +18,7 @@
 #include <atomic>
 #include <csignal>
 #include <filesystem>
+#include <functional>
 #include <optional>
 
 namespace fs = std::filesystem;
@@ -48,11 +49,11 @@ class SignalScope {
 
 class Run {
  public:
-  // `group`: this process's distributed group (null: a single process). Only rank 0 writes to the
-  // run folder (checkpoints, logs, summaries) and validates.
-  Run(Config config, RunFolder folder, const TrainOptions& options, bool resuming, ProcessGroup* group = nullptr)
+  // `group`: this process's group (a SingleProcess alone). Only rank 0 writes to the run folder
+  // (checkpoints, logs, summaries) and validates.
+  Run(Config config, RunFolder folder, const TrainOptions& options, bool resuming, ProcessGroup& group)
       : cfg_(std::move(config)), folder_(std::move(folder)), opts_(options), group_(group),
-        writer_(!group || group->rank() == 0),
+        writer_(group.rank() == 0),
         device_(process_device(options.device.empty() ? cfg_.run.device : options.device, group)),
         checkpoints_(folder_, cfg_.logging.keep_last, !writer_) {
     apply_run_settings(cfg_.run, device_);
@@ -61,12 +62,13 @@ class Run {
     for (const auto& s : cfg_.stages) with_flow = with_flow || s.uses_flow();
     nets_ = Networks::create(NetworkSpec::of(cfg_), with_flow);
     nets_.to(device_);
-    if (group_) averager_ = std::make_unique<GradientAverager>(*group_);
-    if (group_ && cfg_.run.distributed.sync_batchnorm) {
-      const int layers = synchronise_batchnorm(*group_, nets_);
+    // One process has nothing to average or synchronise: it keeps PyTorch's own kernels.
+    if (several()) averager_ = std::make_unique<GradientAverager>(group_);
+    if (several() && cfg_.run.distributed.sync_batchnorm) {
+      const int layers = synchronise_batchnorm(group_, nets_);
       if (writer_)
         spdlog::info("BatchNorm synchronised across the {} processes ({} layers: 2 all-reduces each per step)",
-                     group_->size(), layers);
+                     group_.size(), layers);
     }
     if (resuming) restore();
     else init_networks(stage());  // here, so that a bad --init stops the run before it starts
@@ -114,15 +116,16 @@ class Run {
                        ? "use model.bn_momentum: 0.1 for short runs"
                        : "train for at least " + std::to_string(static_cast<int64_t>(std::ceil(5.0 / cfg_.model.bn_momentum))) +
                              " iterations");
-    if (group_)
+    if (several())
       spdlog::info("distributed: {} processes ({}), this is rank {} on {}; batch_size is per process ({} in all); "
-                   "{}", group_->size(), group_->backend(), group_->rank(), device_.str(),
-                   stage().batch_size * group_->size(),
+                   "{}", group_.size(), group_.backend(), group_.rank(), device_.str(),
+                   stage().batch_size * group_.size(),
                    cfg_.run.distributed.shard_data ? "each reads its own shard of the data stream"
                                                    : "all read the same batches (run.distributed.shard_data false)");
   }
 
   const StageConfig& stage() const { return cfg_.stages[state_.stage]; }
+  bool several() const { return group_.size() > 1; }
 
   int64_t global_step() const {
     int64_t g = state_.iteration;
@@ -149,7 +152,7 @@ class Run {
     state_ = file.train_state();
     init_configs_ = file.init_configs();
     const int64_t was = state_.world_size;
-    const int64_t now = group_ ? group_->size() : 1;
+    const int64_t now = group_.size();
     if (was != now && writer_)
       spdlog::warn("{} was written by a run of {} process(es), this one has {}: training continues from it with the "
                    "data stream re-sharded for {} (the samples after this point differ from an uninterrupted run's)",
@@ -182,7 +185,7 @@ class Run {
 
   int run_stage(const SignalScope& signals) {
     const auto& s = stage();
-    if (group_) broadcast_networks(*group_, nets_);  // every process starts the stage from rank 0's weights
+    broadcast_networks(group_, nets_);  // every process starts the stage from rank 0's weights
     TrainStep step(nets_, cfg_, s);
     step.set_gradient_averager(averager_.get(), cfg_.run.distributed.overlap);
     if (!resume_from_.empty()) CheckpointFile(resume_from_).load_optimizer(step.optimizer());
@@ -190,9 +193,9 @@ class Run {
     LoaderOptions lo = loader_options(cfg_.data, s.batch_size);
     lo.seed = static_cast<uint64_t>(cfg_.run.seed) * 131 + static_cast<uint64_t>(state_.stage);
     lo.pin_memory = device_.is_cuda();  // page-locked batches, copied to the GPU without blocking
-    if (group_ && cfg_.run.distributed.shard_data) {
-      lo.rank = group_->rank();
-      lo.world_size = group_->size();
+    if (cfg_.run.distributed.shard_data) {
+      lo.rank = group_.rank();
+      lo.world_size = group_.size();
     }
     BatchLoader loader(data_.train, lo, state_.iteration);
     spdlog::info("stage {} ({}/{}): training [{}] for {} iterations from {}, batch {}, lr {}", s.name,
@@ -206,7 +209,7 @@ class Run {
       spdlog::info("validation at {} {} was interrupted: done now", s.name, state_.iteration);
       const bool best = writer_ && data_.val && validate(signals);
       if (writer_ && best) save(step, true);
-      if (state_.validation_pending && !group_) {  // interrupted again: stop where it stands
+      if (state_.validation_pending && !several()) {  // interrupted again: stop where it stands
         save(step, false);
         return 130;
       }
@@ -239,8 +242,8 @@ class Run {
       // A new best is checkpointed at once: best-<stage>.pt holds exactly the weights that earned the score.
       const bool new_best = writer_ && due(log.val_interval) && data_.val && validate(signals);
       const auto& dist = cfg_.run.distributed;
-      if (group_ && dist.verify_interval > 0 && state_.iteration % dist.verify_interval == 0)
-        verify_same_weights(*group_, nets_.trainable_parameters(), global_step());
+      if (dist.verify_interval > 0 && state_.iteration % dist.verify_interval == 0)
+        verify_same_weights(group_, nets_.trainable_parameters(), global_step());
       const int signal = agreed_signal(group_, signals.received(), device_);
       const bool checkpoint = due(log.checkpoint_interval);
       if (writer_ && (checkpoint || signal || new_best)) save(step, new_best);
@@ -298,7 +301,7 @@ class Run {
     for (auto& sink : sinks_) sink->flush();
     const std::string path = checkpoints_.save(stage().name, state_.iteration, best, [&](torch::serialize::OutputArchive& a) {
       TrainState state = state_;
-      state.world_size = group_ ? group_->size() : 1;
+      state.world_size = group_.size();
       write_checkpoint(a, CheckpointContents{nets_, &step.optimizer(), state, cfg_, init_configs_});
     });
     spdlog::info("checkpoint {}{}", path, best ? " (best of stage " + stage().name + ")" : "");
@@ -333,7 +336,7 @@ class Run {
   Config cfg_;
   RunFolder folder_;
   TrainOptions opts_;
-  ProcessGroup* group_;
+  ProcessGroup& group_;
   bool writer_;
   std::unique_ptr<GradientAverager> averager_;
   torch::Device device_;
@@ -348,96 +351,93 @@ class Run {
   bool summaries_skipped_ = false;
 };
 
-// This process's group when geo_train was launched as one process of several (torchrun, srun);
-// null for a single process.
-// This process's group (null alone), its ranks checked to train one configuration.
+// This process's group (a SingleProcess alone), its ranks checked to train one configuration.
 std::unique_ptr<ProcessGroup> join_group(const Config& config, const TrainOptions& options) {
   const std::string device = options.device.empty() ? config.run.device : options.device;
   auto group = join_launched_group(config.run.distributed, device, options.master_addr);
-  if (group) check_same_config(*group, to_yaml(config), process_device(device, group.get()));
+  if (group->size() > 1) check_same_config(*group, to_yaml(config), process_device(device, *group));
   return group;
 }
 
-// The other ranks of a distributed run: they read the run folder rank 0 set up and write nothing.
-int follow(const Config& config, const std::string& dir, const TrainOptions& options, ProcessGroup& group,
-           bool resuming) {
-  setup_logging(config.logging.level == "info" || config.logging.level == "debug" || config.logging.level == "trace"
-                    ? "warn" : config.logging.level);
-  Run run(config, RunFolder(dir), options, resuming, &group);
-  return run.run();
-}
+// A run folder rank 0 made ready for the run, held (locked) while it trains.
+struct PreparedFolder {
+  RunFolder folder;
+  std::unique_ptr<FolderLock> lock;  // one writer per run folder
+  bool created = false;              // made for this run: removed again when the run cannot start
+};
 
-}  // namespace
-
-int train(const Config& config, const TrainOptions& options, std::string* run_dir) {
+// What train() and resume() share: rank 0 prepares the run folder (`prepare`) and shares its path,
+// or why it could not, with the other ranks, which train in it without writing to it; then every
+// process runs.
+int run_in_folder(const Config& config, const TrainOptions& options, bool resuming,
+                  const std::function<PreparedFolder()>& prepare, std::string* run_dir) {
   auto group = join_group(config, options);
-  if (group && group->rank() != 0) {
+  if (group->rank() != 0) {
     const std::string dir = group->share_from_rank0("run_dir", "");
     if (run_dir) *run_dir = dir;
-    return follow(config, dir, options, *group, false);
+    const auto& level = config.logging.level;  // rank 0 speaks for the run; the others warn
+    setup_logging(level == "info" || level == "debug" || level == "trace" ? "warn" : level);
+    Run run(config, RunFolder(dir), options, resuming, *group);
+    return run.run();
   }
-  const bool created = options.run_dir.empty() || !fs::exists(options.run_dir);
-  std::optional<RunFolder> folder;
-  std::unique_ptr<FolderLock> lock;
+  std::optional<PreparedFolder> prepared;
   try {
-    folder = options.run_dir.empty() ? RunFolder::create_new(config.run.dir, config.run.name) : RunFolder(options.run_dir);
-    const std::string& dir = folder->root();
-    // The lock first: a folder where a run is training right now is said to be in use, never
-    // called a stopped run to be removed.
-    fs::create_directories(dir);
-    lock = std::make_unique<FolderLock>(dir);  // one writer per run folder
-    if (!folder->latest().empty())
-      throw std::runtime_error("run folder '" + dir + "' already holds a run; use --resume " + dir + " or another --run-dir");
-    // A run that stopped before its first checkpoint cannot be resumed, and a new one would append
-    // to its logs: refused, so that two runs never mix in one folder.
-    const auto earlier = folder->run_files();
-    if (!earlier.empty())
-      throw std::runtime_error("run folder '" + dir + "' holds the files of an earlier run (" + join_list(earlier, ", ") +
-                               ") that stopped before its first checkpoint: remove the folder or use another --run-dir");
-    write_file_atomic(folder->config(), to_yaml(config));
+    prepared.emplace(prepare());
   } catch (const std::exception& e) {
-    if (group) group->share_from_rank0("run_dir", e.what(), true);
+    group->share_from_rank0("run_dir", e.what(), true);
     throw;
   }
-  if (group) group->share_from_rank0("run_dir", folder->root());
-  if (run_dir) *run_dir = folder->root();
-  setup_logging(config.logging.level, folder->log());
+  const RunFolder& folder = prepared->folder;
+  group->share_from_rank0("run_dir", folder.root());
+  if (run_dir) *run_dir = folder.root();
+  setup_logging(config.logging.level, folder.log());
   std::unique_ptr<Run> run;
   try {
-    run = std::make_unique<Run>(config, *folder, options, false, group.get());
+    run = std::make_unique<Run>(config, folder, options, resuming, *group);
   } catch (...) {
     // A run that could not start (bad data root, ...) leaves no half-made folder behind.
-    if (created) {
+    if (prepared->created) {
       setup_logging(config.logging.level);  // release train.log
-      remove_tree(folder->root());
+      remove_tree(folder.root());
     }
     throw;
   }
   return run->run();
 }
 
+}  // namespace
+
+int train(const Config& config, const TrainOptions& options, std::string* run_dir) {
+  return run_in_folder(config, options, false, [&] {
+    const bool created = options.run_dir.empty() || !fs::exists(options.run_dir);
+    PreparedFolder p{options.run_dir.empty() ? RunFolder::create_new(config.run.dir, config.run.name)
+                                             : RunFolder(options.run_dir),
+                     nullptr, created};
+    const std::string& dir = p.folder.root();
+    // The lock first: a folder where a run is training right now is said to be in use, never
+    // called a stopped run to be removed.
+    fs::create_directories(dir);
+    p.lock = std::make_unique<FolderLock>(dir);
+    if (!p.folder.latest().empty())
+      throw std::runtime_error("run folder '" + dir + "' already holds a run; use --resume " + dir + " or another --run-dir");
+    // A run that stopped before its first checkpoint cannot be resumed, and a new one would append
+    // to its logs: refused, so that two runs never mix in one folder.
+    const auto earlier = p.folder.run_files();
+    if (!earlier.empty())
+      throw std::runtime_error("run folder '" + dir + "' holds the files of an earlier run (" + join_list(earlier, ", ") +
+                               ") that stopped before its first checkpoint: remove the folder or use another --run-dir");
+    write_file_atomic(p.folder.config(), to_yaml(config));
+    return p;
+  }, run_dir);
+}
+
 int resume(const std::string& run_dir, const TrainOptions& options) {
   const RunFolder folder(run_dir);
-  const std::string cfg_path = folder.config();
-  if (!fs::exists(cfg_path))
+  if (!fs::exists(folder.config()))
     throw std::runtime_error("--resume '" + run_dir + "': not a run folder (no config.yaml)");
-  const Config config = load_config(cfg_path);
-  auto group = join_group(config, options);
-  if (group && group->rank() != 0) {
-    group->share_from_rank0("resume", "");  // rank 0 holds the folder's lock
-    return follow(config, run_dir, options, *group, true);
-  }
-  std::unique_ptr<FolderLock> lock;
-  try {
-    lock = std::make_unique<FolderLock>(run_dir);  // one writer per run folder
-  } catch (const std::exception& e) {
-    if (group) group->share_from_rank0("resume", e.what(), true);
-    throw;
-  }
-  if (group) group->share_from_rank0("resume", run_dir);
-  setup_logging(config.logging.level, folder.log());
-  Run run(config, folder, options, true, group.get());
-  return run.run();
+  return run_in_folder(load_config(folder.config()), options, true, [&] {
+    return PreparedFolder{folder, std::make_unique<FolderLock>(run_dir), false};
+  }, nullptr);
 }
 
 }  // namespace geo
