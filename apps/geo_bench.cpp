@@ -31,7 +31,7 @@
 #include "core/logging.h"
 #include "core/runtime.h"
 #include "data/loader.h"
-#include "data/packed.h"
+#include "data/packed/packed.h"
 #include "geo/geo.h"
 #include "pipeline/networks.h"
 #include "train/compute_losses.h"

@@ -22,7 +22,7 @@
 #include "core/logging.h"
 #include "core/progress.h"
 #include "core/runtime.h"
-#include "data/calib.h"
+#include "data/kitti/calib.h"
 #include "data/cv_tensor.h"
 #include "data/image_io.h"
 #include "data/point_cloud.h"

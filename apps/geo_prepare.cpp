@@ -1,5 +1,5 @@
 // geo_prepare: packs a training split into a cache the trainer reads without OpenCV and without
-// decoding PNGs (data/packed.h), and measures the loader's throughput.
+// decoding PNGs (data/packed/packed.h), and measures the loader's throughput.
 //   geo_prepare --config stage1.yaml --set data.root=/data/kitti_raw --out /data/kitti_packed
 //   geo_train --config stage1.yaml --set data.root=/data/kitti_packed
 //   geo_prepare --config stage1.yaml --set data.root=... --throughput [--batches 20]

@@ -1,13 +1,13 @@
 // geo_synth: renders a synthetic driving world with exact ground truth in KITTI's formats.
 //   geo_synth --preset tiny --seed 1 --out /tmp/world
-// Layout and conventions: src/data/synth_writer.h. The trainer reads <out>/raw, geo_eval reads
+// Layout and conventions: src/data/synth/synth_writer.h. The trainer reads <out>/raw, geo_eval reads
 // <out>/raw (eigen), <out>/kitti2015 (kitti2015) and <out>/odometry (odometry).
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
 #include <chrono>
 
-#include "data/synth_writer.h"
+#include "data/synth/synth_writer.h"
 #include "data/video/frame_stream.h"
 #include "data/video/video_clips.h"
 #include "app_options.h"

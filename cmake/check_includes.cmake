@@ -43,7 +43,9 @@ forbid("src/pipeline/*" "[\"<](train|eval|data|api)/" "the pipeline layer sits b
 forbid("src/pipeline/*" "[\"<]losses/(total_loss|smoothness|consistency)\\.h" "inference links the photometric error (geo_photometric), not the losses")
 forbid("src/api/*" "[\"<](train|eval|data)/" "the library is built on the pipeline layer only")
 forbid("src/eval/*" "[\"<]train/" "evaluation does not depend on training")
-forbid("src/data/*" "[\"<](train|eval|api|pipeline)/" "data readers sit below the networks, training and evaluation")
+foreach(glob "src/data/*" "src/data/*/*")  # data/ and its rooms by source (kitti, synth, packed, video)
+  forbid("${glob}" "[\"<](train|eval|api|pipeline)/" "data readers sit below the networks, training and evaluation")
+endforeach()
 # Every convolution of the networks goes through geo's (models/conv.h: the oneDNN channel fix).
 foreach(dir models pipeline)
   forbid_code("src/${dir}/*" "torch::nn::Conv2d[^IO]|torch::nn::Conv2d$|torch::conv2d\\(|at::conv2d\\("

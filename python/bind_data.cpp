@@ -3,11 +3,11 @@
 // arrays): LibTorch only, in every build.
 #include "bindings.h"
 
-#include "data/calib.h"
-#include "data/synth.h"
-#include "data/synth_snippets.h"
+#include "data/kitti/calib.h"
+#include "data/synth/synth.h"
+#include "data/synth/synth_snippets.h"
 #include "data/text_io.h"
-#include "data/velodyne_depth.h"
+#include "data/kitti/velodyne_depth.h"
 #include "eval/metrics.h"
 #include "geo/geo.h"
 #include "geometry/road_plane.h"

@@ -2,7 +2,7 @@
 // flow pairs and a short odometry sequence, at the tiny preset's 64x208.
 #pragma once
 
-#include "data/synth_writer.h"
+#include "data/synth/synth_writer.h"
 #include "test_util.h"
 
 namespace geo::test {

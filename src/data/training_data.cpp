@@ -2,12 +2,12 @@
 
 #include "core/logging.h"
 #include "core/progress.h"
-#include "data/packed.h"
-#include "data/splits.h"
-#include "data/training_lists.h"
-#include "data/synth_snippets.h"
+#include "data/packed/packed.h"
+#include "data/kitti/splits.h"
+#include "data/kitti/training_lists.h"
+#include "data/synth/synth_snippets.h"
 #ifdef GEO_WITH_OPENCV
-#include "data/sequence_dataset.h"
+#include "data/kitti/sequence_dataset.h"
 #include "data/video/video_clips.h"
 #endif
 

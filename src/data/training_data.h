@@ -12,7 +12,7 @@
 #pragma once
 
 #include "core/config.h"
-#include "data/splits.h"
+#include "data/kitti/splits.h"
 #include "data/snippets.h"
 
 #include <memory>
@@ -32,7 +32,7 @@ struct TrainingData {
 TrainingData open_training_data(const DataConfig& data);
 
 // Packs `data`'s training and validation snippets (of `config`'s size and sequence length) into a
-// cache at `out` (train/, val/; data/packed.h) that training reads with data.root=`out`, with
+// cache at `out` (train/, val/; data/packed/packed.h) that training reads with data.root=`out`, with
 // progress lines. A val/ an earlier cache left there is removed when `data` has no validation set
 // (returns true then).
 bool write_packed_cache(const TrainingData& data, const DataConfig& config, const std::string& out);

@@ -5,7 +5,7 @@
 #include "core/files.h"
 #include "core/config.h"
 #include "core/progress.h"
-#include "data/calib.h"
+#include "data/kitti/calib.h"
 #include "data/image_io.h"
 #include "data/text_io.h"
 #include "geometry/camera.h"

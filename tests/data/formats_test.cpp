@@ -3,10 +3,10 @@
 // real KITTI excerpts when ../shared/kitti_samples is present.
 #include "core/config.h"
 #include "core/files.h"
-#include "data/calib.h"
-#include "data/splits.h"
+#include "data/kitti/calib.h"
+#include "data/kitti/splits.h"
 #include "data/text_io.h"
-#include "data/velodyne_depth.h"
+#include "data/kitti/velodyne_depth.h"
 
 #include <gtest/gtest.h>
 

@@ -1,7 +1,7 @@
 // The batch stream: determinism and exact resumption, augmentation consistent with the
 // intrinsics, bad-sample policies, and the packed cache round trip.
 #include "data/loader.h"
-#include "data/packed.h"
+#include "data/packed/packed.h"
 
 #include <gtest/gtest.h>
 

@@ -1,6 +1,6 @@
 // The synthetic world in memory (data.format synthetic): geo_synth's drives, split and frames
 // without files, quantised as a PNG holds them, intrinsics scaled to the training size.
-#include "data/synth_snippets.h"
+#include "data/synth/synth_snippets.h"
 
 #include <gtest/gtest.h>
 

@@ -1,13 +1,13 @@
 // The synthetic world's ground truth is exact: flow reproduces the next frame, depth + poses give
 // the flow of static points, the LiDAR lands where the depth says; and the KITTI readers read
 // everything the writer writes.
-#include "data/calib.h"
+#include "data/kitti/calib.h"
 #include "data/image_io.h"
-#include "data/sequence_dataset.h"
-#include "data/synth_snippets.h"
-#include "data/synth_writer.h"
+#include "data/kitti/sequence_dataset.h"
+#include "data/synth/synth_snippets.h"
+#include "data/synth/synth_writer.h"
 #include "data/text_io.h"
-#include "data/velodyne_depth.h"
+#include "data/kitti/velodyne_depth.h"
 #include "geometry/camera.h"
 #include "geometry/pose.h"
 #include "geometry/warp.h"

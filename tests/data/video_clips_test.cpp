@@ -2,7 +2,7 @@
 // decoded once, subsampled, static frames left out, the camera following crop and resize, and the
 // bad clips a user brings named with the file and the value.
 #include "data/image_io.h"
-#include "data/synth.h"
+#include "data/synth/synth.h"
 #include "data/video/video_clips.h"
 
 #include <gtest/gtest.h>

@@ -12,9 +12,9 @@
 
 #include "core/config.h"
 #include "core/files.h"
-#include "data/calib.h"
+#include "data/kitti/calib.h"
 #include "data/image_io.h"
-#include "data/synth_writer.h"
+#include "data/synth/synth_writer.h"
 #include "data/text_io.h"
 #include "eval/protocols.h"
 #include "train/trainer.h"

@@ -11,7 +11,7 @@
 // must fail: what passes is learnt from the images, not from the schedule or the smoothness prior.
 #include "core/config.h"
 #include "core/files.h"
-#include "data/calib.h"
+#include "data/kitti/calib.h"
 #include "eval/predictor.h"
 #include "eval/protocols.h"
 #include "eval/sources.h"

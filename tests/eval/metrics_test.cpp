@@ -3,7 +3,7 @@
 #include "core/files.h"
 #include "core/state_io.h"
 #include "data/image_io.h"
-#include "data/synth_writer.h"
+#include "data/synth/synth_writer.h"
 #include "data/text_io.h"
 #include "eval/metrics.h"
 #include "eval/protocols.h"

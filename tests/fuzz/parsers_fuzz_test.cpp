@@ -10,12 +10,12 @@
 // A failing input is written to GEO_FUZZ_FAILURES (default: fuzz-failures/ in the working folder)
 // and is reproduced by the same GEO_FUZZ_SEED and iteration.
 #include "core/config.h"
-#include "data/calib.h"
+#include "data/kitti/calib.h"
 #include "data/image_io.h"
-#include "data/packed.h"
-#include "data/splits.h"
+#include "data/packed/packed.h"
+#include "data/kitti/splits.h"
 #include "data/text_io.h"
-#include "data/velodyne_depth.h"
+#include "data/kitti/velodyne_depth.h"
 
 #include <gtest/gtest.h>
 

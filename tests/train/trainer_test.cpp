@@ -4,9 +4,9 @@
 // stage trains, and a run folder resolves to the best of its last stage; the TensorBoard file
 // holds the losses of metrics.csv.
 #include "core/files.h"
-#include "data/packed.h"
-#include "data/splits.h"
-#include "data/synth_writer.h"
+#include "data/packed/packed.h"
+#include "data/kitti/splits.h"
+#include "data/synth/synth_writer.h"
 #include "pipeline/checkpoint.h"
 #include "train/checkpoints.h"
 #include "data/training_data.h"

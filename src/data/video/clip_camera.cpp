@@ -1,6 +1,6 @@
 #include "data/video/clip_camera.h"
 
-#include "data/calib.h"
+#include "data/kitti/calib.h"
 #include "geometry/camera.h"
 
 #include <spdlog/spdlog.h>

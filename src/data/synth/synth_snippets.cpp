@@ -1,4 +1,4 @@
-#include "data/synth_snippets.h"
+#include "data/synth/synth_snippets.h"
 
 #include <stdexcept>
 

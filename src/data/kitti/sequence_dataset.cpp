@@ -1,7 +1,7 @@
-#include "data/sequence_dataset.h"
+#include "data/kitti/sequence_dataset.h"
 
 #include "core/files.h"
-#include "data/calib.h"
+#include "data/kitti/calib.h"
 #include "data/image_io.h"
 
 #include <cstdio>

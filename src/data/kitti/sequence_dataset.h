@@ -5,7 +5,7 @@
 #pragma once
 
 #include "data/snippets.h"
-#include "data/splits.h"
+#include "data/kitti/splits.h"
 
 #include <map>
 #include <mutex>

@@ -1,4 +1,4 @@
-#include "data/packed.h"
+#include "data/packed/packed.h"
 
 #include "core/files.h"
 #include "data/text_io.h"

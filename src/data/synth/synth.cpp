@@ -1,4 +1,4 @@
-#include "data/synth.h"
+#include "data/synth/synth.h"
 
 #include <algorithm>
 #include <cmath>

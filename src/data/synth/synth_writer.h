@@ -1,4 +1,4 @@
-// Writes a synthetic world (data/synth.h) in KITTI's on-disk formats (KITTI devkit formats) under
+// Writes a synthetic world (data/synth/synth.h) in KITTI's on-disk formats (KITTI devkit formats) under
 // one root, so every reader, the trainer and the evaluator run on it unchanged:
 //   raw/<date>/calib_cam_to_cam.txt, calib_velo_to_cam.txt
 //   raw/<date>/<date>_drive_NNNN_sync/image_02/data/%010d.png, velodyne_points/data/%010d.bin,
@@ -11,7 +11,7 @@
 //   odometry/sequences/09/image_2/%06d.png, calib.txt, times.txt; odometry/poses/09.txt
 #pragma once
 
-#include "data/synth.h"
+#include "data/synth/synth.h"
 
 #include <functional>
 #include <string>

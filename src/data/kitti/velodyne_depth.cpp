@@ -1,4 +1,4 @@
-#include "data/velodyne_depth.h"
+#include "data/kitti/velodyne_depth.h"
 
 #include "core/tensor_checks.h"
 

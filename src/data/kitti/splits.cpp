@@ -1,4 +1,4 @@
-#include "data/splits.h"
+#include "data/kitti/splits.h"
 
 #include "core/config.h"
 #include "core/files.h"

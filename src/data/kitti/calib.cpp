@@ -1,4 +1,4 @@
-#include "data/calib.h"
+#include "data/kitti/calib.h"
 
 #include <cstdio>
 

@@ -1,7 +1,7 @@
-#include "data/synth_writer.h"
+#include "data/synth/synth_writer.h"
 
 #include "core/files.h"
-#include "data/calib.h"
+#include "data/kitti/calib.h"
 #include "data/image_io.h"
 #include "data/text_io.h"
 #include "geometry/pose.h"

@@ -1,7 +1,7 @@
-#include "data/training_lists.h"
+#include "data/kitti/training_lists.h"
 
-#include "data/packed.h"
-#include "data/splits.h"
+#include "data/packed/packed.h"
+#include "data/kitti/splits.h"
 
 #include <cctype>
 #include <filesystem>

@@ -8,7 +8,7 @@
 #pragma once
 
 #include "data/snippets.h"
-#include "data/synth.h"
+#include "data/synth/synth.h"
 
 #include <memory>
 #include <vector>
