@@ -19,7 +19,7 @@ class ConfigError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-class Checker;  // collects validation failures with key paths and YAML lines (config.cpp)
+class Checker;  // collects validation failures with key paths and YAML lines (config_checks.cpp)
 
 // Enumerated keys: read from YAML by name once, at parsing (an unknown name is a ConfigError listing
 // the valid ones), written back by name, compared as values everywhere else.
