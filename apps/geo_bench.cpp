@@ -401,8 +401,7 @@ int bench(Options& o, const std::string& command_line) {
     // Three n x n float32 matrices at once (a, b, the product).
     if (!device.is_cuda()) geo::check_memory_available("--ceiling-size " + std::to_string(n), 12.0 * n * n);
     ceiling = geo::bench::measure_ceiling(device, n, 7);
-    spdlog::info("ceiling: {}x{} matrix product {:.0f} GFLOP/s {}, {:.0f} GFLOP/s bf16", ceiling.n, ceiling.n,
-                 ceiling.fp32, ceiling.float_name(), ceiling.bf16);
+    spdlog::info("ceiling: {}", ceiling.describe());
   }
   if (!o.summary && !o.no_infer) {
     auto r = inference_rows(config, frs, o, device, params);

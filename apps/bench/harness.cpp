@@ -1,6 +1,7 @@
 #include "bench/harness.h"
 
 #include <spdlog/spdlog.h>
+#include <ATen/core/dispatch/Dispatcher.h>
 #include <torch/csrc/autograd/profiler_legacy.h>
 
 #include <algorithm>
@@ -177,6 +178,68 @@ std::vector<std::string> fr_overheads(const std::vector<Row>& rows) {
 }
 
 
+namespace {
+
+// The fastest of `iters` calls of `f` after two warm-ups, in ms.
+template <class F> double best_ms(const torch::Device& device, int iters, F&& f) {
+  std::vector<double> ms;
+  for (int i = 0; i < iters + 2; ++i) {
+    const auto t0 = std::chrono::steady_clock::now();
+    f();
+    sync(device);
+    if (i >= 2) ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  }
+  // The best of the runs: a ceiling is what the machine can do, not what it does on average.
+  return *std::min_element(ms.begin(), ms.end());
+}
+
+// LibTorch's quantized engine for int8 products: oneDNN's where this LibTorch has it, else FBGEMM,
+// else QNNPACK; "" when it has none.
+std::string select_int8_engine() {
+  const auto& supported = at::globalContext().supportedQEngines();
+  for (const auto& [engine, name] : std::vector<std::pair<at::QEngine, const char*>>{
+           {at::QEngine::ONEDNN, "onednn"}, {at::QEngine::FBGEMM, "fbgemm"}, {at::QEngine::QNNPACK, "qnnpack"}})
+    if (std::find(supported.begin(), supported.end(), engine) != supported.end()) {
+      at::globalContext().setQEngine(engine);
+      return name;
+    }
+  return "";
+}
+
+// [n,n] uint8 x [n,n] int8 -> uint8 through quantized::linear (the weights prepacked once, as a
+// network's are), GOP/s; < 0 where the engine cannot run it.
+double int8_gops(int64_t n, int iters, std::string& engine) {
+  engine = select_int8_engine();
+  if (engine.empty()) return -1;
+  try {
+    const auto a = at::quantize_per_tensor(torch::rand({n, n}), 1.0 / 255, 0, torch::kQUInt8);
+    const auto w = at::quantize_per_tensor(torch::rand({n, n}) - 0.5, 1.0 / 127, 0, torch::kQInt8);
+    auto& dispatcher = c10::Dispatcher::singleton();
+    torch::jit::Stack stack{w, c10::IValue()};
+    dispatcher.findSchemaOrThrow("quantized::linear_prepack", "").callBoxed(&stack);
+    const c10::IValue packed = stack.at(0);
+    const auto linear = dispatcher.findSchemaOrThrow("quantized::linear", "");
+    // Products of n terms of up to 0.5 in size: an output scale that keeps them within uint8.
+    const double scale = 0.5 * static_cast<double>(n) / 255.0 / 4;
+    const double ms = best_ms(torch::kCPU, iters, [&] {
+      torch::jit::Stack s{a, packed, scale, int64_t{128}};
+      linear.callBoxed(&s);
+    });
+    return 2.0 * static_cast<double>(n) * n * n / 1e9 / (ms / 1000.0);
+  } catch (const c10::Error& e) {
+    spdlog::warn("int8 ceiling not measured: {}", std::string(e.what_without_backtrace()).substr(0, 200));
+    return -1;
+  }
+}
+
+}  // namespace
+
+std::string Ceiling::describe() const {
+  std::string d = fmt::format("{0}x{0} matrix product {1:.0f} GFLOP/s {2}, {3:.0f} GFLOP/s bf16", n, fp32, float_name(), bf16);
+  if (int8 > 0) d += fmt::format(", {:.0f} GOP/s int8 ({})", int8, int8_engine);
+  return d;
+}
+
 Ceiling measure_ceiling(const torch::Device& device, int64_t n, int iters) {
   Ceiling c;
   c.n = n;
@@ -187,18 +250,10 @@ Ceiling measure_ceiling(const torch::Device& device, int64_t n, int iters) {
     const auto a = torch::rand({n, n}, torch::TensorOptions().device(device)).to(dtype);
     const auto b = torch::rand({n, n}, torch::TensorOptions().device(device)).to(dtype);
     auto out = torch::empty({n, n}, a.options());
-    std::vector<double> ms;
-    for (int i = 0; i < iters + 2; ++i) {
-      const auto t0 = std::chrono::steady_clock::now();
-      torch::mm_out(out, a, b);
-      sync(device);
-      if (i >= 2) ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
-    }
-    // The best of the runs: a ceiling is what the machine can do, not what it does on average.
-    const double best_ms = *std::min_element(ms.begin(), ms.end());
-    const double gflop_per_s = 2.0 * static_cast<double>(n) * n * n / 1e9 / (best_ms / 1000.0);
-    (bf16 ? c.bf16 : c.fp32) = gflop_per_s;
+    const double ms = best_ms(device, iters, [&] { torch::mm_out(out, a, b); });
+    (bf16 ? c.bf16 : c.fp32) = 2.0 * static_cast<double>(n) * n * n / 1e9 / (ms / 1000.0);
   }
+  if (device.is_cpu()) c.int8 = int8_gops(n, iters, c.int8_engine);
   return c;
 }
 
@@ -230,9 +285,8 @@ void print_table(const std::vector<Row>& rows, const Ceiling& ceiling) {
                 fmt_num(r.gflops_per_s(), "{:.0f}").c_str(), fraction(r, ceiling).c_str());
   }
   if (ceiling.fp32 > 0)
-    std::printf("ceiling: %lldx%lld matrix product %.0f GFLOP/s %s, %.0f GFLOP/s bf16 "
-                "(ceil: a row's GFLOP/s as a share of its precision's ceiling)\n",
-                static_cast<long long>(ceiling.n), static_cast<long long>(ceiling.n), ceiling.fp32, ceiling.float_name(), ceiling.bf16);
+    std::printf("ceiling: %s (ceil: a row's GFLOP/s as a share of its precision's ceiling)\n",
+                ceiling.describe().c_str());
   for (const auto& o : fr_overheads(rows)) std::printf("FR overhead, %s\n", o.c_str());
 }
 
@@ -241,9 +295,8 @@ std::string markdown_table(const std::vector<Row>& rows, const Ceiling& ceiling,
   std::string md = fmt::format("Machine: {}; LibTorch {}; {}.\nCommand: `{}`\n\n", machine, TORCH_VERSION,
                                geo::local_date(), command);
   if (ceiling.fp32 > 0)
-    md += fmt::format("Ceiling ({0}x{0} matrix product, same threads): {1:.0f} GFLOP/s {3}, {2:.0f} GFLOP/s bf16. "
-                      "A training step counts 3x its forward FLOPs.\n\n", ceiling.n, ceiling.fp32, ceiling.bf16,
-                      ceiling.float_name());
+    md += fmt::format("Ceiling (same threads): {}. A training step counts 3x its forward FLOPs.\n\n",
+                      ceiling.describe());
   md += "| section | what | FR | batch | parameters | GFLOPs | ms/call | ms/sample | samples/s | peak MB | GFLOP/s | of ceiling |\n"
         "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& r : rows)
@@ -266,6 +319,7 @@ std::string json_report(const std::vector<Row>& rows, const Ceiling& ceiling, co
      << ",\n  \"bn_folded\": " << (h.bn_folded ? "true" : "false") << ",\n  \"cpu_flags\": \"" << cpu_flags()
      << "\",\n  \"ceiling_gflops_fp32\": " << json_num(ceiling.fp32)
      << ",\n  \"ceiling_gflops_bf16\": " << json_num(ceiling.bf16)
+     << ",\n  \"ceiling_gops_int8\": " << json_num(ceiling.int8) << ",\n  \"int8_engine\": \"" << ceiling.int8_engine << "\""
      << ",\n  \"ceiling_tf32\": " << (ceiling.tf32 ? "true" : "false") << ",\n  \"rows\": [\n";
   for (size_t i = 0; i < rows.size(); ++i) {
     const auto& r = rows[i];

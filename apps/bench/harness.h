@@ -30,17 +30,24 @@ struct Row {
 };
 
 // The machine's matrix-product ceiling: GFLOP/s of a large square matrix product (fp32 and bf16),
-// the same threads as the rows; < 0 when not measured.
+// the same threads as the rows; < 0 when not measured. int8: GOP/s of the same product in LibTorch's
+// quantized engine (uint8 activations x int8 weights -> uint8; CPU only), what an int8 network's
+// convolutions run on: `int8_engine` names it (onednn, fbgemm, qnnpack).
 struct Ceiling {
   double fp32 = -1;
   double bf16 = -1;
+  double int8 = -1;
+  std::string int8_engine;
   int64_t n = 0;
   bool tf32 = false;  // CUDA with TF32 allowed (run.precision tf32): the float32 product runs on TF32 tensor cores
   double of(const Row& r) const { return r.bf16 ? bf16 : fp32; }
   const char* float_name() const { return tf32 ? "fp32 (TF32)" : "fp32"; }
+  std::string describe() const;  // "2048x2048 matrix product 205 GFLOP/s fp32, 420 GFLOP/s bf16, 850 GOP/s int8 (onednn)"
 };
 
-// Times a [n,n] x [n,n] product in fp32 and bf16 on `device`: the fastest of `iters` after two warm-ups.
+// Times a [n,n] x [n,n] product in fp32, bf16 and (CPU) int8 on `device`: the fastest of `iters`
+// after two warm-ups. The int8 product selects LibTorch's quantized engine for the process (oneDNN
+// where it has one, else FBGEMM, else QNNPACK; none: int8 stays unmeasured).
 Ceiling measure_ceiling(const torch::Device& device, int64_t n, int iters);
 
 // Peak memory of the process (CPU: resident set high-water mark) or of the caching allocator (CUDA).
