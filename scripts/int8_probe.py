@@ -8,6 +8,13 @@ module in fp32 eager at batch 1.
   PYTHONPATH=build/python python3 scripts/int8_probe.py --fr off --threads 2
 prints one line: eager fp32 ms, int8 ms, and the mean relative difference of the finest disparity
 (with untrained weights and random calibration frames: a speed probe, not an accuracy figure).
+
+  python3 scripts/int8_probe.py --convs --threads 2
+times single convolutions of the DepthNet's shapes at 128x416 instead: fp32, the int8 convolution
+alone (quantized::conv2d_relu, prepacked per-channel weights, NHWC uint8 activations), and what
+quantizing its input and dequantizing its output costs with ATen's quantize_per_tensor /
+dequantize and with plain vectorised tensor arithmetic: what an int8 path that leaves activations
+in float between convolutions would pay.
 """
 import argparse
 import time
@@ -30,6 +37,31 @@ def median_ms(f, n):
     return sorted(times)[n // 2]
 
 
+def convs(a):
+    # (in, out, kernel, stride, input height, width): the encoder's first convolution, a ResNet-50
+    # bottleneck's 1x1 reduction and 3x3 at 1/4 size, a 3x3 at 1/16, and a decoder 3x3 at 1/2.
+    shapes = [(3, 64, 7, 2, 128, 416), (256, 64, 1, 1, 32, 104), (64, 64, 3, 1, 32, 104),
+              (256, 256, 3, 1, 8, 26), (96, 32, 3, 1, 64, 208)]
+    print(f"torch {torch.__version__}, {a.threads} threads, ms (median of {a.iters})")
+    print("| conv | fp32 | int8 conv | ATen quantize + dequantize | vectorised quantize + dequantize |")
+    print("|---|---|---|---|---|")
+    with torch.inference_mode():
+        for ci, co, k, st, h, w in shapes:
+            x = torch.rand(1, ci, h, w).contiguous(memory_format=torch.channels_last)
+            wt, b = torch.randn(co, ci, k, k) * 0.1, torch.randn(co)
+            qw = torch.quantize_per_channel(wt, wt.abs().amax((1, 2, 3)) / 127, torch.zeros(co, dtype=torch.long), 0,
+                                            torch.qint8)
+            packed = torch.ops.quantized.conv2d_prepack(qw, b, [st, st], [k // 2, k // 2], [1, 1], 1)
+            qx = torch.quantize_per_tensor(x, 1 / 255, 0, torch.quint8)
+            qy = torch.ops.quantized.conv2d_relu(qx, packed, 0.05, 0)
+            fp32 = median_ms(lambda: torch.relu(torch.conv2d(x, wt, b, st, k // 2)), a.iters)
+            int8 = median_ms(lambda: torch.ops.quantized.conv2d_relu(qx, packed, 0.05, 0), a.iters)
+            aten = median_ms(lambda: (torch.quantize_per_tensor(x, 1 / 255, 0, torch.quint8), qy.dequantize()), a.iters)
+            vect = median_ms(lambda: (torch._make_per_tensor_quantized_tensor(
+                x.mul(255).round_().clamp_(0, 255).to(torch.uint8), 1 / 255, 0), qy.int_repr().float().mul_(0.05)), a.iters)
+            print(f"| {ci}->{co} {k}x{k}/{st} at {h}x{w} | {fp32:.2f} | {int8:.2f} | {aten:.2f} | {vect:.2f} |")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--fr", choices=("on", "off"), default="off")
@@ -38,9 +70,12 @@ def main():
     ap.add_argument("--width", type=int, default=416)
     ap.add_argument("--iters", type=int, default=9)
     ap.add_argument("--calibration", type=int, default=4)
+    ap.add_argument("--convs", action="store_true", help="time single convolutions (fp32, int8, quantize/dequantize)")
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
     torch.backends.quantized.engine = "onednn"
+    if a.convs:
+        return convs(a)
     torch.manual_seed(0)
     model = {"encoder_depth": 50, "use_fr": a.fr == "on", "fr_encoder": True, "fr_decoder": True, "fr_ratio": 16,
              "fr_spatial_bn": False, "upsample": "nearest", "bn_eps": 1e-3}
