@@ -77,7 +77,9 @@ struct InferOptions {
 
 // The input's frames at the model's size, in order, and what the outputs need of the input.
 struct Frames {
-  std::vector<std::pair<std::string, torch::Tensor>> list;  // name, image [1,3,h,w]
+  // name, image [1,3,h,w]: uint8 for 8-bit input (a quarter of float's memory; geo::Model takes it
+  // as it is), float [0,1] for 16-bit frames
+  std::vector<std::pair<std::string, torch::Tensor>> list;
   double fps = 10;                                          // a frame folder's (KITTI's); a video's own
   int64_t height = 0, width = 0;                            // the original size (for the intrinsics)
   bool video = false;
@@ -101,7 +103,7 @@ Frames read_frames(const InferOptions& o, int64_t h, int64_t w) {
   std::string name;
   cv::Mat m;
   while ((o.max_frames <= 0 || static_cast<int64_t>(frames.size()) < o.max_frames) && stream.next(name, &m))
-    frames.list.emplace_back(name, geo::resized_mat_to_tensor(m, h, w, o.input + " [" + name + "]").unsqueeze(0));
+    frames.list.emplace_back(name, geo::resized_mat_to_frame(m, h, w, o.input + " [" + name + "]").unsqueeze(0));
   if (frames.list.empty()) throw std::runtime_error("--input '" + o.input + "': no frame could be decoded (an empty or damaged video)");
   frames.height = stream.height();
   frames.width = stream.width();

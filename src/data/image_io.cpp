@@ -47,18 +47,38 @@ void write_raw(const std::string& path, const cv::Mat& m) {
 
 }  // namespace
 
-torch::Tensor mat_to_tensor(const cv::Mat& bgr_any, const std::string& path) {
-  cv::Mat m;  // a new buffer: the caller's image stays BGR
+namespace {
+
+// 1-, 3- or 4-channel BGR(A) -> RGB in a new buffer (the caller's image stays BGR).
+cv::Mat to_rgb(const cv::Mat& bgr_any, const std::string& path) {
+  cv::Mat m;
   if (bgr_any.channels() == 1) cv::cvtColor(bgr_any, m, cv::COLOR_GRAY2RGB);
   else if (bgr_any.channels() == 3) cv::cvtColor(bgr_any, m, cv::COLOR_BGR2RGB);
   else if (bgr_any.channels() == 4) cv::cvtColor(bgr_any, m, cv::COLOR_BGRA2RGB);
   else
     throw std::runtime_error("image '" + path + "' has " + std::to_string(bgr_any.channels()) +
                              " channels; expected 1, 3 or 4");
+  return m;
+}
+
+// The image at height x width: INTER_AREA when shrinking both sides, linear otherwise; as it is at that size.
+cv::Mat resized(const cv::Mat& image, int64_t height, int64_t width) {
+  if (image.rows == height && image.cols == width) return image;
+  const bool shrink = height < image.rows && width < image.cols;
+  cv::Mat r;
+  cv::resize(image, r, cv::Size(static_cast<int>(width), static_cast<int>(height)), 0, 0,
+             shrink ? cv::INTER_AREA : cv::INTER_LINEAR);
+  return r;
+}
+
+}  // namespace
+
+torch::Tensor mat_to_tensor(const cv::Mat& bgr_any, const std::string& path) {
+  const cv::Mat m = to_rgb(bgr_any, path);
   cv::Mat f;
   m.convertTo(f, CV_32FC3, m.depth() == CV_16U ? 1.0 / 65535.0 : 1.0 / 255.0);
-  auto t = torch::from_blob(f.data, {f.rows, f.cols, 3}, torch::kFloat32);
-  return t.permute({2, 0, 1}).contiguous();
+  // A copy in any case (f's buffer is gone on return; contiguous() would not copy a 1x1 image).
+  return torch::from_blob(f.data, {f.rows, f.cols, 3}, torch::kFloat32).permute({2, 0, 1}).clone(at::MemoryFormat::Contiguous);
 }
 
 cv::Mat tensor_to_bgr8(const torch::Tensor& image) {
@@ -86,12 +106,13 @@ torch::Tensor read_image_resized(const std::string& path, int64_t height, int64_
 }
 
 torch::Tensor resized_mat_to_tensor(const cv::Mat& bgr_any, int64_t height, int64_t width, const std::string& path) {
-  if (bgr_any.rows == height && bgr_any.cols == width) return mat_to_tensor(bgr_any, path);
-  const bool shrink = height < bgr_any.rows && width < bgr_any.cols;
-  cv::Mat r;
-  cv::resize(bgr_any, r, cv::Size(static_cast<int>(width), static_cast<int>(height)), 0, 0,
-             shrink ? cv::INTER_AREA : cv::INTER_LINEAR);
-  return mat_to_tensor(r, path);
+  return mat_to_tensor(resized(bgr_any, height, width), path);
+}
+
+torch::Tensor resized_mat_to_frame(const cv::Mat& bgr_any, int64_t height, int64_t width, const std::string& path) {
+  if (bgr_any.depth() != CV_8U) return resized_mat_to_tensor(bgr_any, height, width, path);
+  const cv::Mat m = to_rgb(resized(bgr_any, height, width), path);
+  return torch::from_blob(m.data, {m.rows, m.cols, 3}, torch::kUInt8).permute({2, 0, 1}).clone(at::MemoryFormat::Contiguous);
 }
 
 void write_image(const std::string& path, const torch::Tensor& image) {

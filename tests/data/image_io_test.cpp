@@ -1,5 +1,6 @@
 // Image, flow and depth PNGs: exact round trips at the formats' resolution and clear errors.
 #include "data/image_io.h"
+#include "data/cv_tensor.h"
 #include "core/zip_check.h"
 #include "geometry/warp.h"
 
@@ -17,6 +18,26 @@ TEST(ImageIo, ImageRoundTripIsExactIn8Bit) {
   EXPECT_TRUE(torch::allclose(read_image(dir + "/a.png"), img, 0, 1e-6));
   const auto small = read_image_resized(dir + "/a.png", 3, 4);
   EXPECT_EQ(small.sizes(), (torch::IntArrayRef{3, 3, 4}));
+}
+
+// geo_infer's frames: 8-bit images stay uint8 (the values resized_mat_to_tensor scales to [0,1]),
+// 16-bit ones are float; both resized alike.
+TEST(ImageIo, FramesStayEightBitWhereTheImageIs) {
+  const auto bgr8 = cv::Mat(6, 10, CV_8UC3);
+  cv::randu(bgr8, 0, 256);
+  const auto frame = resized_mat_to_frame(bgr8, 3, 5, "a");
+  ASSERT_EQ(frame.scalar_type(), torch::kUInt8);
+  EXPECT_EQ(frame.sizes(), (torch::IntArrayRef{3, 3, 5}));
+  EXPECT_TRUE(torch::allclose(frame.to(torch::kFloat32) / 255, resized_mat_to_tensor(bgr8, 3, 5, "a"), 0, 1e-6));
+  // At its own size: the bytes as they are, red first (OpenCV's channel 2).
+  const auto same = resized_mat_to_frame(bgr8, 6, 10, "a");
+  EXPECT_EQ(same[0][4][7].item<int>(), bgr8.at<cv::Vec3b>(4, 7)[2]);
+  EXPECT_EQ(same[2][4][7].item<int>(), bgr8.at<cv::Vec3b>(4, 7)[0]);
+  cv::Mat bgr16;
+  bgr8.convertTo(bgr16, CV_16UC3, 257);
+  const auto deep = resized_mat_to_frame(bgr16, 3, 5, "b");
+  ASSERT_EQ(deep.scalar_type(), torch::kFloat32);
+  EXPECT_TRUE(torch::allclose(deep, resized_mat_to_tensor(bgr16, 3, 5, "b"), 0, 0));
 }
 
 TEST(ImageIo, FlowPngRoundTripAtOneSixtyFourthPixel) {
