@@ -33,6 +33,17 @@ template <class Body> int run_tool(Body&& body) {
   }
 }
 
+// A whole tool: its command line described by `add(app, command)` into a `Command`, parsed (--help
+// and parse errors as CLI11 reports them), then `run(command)` inside run_tool.
+template <class Command, class Add, class Run>
+int run_command(int argc, char** argv, const std::string& description, Add&& add, Run&& run) {
+  CLI::App app{description};
+  Command command;
+  add(app, command);
+  CLI11_PARSE(app, argc, argv);
+  return run_tool([&] { return run(command); });
+}
+
 // A number >= `min` (or > `min` when `strict`), integers and reals alike: "must be >= 1 (got 0)"
 // rather than CLI11's "Value 0 not in range 0.000000 to 1.797e308".
 inline CLI::Validator bounded_below(long long min, bool strict) {

@@ -437,12 +437,12 @@ int bench(Options& o, const std::string& command_line) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"geo_bench: parameter counts, FLOPs, inference and training-step timings, loader throughput, "
-               "and each as a share of the machine's matrix-product ceiling"};
-  Options o;
-  o.add_to(app);
-  CLI11_PARSE(app, argc, argv);
   std::vector<std::string> args(argv, argv + argc);
   args[0] = "geo_bench";
-  return geo::app::run_tool([&] { return bench(o, geo::join_list(args, " ")); });
+  return geo::app::run_command<Options>(
+      argc, argv,
+      "geo_bench: parameter counts, FLOPs, inference and training-step timings, loader throughput, "
+      "and each as a share of the machine's matrix-product ceiling",
+      [](CLI::App& app, Options& o) { o.add_to(app); },
+      [&](Options& o) { return bench(o, geo::join_list(args, " ")); });
 }

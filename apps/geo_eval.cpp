@@ -125,9 +125,7 @@ int evaluate(EvalCommand& c) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"geo_eval: depth (Eigen split), optical flow (KITTI 2015) and pose (KITTI odometry) metrics"};
-  EvalCommand command;
-  add_options(app, command);
-  CLI11_PARSE(app, argc, argv);
-  return geo::app::run_tool([&] { return command.compare.empty() ? evaluate(command) : compare(command.compare); });
+  return geo::app::run_command<EvalCommand>(
+      argc, argv, "geo_eval: depth (Eigen split), optical flow (KITTI 2015) and pose (KITTI odometry) metrics", add_options,
+      [](EvalCommand& c) { return c.compare.empty() ? evaluate(c) : compare(c.compare); });
 }

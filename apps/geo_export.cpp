@@ -50,9 +50,7 @@ int export_model(const ExportCommand& c) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"geo_export: weights-only model file (for geo::Model, geo_infer) from a geo_train checkpoint"};
-  ExportCommand command;
-  add_options(app, command);
-  CLI11_PARSE(app, argc, argv);
-  return geo::app::run_tool([&] { return export_model(command); });
+  return geo::app::run_command<ExportCommand>(
+      argc, argv, "geo_export: weights-only model file (for geo::Model, geo_infer) from a geo_train checkpoint",
+      add_options, export_model);
 }

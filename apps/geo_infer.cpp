@@ -295,9 +295,7 @@ int infer(const InferOptions& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"geo_infer: depth, optical flow and camera trajectory of images, frame folders or videos"};
-  InferOptions o;
-  o.add_to(app);
-  CLI11_PARSE(app, argc, argv);
-  return geo::app::run_tool([&] { return infer(o); });
+  return geo::app::run_command<InferOptions>(
+      argc, argv, "geo_infer: depth, optical flow and camera trajectory of images, frame folders or videos",
+      [](CLI::App& app, InferOptions& o) { o.add_to(app); }, infer);
 }

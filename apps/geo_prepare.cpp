@@ -53,9 +53,7 @@ int prepare(const PrepareCommand& c) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"geo_prepare: pack a KITTI/synthetic training split into a fast cache; measure loader throughput"};
-  PrepareCommand command;
-  add_options(app, command);
-  CLI11_PARSE(app, argc, argv);
-  return geo::app::run_tool([&] { return prepare(command); });
+  return geo::app::run_command<PrepareCommand>(
+      argc, argv, "geo_prepare: pack a KITTI/synthetic training split into a fast cache; measure loader throughput",
+      add_options, prepare);
 }

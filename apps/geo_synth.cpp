@@ -95,11 +95,9 @@ int synthesise(const SynthCommand& c) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{
+  return geo::app::run_command<SynthCommand>(
+      argc, argv,
       "geo_synth: render a procedural driving world (road, facades, poles, boxes, moving cars) "
-      "with exact ground truth, written in KITTI's raw, 2015-flow and odometry formats"};
-  SynthCommand command;
-  add_options(app, command);
-  CLI11_PARSE(app, argc, argv);
-  return geo::app::run_tool([&] { return synthesise(command); });
+      "with exact ground truth, written in KITTI's raw, 2015-flow and odometry formats",
+      add_options, synthesise);
 }

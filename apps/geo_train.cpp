@@ -54,10 +54,9 @@ int train(const TrainCommand& c) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"geo_train: unsupervised training of depth, camera motion and optical flow "
-               "(GeoNet with feature refinement) from monocular video"};
-  TrainCommand command;
-  add_options(app, command);
-  CLI11_PARSE(app, argc, argv);
-  return geo::app::run_tool([&] { return train(command); });
+  return geo::app::run_command<TrainCommand>(
+      argc, argv,
+      "geo_train: unsupervised training of depth, camera motion and optical flow "
+      "(GeoNet with feature refinement) from monocular video",
+      add_options, train);
 }

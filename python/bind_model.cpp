@@ -24,6 +24,13 @@ py::object with_scale(torch::Tensor result, std::vector<double> scale, bool want
   return py::make_tuple(std::move(result), std::move(scale));
 }
 
+// Model.load's and Model.create's keyword arguments.
+LoadOptions load_options(const std::string& device, const std::string& precision, int threads) {
+  LoadOptions options;
+  options.device = device, options.precision = precision, options.threads = threads;
+  return options;
+}
+
 }  // namespace
 
 void bind_model(py::module_& m) {
@@ -78,8 +85,7 @@ void bind_model(py::module_& m) {
       .def_static(
           "load",
           [](const std::string& path, const std::string& device, const std::string& precision, int threads) {
-            LoadOptions options;
-            options.device = device, options.precision = precision, options.threads = threads;
+            const LoadOptions options = load_options(device, precision, threads);
             py::gil_scoped_release release;
             return Model::load(path, options);
           },
@@ -89,8 +95,7 @@ void bind_model(py::module_& m) {
       .def_static(
           "create",
           [](const std::string& config_yaml, const std::string& device, const std::string& precision, int threads) {
-            LoadOptions options;
-            options.device = device, options.precision = precision, options.threads = threads;
+            const LoadOptions options = load_options(device, precision, threads);
             py::gil_scoped_release release;
             return Model::create(config_yaml, options);
           },
