@@ -154,12 +154,13 @@ torch::Tensor rgb8_image(const uint8_t* rgb, int64_t height, int64_t width, int6
 
 namespace {
 
-// Networks created and loaded -> on the device, eval mode, BatchNorm folded, in the precision asked.
-void make_ready(Model::Impl& impl, const std::string& device, const std::string& precision, bool has_flow,
-                const std::string& source) {
-  impl.device = select_device(device);
+// Networks created and loaded -> on the device, eval mode, BatchNorm folded, in the precision asked
+// (and LibTorch's threads set where the options ask).
+void make_ready(Model::Impl& impl, const LoadOptions& options, bool has_flow, const std::string& source) {
+  if (options.threads > 0) torch::set_num_threads(options.threads);
+  impl.device = select_device(options.device);
   impl.nets.to(impl.device);
-  const bool bf16 = use_bf16(precision, impl.device);
+  const bool bf16 = use_bf16(options.precision, impl.device);
   impl.nets.prepare_inference(true, bf16);
   impl.spec = public_spec(impl.nets.spec, has_flow, source);
   impl.spec.precision = bf16 ? "bf16" : "fp32";
@@ -171,8 +172,7 @@ Model Model::create(const std::string& config_yaml, const LoadOptions& options) 
   return guarded("creating an untrained geo model", [&] {
     auto impl = std::make_shared<Impl>();
     impl->nets = Networks::create(NetworkSpec::parse(config_yaml, "the config given"), true);  // the caller seeds
-    if (options.threads > 0) torch::set_num_threads(options.threads);
-    make_ready(*impl, options.device, options.precision, true, "untrained");
+    make_ready(*impl, options, true, "untrained");
     return Model(impl);
   });
 }
@@ -186,8 +186,7 @@ Model Model::load(const std::string& path, const LoadOptions& options) {
     auto impl = std::make_shared<Impl>();
     impl->nets = create_quietly(checkpoint.spec(), checkpoint.has_flow());
     checkpoint.load_networks(impl->nets, false);
-    if (options.threads > 0) torch::set_num_threads(options.threads);
-    make_ready(*impl, options.device, options.precision, checkpoint.has_flow(), file);
+    make_ready(*impl, options, checkpoint.has_flow(), file);
     if (checkpoint.config()) impl->training_configs = checkpoint.lineage();
     return Model(impl);
   });
