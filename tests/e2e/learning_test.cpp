@@ -53,7 +53,7 @@ stages:
   - {name: stage1, iterations: 300, train: [depth, pose], batch_size: 4, learning_rate: 5.0e-4}
   - {name: stage2, iterations: 200, train: [flow], batch_size: 4, learning_rate: 2.0e-4,
      weights: {rigid: 0.0, disp_smooth: 0.0, flow: 1.0, flow_smooth: 0.2, flow_consistency: 0.2}}
-logging: {interval: 50, summary_interval: 0, checkpoint_interval: 100, val_interval: 0}
+logging: {interval: 50, summary_interval: 0, checkpoint_interval: 100, val_interval: 0, keep_last: 1}
 run: {seed: 1, threads: 2}
 )";
     config_ = parse_config(yaml, "learning.yaml", {"data.root=" + root_ + "/world/raw"});
@@ -217,7 +217,7 @@ model: {encoder_depth: 18, bn_momentum: 0.1, learn_intrinsics: true}
 data: {height: 64, width: 208, num_workers: 1, augment: {enabled: false}}
 stages:
   - {name: stage1, iterations: 300, train: [depth, pose], batch_size: 4, learning_rate: 5.0e-4}
-logging: {interval: 50, summary_interval: 0, checkpoint_interval: 100, val_interval: 0}
+logging: {interval: 50, summary_interval: 0, checkpoint_interval: 100, val_interval: 0, keep_last: 1}
 run: {seed: 1, threads: 2}
 )";
   TrainOptions lt;

@@ -51,4 +51,6 @@ real="$data/kitti_real/odometry_forward/frames"
 grep -q "clip '$real': 51 frames (424x128, rate unknown)" "$work/real.log" || { cat "$work/real.log"; exit 1; }
 grep -q "camera not given: learned by the networks" "$work/real.log" || { cat "$work/real.log"; exit 1; }
 test -f "$work/run_real/checkpoints/stage1-00000002.pt"
+# Passed: its checkpoints (a gigabyte) go; GEO_KEEP_TEST_DIRS=1 keeps them.
+[ "${GEO_KEEP_TEST_DIRS:-}" = 1 ] || rm -rf "$work"
 echo "video training: ok"

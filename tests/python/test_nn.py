@@ -7,7 +7,7 @@ import torch
 
 import geo
 import geo.nn
-from conftest import TINY_RUN
+from conftest import TINY_RUN, remove_folder
 
 
 def check_same(tag, mine, theirs, tol=1e-5):
@@ -19,9 +19,11 @@ def check_same(tag, mine, theirs, tol=1e-5):
 
 @pytest.fixture(scope="module")
 def no_fr_run(tmp_path_factory):
-    run = tmp_path_factory.mktemp("nofr") / "run"
+    folder = tmp_path_factory.mktemp("nofr")
+    run = folder / "run"
     geo.train("smoke.yaml", run_dir=str(run), overrides=TINY_RUN + ["model.use_fr=false"])
-    return run
+    yield run
+    remove_folder(folder)
 
 
 @pytest.mark.parametrize("which", ["fr", "no_fr"])
