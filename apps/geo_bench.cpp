@@ -33,6 +33,7 @@
 #include "data/loader.h"
 #include "data/packed/packed.h"
 #include "geo/geo.h"
+#include "models/int8.h"
 #include "pipeline/networks.h"
 #include "train/compute_losses.h"
 #include "train/distributed.h"
@@ -143,7 +144,7 @@ struct Options {
   std::vector<std::string> overrides, stages;
   std::vector<int> batches = {1, 4};
   bool summary = false, no_infer = false, no_train = false, no_fold = false, no_comm = false, no_ceiling = false;
-  bool profile_shapes = false;
+  bool profile_shapes = false, int8 = false;
   int warmup = 10, iters = 5, train_warmup = 2, train_iters = 5, threads = 0, train_batch = 0, loader_batches = 20,
       profile_top = 0;
   int64_t ceiling_size = 0;
@@ -170,6 +171,8 @@ struct Options {
     app.add_flag("--no-infer", no_infer, "skip the inference timings");
     app.add_flag("--no-train", no_train, "skip the training-step timings");
     app.add_flag("--no-comm", no_comm, "skip the gradient all-reduce timings (data-parallel training's cost per step)");
+    app.add_flag("--int8", int8,
+                 "also time int8 inference (DepthNet, FlowNet, pipeline; calibrated on random frames; CPU)");
     app.add_flag("--no-fold", no_fold, "inference with BatchNorm as separate layers (default: folded into the convolutions)");
     app.add_flag("--no-ceiling", no_ceiling, "skip the matrix-product ceiling (and the rows' share of it)");
     app.add_option("--ceiling-size", ceiling_size,
@@ -225,20 +228,40 @@ double gflops_at(const std::vector<Row>& params, const std::string& what, const 
   return -1;
 }
 
-// Inference of each network and of the pipeline, each FR variant in float32 and (with bf16
-// precision) in bfloat16, side by side, at each batch size.
+// The DepthNet and FlowNet of `nets` (prepared for inference in float32) calibrated on random
+// inputs of `batch` frames and quantized to int8: for timing (the values of random frames are not
+// what a model sees; geo::Model calibrates on real frames).
+void calibrate_int8(geo::Networks& nets, const geo::Config& config, int64_t batch) {
+  torch::InferenceMode guard;
+  const int64_t H = config.data.height, W = config.data.width;
+  geo::observe_int8(*nets.depth->net);
+  nets.depth(torch::rand({batch, 3, H, W}));
+  geo::quantize_int8(*nets.depth->net);
+  if (nets.flow) {
+    geo::observe_int8(*nets.flow->net);
+    nets.flow(torch::rand({batch, 12, H, W}) * 2 - 1);
+    geo::quantize_int8(*nets.flow->net);
+  }
+}
+
+// Inference of each network and of the pipeline, each FR variant in float32, (with bf16 precision)
+// in bfloat16 and (--int8) in int8, side by side, at each batch size.
 std::vector<Row> inference_rows(const geo::Config& config, const std::vector<bool>& frs, const Options& o,
                                 const torch::Device& device, const std::vector<Row>& params) {
   const int64_t H = config.data.height, W = config.data.width, N = config.data.seq_length - 1;
   std::vector<std::pair<geo::Config, geo::Networks>> made;
-  std::vector<bool> made_fr, made_bf16;
+  std::vector<bool> made_fr;
+  std::vector<std::string> made_precision;  // fp32, bf16, int8
   for (bool fr : frs)
-    for (bool bf16 : {false, true}) {
-      if (bf16 && config.run.precision != geo::Precision::kBf16) continue;
+    for (const std::string precision : {"fp32", "bf16", "int8"}) {
+      if (precision == "bf16" && config.run.precision != geo::Precision::kBf16) continue;
+      if (precision == "int8" && !o.int8) continue;
       made.push_back(networks_with_fr(config, fr, true, device));
-      made.back().second.prepare_inference(!o.no_fold, bf16);
+      geo::Networks& nets = made.back().second;
+      nets.prepare_inference(!o.no_fold || precision == "int8", precision == "bf16");
+      if (precision == "int8") calibrate_int8(nets, config, o.batches.front());
       made_fr.push_back(fr);
-      made_bf16.push_back(bf16);
+      made_precision.push_back(precision);
     }
   torch::InferenceMode guard;
   std::vector<Row> rows;
@@ -260,9 +283,13 @@ std::vector<Row> inference_rows(const geo::Config& config, const std::vector<boo
       for (size_t k = 0; k < made.size(); ++k) {
         const bool pose = what == "PoseNet";
         if (pose && made_fr[k] != made_fr[0]) continue;  // no FR in the PoseNet: once per precision
+        const std::string& precision = made_precision[k];
+        // int8: the encoder-decoders (the PoseNet stays in float32); geo::Model has no int8 yet.
+        if (precision == "int8" && (pose || what == "Model::depth")) continue;
         geo::Networks& nets = made[k].second;
-        Row row{"infer", what + (made_bf16[k] ? " bf16" : ""), pose ? "-" : (made_fr[k] ? "on" : "off"), b};
-        row.bf16 = made_bf16[k];
+        Row row{"infer", what + (precision == "fp32" ? "" : " " + precision), pose ? "-" : (made_fr[k] ? "on" : "off"), b};
+        row.bf16 = precision == "bf16";
+        row.int8 = precision == "int8";
         row.gflops = gflops_at(params, what == "Model::depth" ? "DepthNet" : what, row.fr, b);
         batch_rows.push_back(row);
         std::function<void()> fn;
@@ -273,7 +300,7 @@ std::vector<Row> inference_rows(const geo::Config& config, const std::vector<boo
         if (what == "Model::depth") {  // the library's call: an 8-bit RGB frame in, depth at its size out
           geo::LoadOptions lo;
           lo.device = device.str();
-          lo.precision = made_bf16[k] ? "bf16" : "fp32";
+          lo.precision = precision;
           models.push_back(std::make_unique<geo::Model>(geo::Model::create(geo::to_yaml(made[k].first), lo)));
           fn = [m = models.back().get(), &frame8] { m->depth(frame8); };
         }
@@ -377,6 +404,9 @@ int bench(Options& o, const std::string& command_line) {
   geo::check_outputs({{"--json", o.json_path}, {"--markdown", o.markdown_path}},
                      {config_file, o.data_root, config.data.root});
   const torch::Device device = geo::select_device(o.device_name);
+  if (o.int8 && !device.is_cpu()) throw std::runtime_error("--int8: int8 inference runs on the CPU, not on " + device.str());
+  if (o.int8 && geo::select_int8_engine().empty())
+    throw std::runtime_error("--int8: this LibTorch has no quantized engine (onednn, x86, fbgemm or qnnpack)");
   geo::RunConfig settings = config.run;  // as geo_train applies them, with --threads
   settings.threads = o.threads;
   const int nthreads = geo::apply_run_settings(settings, device);

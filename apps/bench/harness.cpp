@@ -18,6 +18,7 @@
 #endif
 
 #include "core/logging.h"
+#include "models/int8.h"
 
 namespace geo::bench {
 namespace {
@@ -193,23 +194,10 @@ template <class F> double best_ms(const torch::Device& device, int iters, F&& f)
   return *std::min_element(ms.begin(), ms.end());
 }
 
-// LibTorch's quantized engine for int8 products: oneDNN's where this LibTorch has it, else FBGEMM,
-// else QNNPACK; "" when it has none.
-std::string select_int8_engine() {
-  const auto& supported = at::globalContext().supportedQEngines();
-  for (const auto& [engine, name] : std::vector<std::pair<at::QEngine, const char*>>{
-           {at::QEngine::ONEDNN, "onednn"}, {at::QEngine::FBGEMM, "fbgemm"}, {at::QEngine::QNNPACK, "qnnpack"}})
-    if (std::find(supported.begin(), supported.end(), engine) != supported.end()) {
-      at::globalContext().setQEngine(engine);
-      return name;
-    }
-  return "";
-}
-
 // [n,n] uint8 x [n,n] int8 -> uint8 through quantized::linear (the weights prepacked once, as a
 // network's are), GOP/s; < 0 where the engine cannot run it.
 double int8_gops(int64_t n, int iters, std::string& engine) {
-  engine = select_int8_engine();
+  engine = geo::select_int8_engine();
   if (engine.empty()) return -1;
   try {
     const auto a = at::quantize_per_tensor(torch::rand({n, n}), 1.0 / 255, 0, torch::kQUInt8);

@@ -23,7 +23,8 @@ struct Row {
   double samples_per_s = -1;
   double peak_mb = -1;
   double gflops = -1;   // per call: one forward pass (params, infer), forward + backward (train: 3x forward)
-  bool bf16 = false;    // which ceiling the row is measured against
+  bool bf16 = false;    // which ceiling the row is measured against: bf16's, int8's, else fp32's
+  bool int8 = false;
 
   // Achieved GFLOP/s (gflops per call over its median time); < 0 when either is unknown.
   double gflops_per_s() const { return gflops > 0 && ms > 0 ? gflops / (ms / 1000.0) : -1; }
@@ -40,7 +41,7 @@ struct Ceiling {
   std::string int8_engine;
   int64_t n = 0;
   bool tf32 = false;  // CUDA with TF32 allowed (run.precision tf32): the float32 product runs on TF32 tensor cores
-  double of(const Row& r) const { return r.bf16 ? bf16 : fp32; }
+  double of(const Row& r) const { return r.int8 ? int8 : r.bf16 ? bf16 : fp32; }
   const char* float_name() const { return tf32 ? "fp32 (TF32)" : "fp32"; }
   std::string describe() const;  // "2048x2048 matrix product 205 GFLOP/s fp32, 420 GFLOP/s bf16, 850 GOP/s int8 (onednn)"
 };

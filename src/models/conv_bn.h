@@ -34,6 +34,9 @@ struct ConvBnImpl : torch::nn::Module {
   void fold_batchnorm(torch::Dtype dtype = torch::kFloat32);
   bool folded() const { return folded_weight_.defined(); }
   bool prepacked() const { return packed_weight_.defined(); }
+  // The folded kernel and bias (undefined before fold_batchnorm): what the int8 path quantizes.
+  const torch::Tensor& folded_weight() const { return folded_weight_; }
+  const torch::Tensor& folded_bias() const { return folded_bias_; }
   Conv2d conv{nullptr};
   SyncBatchNorm2d bn{nullptr};  // synchronised across processes in data-parallel training
   bool relu;

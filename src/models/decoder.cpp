@@ -36,6 +36,7 @@ EncoderDecoderImpl::EncoderDecoderImpl(const EncoderDecoderOptions& o, Head h)
 }
 
 std::vector<torch::Tensor> EncoderDecoderImpl::forward(const torch::Tensor& x) {
+  if (int8) return int8->forward(x);
   const auto feats = encoder(x);
   std::vector<torch::Tensor> preds;  // coarsest first while building
   auto y = feats[5];

@@ -10,11 +10,13 @@
 #include <torch/torch.h>
 
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "models/fr.h"
 #include "models/conv_bn.h"
+#include "models/int8.h"
 #include "models/layers.h"
 #include "models/resnet_encoder.h"
 
@@ -40,6 +42,8 @@ struct EncoderDecoderImpl : torch::nn::Module {
   std::vector<ConvBn> upconv, iconv;        // index 0 = stage 6 (coarsest) ... 5 = stage 1
   std::vector<FeatureRefinement> refine;    // empty when decoder FR is off
   std::vector<Conv2d> pred;      // index 0 = 1/8 ... 3 = full
+  // Set by observe_int8 (models/int8.h): forward calibrates, then (quantize_int8) runs in int8.
+  std::shared_ptr<Int8EncoderDecoder> int8;
 };
 TORCH_MODULE(EncoderDecoder);
 

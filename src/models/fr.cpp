@@ -159,15 +159,22 @@ FeatureRefinementImpl::FeatureRefinementImpl(const FeatureRefinementOptions& o) 
 torch::Tensor FeatureRefinementImpl::channel_gate(const torch::Tensor& x) {
   TORCH_CHECK(x.dim() == 4 && x.size(1) == options.channels, "FR input must be [B,",
               options.channels, ",H,W], got ", x.sizes());
-  auto mlp = [this](const torch::Tensor& t) { return conv2d(*mlp_out, torch::relu(conv2d(*mlp_in, t))); };
   const auto [mx, avg] = max_mean_over_space(x);
-  return torch::sigmoid(mlp(avg) + mlp(mx));
+  return channel_gate_of(mx, avg);
+}
+
+torch::Tensor FeatureRefinementImpl::channel_gate_of(const torch::Tensor& max, const torch::Tensor& mean) {
+  auto mlp = [this](const torch::Tensor& t) { return conv2d(*mlp_out, torch::relu(conv2d(*mlp_in, t))); };
+  return torch::sigmoid(mlp(mean) + mlp(max));
 }
 
 torch::Tensor FeatureRefinementImpl::spatial_gate(const torch::Tensor& f1) {
   const auto [mx, avg] = max_mean_over_channels(f1);
-  const auto pooled = torch::cat({mx, avg}, 1);
-  auto a = conv2d(*spatial, pooled);
+  return spatial_gate_of(mx, avg);
+}
+
+torch::Tensor FeatureRefinementImpl::spatial_gate_of(const torch::Tensor& max, const torch::Tensor& mean) {
+  auto a = conv2d(*spatial, torch::cat({max, mean}, 1));
   if (options.spatial_bn) a = spatial_bn(a);
   return torch::sigmoid(a);
 }

@@ -30,6 +30,10 @@ struct FeatureRefinementImpl : torch::nn::Module {
   torch::Tensor channel_gate(const torch::Tensor& x);
   // a_s = sigmoid(conv7x7([max_c F1, mean_c F1])) [B,1,H,W].
   torch::Tensor spatial_gate(const torch::Tensor& f1);
+  // The gates from their pooled inputs (max and mean over space [B,C,1,1], over the channels
+  // [B,1,H,W]): for a caller that pools itself (the int8 path pools 8-bit features).
+  torch::Tensor channel_gate_of(const torch::Tensor& max, const torch::Tensor& mean);
+  torch::Tensor spatial_gate_of(const torch::Tensor& max, const torch::Tensor& mean);
 
   FeatureRefinementOptions options;
   Conv2d mlp_in{nullptr}, mlp_out{nullptr}, spatial{nullptr};

@@ -2,40 +2,25 @@
 
 namespace geo {
 
-namespace {
+BottleneckImpl::BottleneckImpl(int64_t in, int64_t n, int64_t stride) {
+  c1 = register_module("conv1", ConvBn(in, n, 1));
+  c2 = register_module("conv2", ConvBn(n, n, 3, stride));
+  c3 = register_module("conv3", ConvBn(n, 4 * n, 1, 1, /*relu=*/false));
+  proj = register_module("shortcut", ConvBn(in, 4 * n, 1, stride, false));
+}
 
-// GeoNet's resconv: 1x1 (n) -> 3x3/stride (n) -> 1x1 (4n, no ReLU) + shortcut, then ReLU.
-// The shortcut is always a projection (1x1/stride + BN): GeoNet (after monodepth) tests
-// `tf.shape(x)[3] != num_layers`, which is always true in TF1, and keeps it "for consistency".
-// This is what makes GeoNet's ResNet-50 DepthNet 58.5 M parameters rather than 49.5 M.
-struct BottleneckImpl : torch::nn::Module {
-  BottleneckImpl(int64_t in, int64_t n, int64_t stride) {
-    c1 = register_module("conv1", ConvBn(in, n, 1));
-    c2 = register_module("conv2", ConvBn(n, n, 3, stride));
-    c3 = register_module("conv3", ConvBn(n, 4 * n, 1, 1, /*relu=*/false));
-    proj = register_module("shortcut", ConvBn(in, 4 * n, 1, stride, false));
-  }
-  torch::Tensor forward(const torch::Tensor& x) { return torch::relu(c3(c2(c1(x))) + proj(x)); }
-  ConvBn c1{nullptr}, c2{nullptr}, c3{nullptr}, proj{nullptr};
-};
-TORCH_MODULE(Bottleneck);
+torch::Tensor BottleneckImpl::forward(const torch::Tensor& x) { return torch::relu(c3(c2(c1(x))) + proj(x)); }
 
-// Basic block (ResNet-18/34): 3x3/stride -> 3x3 (no ReLU) + shortcut, then ReLU.
-struct BasicBlockImpl : torch::nn::Module {
-  BasicBlockImpl(int64_t in, int64_t n, int64_t stride) {
-    c1 = register_module("conv1", ConvBn(in, n, 3, stride));
-    c2 = register_module("conv2", ConvBn(n, n, 3, 1, /*relu=*/false));
-    if (in != n || stride != 1) proj = register_module("shortcut", ConvBn(in, n, 1, stride, false));
-  }
-  torch::Tensor forward(const torch::Tensor& x) {
-    const auto shortcut = proj ? proj(x) : x;
-    return torch::relu(c2(c1(x)) + shortcut);
-  }
-  ConvBn c1{nullptr}, c2{nullptr}, proj{nullptr};
-};
-TORCH_MODULE(BasicBlock);
+BasicBlockImpl::BasicBlockImpl(int64_t in, int64_t n, int64_t stride) {
+  c1 = register_module("conv1", ConvBn(in, n, 3, stride));
+  c2 = register_module("conv2", ConvBn(n, n, 3, 1, /*relu=*/false));
+  if (in != n || stride != 1) proj = register_module("shortcut", ConvBn(in, n, 1, stride, false));
+}
 
-}  // namespace
+torch::Tensor BasicBlockImpl::forward(const torch::Tensor& x) {
+  const auto shortcut = proj ? proj(x) : x;
+  return torch::relu(c2(c1(x)) + shortcut);
+}
 
 ResNetEncoderImpl::ResNetEncoderImpl(const ResNetEncoderOptions& o) : options(o) {
   std::vector<int> blocks;

@@ -15,6 +15,26 @@
 
 namespace geo {
 
+// GeoNet's resconv: 1x1 (n) -> 3x3/stride (n) -> 1x1 (4n, no ReLU) + shortcut, then ReLU.
+// The shortcut is always a projection (1x1/stride + BN): GeoNet (after monodepth) tests
+// `tf.shape(x)[3] != num_layers`, which is always true in TF1, and keeps it "for consistency".
+// This is what makes GeoNet's ResNet-50 DepthNet 58.5 M parameters rather than 49.5 M.
+struct BottleneckImpl : torch::nn::Module {
+  BottleneckImpl(int64_t in, int64_t n, int64_t stride);
+  torch::Tensor forward(const torch::Tensor& x);
+  ConvBn c1{nullptr}, c2{nullptr}, c3{nullptr}, proj{nullptr};
+};
+TORCH_MODULE(Bottleneck);
+
+// Basic block (ResNet-18/34): 3x3/stride -> 3x3 (no ReLU) + shortcut (a projection where the
+// shape changes, else the input), then ReLU.
+struct BasicBlockImpl : torch::nn::Module {
+  BasicBlockImpl(int64_t in, int64_t n, int64_t stride);
+  torch::Tensor forward(const torch::Tensor& x);
+  ConvBn c1{nullptr}, c2{nullptr}, proj{nullptr};
+};
+TORCH_MODULE(BasicBlock);
+
 struct ResNetEncoderOptions {
   int64_t in_channels = 3;   // 3 for DepthNet, 12 for FlowNet
   int depth = 50;            // ResNet-50 (paper)

@@ -1,0 +1,311 @@
+#include "models/int8.h"
+
+#include <ATen/Parallel.h>
+#include <ATen/core/dispatch/Dispatcher.h>
+#include <torch/version.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <optional>
+#include <unordered_map>
+#include <utility>
+
+#include "models/conv_bn.h"
+#include "models/decoder.h"
+#include "models/fr.h"
+#include "models/layers.h"
+#include "models/resnet_encoder.h"
+
+namespace geo {
+
+std::string select_int8_engine() {
+  const auto& supported = at::globalContext().supportedQEngines();
+  for (const auto& [engine, name] : std::vector<std::pair<at::QEngine, const char*>>{
+           {at::QEngine::ONEDNN, "onednn"},
+#if TORCH_VERSION_MAJOR >= 2
+           {at::QEngine::X86, "x86"},
+#endif
+           {at::QEngine::FBGEMM, "fbgemm"},
+           {at::QEngine::QNNPACK, "qnnpack"}})
+    if (std::find(supported.begin(), supported.end(), engine) != supported.end()) {
+      at::globalContext().setQEngine(engine);
+      return name;
+    }
+  return "";
+}
+
+namespace {
+
+c10::OperatorHandle op(const char* name, const char* overload) {
+  return c10::Dispatcher::singleton().findSchemaOrThrow(name, overload);
+}
+
+torch::Tensor call(const c10::OperatorHandle& handle, torch::jit::Stack stack) {
+  handle.callBoxed(&stack);
+  return stack.at(0).toTensor();
+}
+
+}  // namespace
+
+torch::Tensor int8_feature_refinement(FeatureRefinementImpl& fr, const torch::Tensor& q_in, double out_scale, int64_t out_zp) {
+  const auto q = q_in.contiguous(at::MemoryFormat::ChannelsLast);
+  const int64_t B = q.size(0), C = q.size(1), H = q.size(2), W = q.size(3), HW = H * W;
+  const float s = static_cast<float>(q.q_scale()), z = static_cast<float>(q.q_zero_point());
+  const uint8_t* x = reinterpret_cast<const uint8_t*>(q.data_ptr<c10::quint8>());
+  auto fopt = torch::TensorOptions().dtype(torch::kFloat32);
+
+  auto cmax = torch::empty({B, C, 1, 1}, fopt), cmean = torch::empty({B, C, 1, 1}, fopt);
+  float *cm = cmax.data_ptr<float>(), *ca = cmean.data_ptr<float>();
+  for (int64_t b = 0; b < B; ++b) {
+    at::parallel_for(0, C, 16, [&](int64_t c0, int64_t c1) {
+      std::vector<uint8_t> mx(c1 - c0, 0);
+      std::vector<int64_t> sum(c1 - c0, 0);
+      for (int64_t p = 0; p < HW; ++p) {
+        const uint8_t* row = x + (b * HW + p) * C + c0;
+        for (int64_t c = 0; c < c1 - c0; ++c) {
+          mx[c] = std::max(mx[c], row[c]);
+          sum[c] += row[c];
+        }
+      }
+      for (int64_t c = 0; c < c1 - c0; ++c) {
+        cm[b * C + c0 + c] = s * (static_cast<float>(mx[c]) - z);
+        ca[b * C + c0 + c] = s * (static_cast<float>(sum[c]) / static_cast<float>(HW) - z);
+      }
+    });
+  }
+  const auto gate_c = fr.channel_gate_of(cmax, cmean).to(torch::kFloat32).contiguous();
+  const float* ac = gate_c.data_ptr<float>();
+
+  auto smax = torch::empty({B, 1, H, W}, fopt), smean = torch::empty({B, 1, H, W}, fopt);
+  float *sm = smax.data_ptr<float>(), *sa = smean.data_ptr<float>();
+  at::parallel_for(0, B * HW, 256, [&](int64_t p0, int64_t p1) {
+    for (int64_t p = p0; p < p1; ++p) {
+      const uint8_t* row = x + p * C;
+      const float* a = ac + (p / HW) * C;
+      float best = -std::numeric_limits<float>::infinity(), sum = 0.f;
+      for (int64_t c = 0; c < C; ++c) {
+        const float v = (static_cast<float>(row[c]) - z) * a[c];
+        best = std::max(best, v);
+        sum += v;
+      }
+      sm[p] = s * best;
+      sa[p] = s * sum / static_cast<float>(C);
+    }
+  });
+  const auto gate_s = fr.spatial_gate_of(smax, smean).to(torch::kFloat32).contiguous();
+  const float* as = gate_s.data_ptr<float>();
+
+  auto out = at::_empty_affine_quantized({B, C, H, W}, q.options(), out_scale, out_zp, at::MemoryFormat::ChannelsLast);
+  uint8_t* y = reinterpret_cast<uint8_t*>(out.data_ptr<c10::quint8>());
+  const float zo = static_cast<float>(out_zp), inv = 1.0f / static_cast<float>(out_scale);
+  at::parallel_for(0, B * HW, 256, [&](int64_t p0, int64_t p1) {
+    for (int64_t p = p0; p < p1; ++p) {
+      const uint8_t* row = x + p * C;
+      uint8_t* o = y + p * C;
+      const float* a = ac + (p / HW) * C;
+      const float g = s * as[p] * inv;
+      for (int64_t c = 0; c < C; ++c) {
+        const float v = std::clamp((static_cast<float>(row[c]) - z) * a[c] * g + zo, 0.f, 255.f);
+        o[c] = static_cast<uint8_t>(v + 0.5f);
+      }
+    }
+  });
+  return out;
+}
+
+struct Int8EncoderDecoder::State {
+  // A quantized point: the range its values took during calibration, then the scale and zero point
+  // that map it onto 0..255 (the range widened to hold 0, as the zero padding of the next convolution
+  // must be exact).
+  struct Point {
+    float lo = std::numeric_limits<float>::infinity(), hi = -std::numeric_limits<float>::infinity();
+    double scale = 1.0;
+    int64_t zero_point = 0;
+    void see(const torch::Tensor& t) {
+      lo = std::min(lo, t.min().item<float>());
+      hi = std::max(hi, t.max().item<float>());
+    }
+    void fix() {
+      const double l = std::min(0.0, static_cast<double>(lo)), h = std::max(0.0, static_cast<double>(hi));
+      scale = std::max(h - l, 1e-6) / 255.0;
+      zero_point = std::clamp<int64_t>(std::llround(-l / scale), 0, 255);
+    }
+  };
+
+  explicit State(EncoderDecoderImpl& n) : net(n) {}
+  EncoderDecoderImpl& net;
+  std::vector<Point> points;
+  bool quantized = false;
+  std::unordered_map<const torch::nn::Module*, c10::IValue> packed;
+  std::optional<c10::OperatorHandle> conv, conv_relu, add_relu, cat;
+};
+
+namespace {
+
+// The network's graph, once, for both passes: `Ops` computes each step in float while recording the
+// ranges of its quantized points (Observe) or in int8 (Quantized). Every point takes the next slot,
+// in this order: statements, never two slots in one expression (C++ leaves their order open).
+template <class Ops>
+std::vector<torch::Tensor> run_graph(EncoderDecoderImpl& net, Ops& ops, const torch::Tensor& x) {
+  auto& enc = *net.encoder;
+  std::vector<torch::Tensor> feats;
+  const auto input = ops.input(x);
+  feats.push_back(ops.conv(*enc.conv1, input));
+  feats.push_back(ops.max_pool(feats.back()));
+  for (size_t s = 0; s < enc.stages.size(); ++s) {
+    auto y = feats.back();
+    for (const auto& m : enc.stages[s]->children()) {
+      if (auto* b = m->as<BottleneckImpl>()) {
+        auto r = ops.conv(*b->c1, y);
+        r = ops.conv(*b->c2, r);
+        r = ops.conv(*b->c3, r);
+        const auto shortcut = ops.conv(*b->proj, y);
+        y = ops.add_relu(r, shortcut);
+      } else if (auto* bb = m->as<BasicBlockImpl>()) {
+        auto r = ops.conv(*bb->c1, y);
+        r = ops.conv(*bb->c2, r);
+        const auto shortcut = bb->proj ? ops.conv(*bb->proj, y) : y;
+        y = ops.add_relu(r, shortcut);
+      } else {
+        TORCH_CHECK(false, "int8: unknown block in the encoder");
+      }
+    }
+    if (!enc.refine.empty()) y = ops.fr(*enc.refine[s], y);
+    feats.push_back(y);
+  }
+  const auto mode = net.options.upsample;
+  std::vector<torch::Tensor> preds;  // coarsest first while building
+  auto y = feats[5];
+  for (int k = 0; k < 6; ++k) {
+    const torch::Tensor& ref = k < 5 ? feats[4 - k] : x;
+    std::vector<torch::Tensor> parts;
+    parts.reserve(3);
+    parts.push_back(resize_like(ops.conv(*net.upconv[k], upsample2(y, mode)), ref));
+    if (k < 5) parts.push_back(feats[4 - k]);
+    if (k >= 3) parts.push_back(ops.quantize(resize_like(upsample2(preds.back(), mode), ref)));
+    y = ops.cat(parts);
+    y = ops.conv(*net.iconv[k], y);
+    if (!net.refine.empty()) y = ops.fr(*net.refine[k], y);
+    if (k >= 2) preds.push_back(net.head(ops.pred(*net.pred[k - 2], y)));
+  }
+  return {preds[3], preds[2], preds[1], preds[0]};
+}
+
+struct Observe {
+  std::vector<Int8EncoderDecoder::State::Point>& points;
+  size_t i = 0;
+  torch::Tensor seen(torch::Tensor t) {
+    if (i == points.size()) points.emplace_back();
+    points[i++].see(t);
+    return t;
+  }
+  torch::Tensor input(const torch::Tensor& x) { return seen(x); }
+  torch::Tensor quantize(const torch::Tensor& x) { return seen(x); }
+  torch::Tensor conv(ConvBnImpl& m, const torch::Tensor& x) { return seen(m.forward(x)); }
+  torch::Tensor add_relu(const torch::Tensor& a, const torch::Tensor& b) { return seen(torch::relu(a + b)); }
+  torch::Tensor max_pool(const torch::Tensor& x) { return torch::max_pool2d(x, {3, 3}, {2, 2}, {1, 1}, {1, 1}); }
+  torch::Tensor fr(FeatureRefinementImpl& m, const torch::Tensor& x) { return seen(m.forward(x)); }
+  torch::Tensor cat(const std::vector<torch::Tensor>& parts) { return seen(torch::cat(parts, 1)); }
+  torch::Tensor pred(Conv2dImpl& m, const torch::Tensor& y) { return seen(m.forward(y)); }
+};
+
+struct Quantized {
+  Int8EncoderDecoder::State& st;
+  size_t i = 0;
+  const Int8EncoderDecoder::State::Point& next() { return st.points.at(i++); }
+  torch::Tensor quantize(const torch::Tensor& x) {
+    const auto& p = next();
+    return at::quantize_per_tensor(x.to(torch::kFloat32).contiguous(at::MemoryFormat::ChannelsLast), p.scale,
+                                   p.zero_point, torch::kQUInt8);
+  }
+  torch::Tensor input(const torch::Tensor& x) { return quantize(x); }
+  torch::Tensor conv_packed(const torch::nn::Module& m, const torch::Tensor& x, bool relu) {
+    const auto& p = next();
+    return call(relu ? *st.conv_relu : *st.conv, {x, st.packed.at(&m), p.scale, p.zero_point});
+  }
+  torch::Tensor conv(ConvBnImpl& m, const torch::Tensor& x) { return conv_packed(m, x, m.relu); }
+  torch::Tensor add_relu(const torch::Tensor& a, const torch::Tensor& b) {
+    const auto& p = next();
+    return call(*st.add_relu, {a, b, p.scale, p.zero_point});
+  }
+  torch::Tensor max_pool(const torch::Tensor& x) { return torch::max_pool2d(x, {3, 3}, {2, 2}, {1, 1}, {1, 1}); }
+  torch::Tensor fr(FeatureRefinementImpl& m, const torch::Tensor& x) {
+    const auto& p = next();
+    return int8_feature_refinement(m, x, p.scale, p.zero_point);
+  }
+  torch::Tensor cat(const std::vector<torch::Tensor>& parts) {
+    const auto& p = next();
+    return call(*st.cat, {c10::List<torch::Tensor>(parts), int64_t{1}, p.scale, p.zero_point});
+  }
+  torch::Tensor pred(Conv2dImpl& m, const torch::Tensor& y) {
+    return conv_packed(m, y, false).dequantize().contiguous();
+  }
+};
+
+// w [Co,Ci,k,k] float -> int8 per output channel (symmetric), prepacked with its float bias.
+c10::IValue pack(const torch::Tensor& weight, const torch::Tensor& bias, int64_t stride, int64_t padding) {
+  const auto w = weight.to(torch::kFloat32).contiguous();
+  const auto scales = (w.abs().amax({1, 2, 3}) / 127.0).clamp_min(1e-12).to(torch::kFloat64);
+  const auto qw = at::quantize_per_channel(w, scales, torch::zeros({w.size(0)}, torch::kLong), 0, torch::kQInt8);
+  torch::jit::Stack stack{qw,
+                          bias.defined() ? c10::IValue(bias.to(torch::kFloat32)) : c10::IValue(),
+                          std::vector<int64_t>{stride, stride},
+                          std::vector<int64_t>{padding, padding},
+                          std::vector<int64_t>{1, 1},
+                          int64_t{1}};
+  op("quantized::conv2d_prepack", "").callBoxed(&stack);
+  return stack.at(0);
+}
+
+}  // namespace
+
+Int8EncoderDecoder::Int8EncoderDecoder(EncoderDecoderImpl& net) : state_(std::make_unique<State>(net)) {}
+Int8EncoderDecoder::~Int8EncoderDecoder() = default;
+
+bool Int8EncoderDecoder::quantized() const { return state_->quantized; }
+int64_t Int8EncoderDecoder::points() const { return static_cast<int64_t>(state_->points.size()); }
+
+std::vector<torch::Tensor> Int8EncoderDecoder::forward(const torch::Tensor& x) {
+  TORCH_CHECK(!state_->net.is_training(), "int8: the network is in training mode (int8 is for inference)");
+  torch::NoGradGuard no_grad;
+  const auto input = x.to(torch::kFloat32);
+  if (state_->quantized) {
+    TORCH_CHECK(x.device().is_cpu(), "int8 inference runs on the CPU, got an input on ", x.device());
+    Quantized ops{*state_};
+    return run_graph(state_->net, ops, input);
+  }
+  Observe ops{state_->points};
+  auto out = run_graph(state_->net, ops, input);
+  TORCH_CHECK(ops.i == state_->points.size(), "int8: the graph changed between calibration inputs");
+  return out;
+}
+
+void Int8EncoderDecoder::quantize() {
+  auto& st = *state_;
+  TORCH_CHECK(!st.points.empty(), "int8: nothing was observed: run the network on calibration inputs first");
+  TORCH_CHECK(!select_int8_engine().empty(), "int8: this LibTorch has no quantized engine");
+  for (auto& p : st.points) p.fix();
+  st.conv = op("quantized::conv2d", "new");
+  st.conv_relu = op("quantized::conv2d_relu", "new");
+  st.add_relu = op("quantized::add_relu", "");
+  st.cat = op("quantized::cat", "");
+  for (const auto& m : st.net.modules(/*include_self=*/false)) {
+    if (auto* cb = m->as<ConvBnImpl>()) {
+      TORCH_CHECK(cb->folded(), "int8: BatchNorm must be folded before quantizing");
+      const auto& o = cb->conv->options;
+      st.packed[cb] = pack(cb->folded_weight(), cb->folded_bias(), (*o.stride())[0], (*o.kernel_size())[0] / 2);
+    }
+  }
+  for (const auto& p : st.net.pred) st.packed[p.get()] = pack(p->weight, p->bias, 1, 1);
+  st.quantized = true;
+}
+
+void observe_int8(EncoderDecoderImpl& net) { net.int8 = std::make_shared<Int8EncoderDecoder>(net); }
+
+void quantize_int8(EncoderDecoderImpl& net) {
+  TORCH_CHECK(net.int8, "int8: the network was not observed (observe_int8) before quantize_int8");
+  net.int8->quantize();
+}
+
+}  // namespace geo

@@ -1,0 +1,126 @@
+// int8 inference of the encoder-decoders (models/int8.h): FR on 8-bit features against the float FR,
+// a calibrated DepthNet and FlowNet against their float selves, and what is refused.
+#include <gtest/gtest.h>
+
+#include "models/conv_bn.h"
+#include "models/depth_net.h"
+#include "models/flow_net.h"
+#include "models/int8.h"
+
+namespace {
+
+bool has_int8() { return !geo::select_int8_engine().empty(); }
+
+// Random BatchNorm statistics and affines, so that folded networks are not the identity's.
+void randomize_batchnorm(torch::nn::Module& m) {
+  torch::NoGradGuard no_grad;
+  for (auto& b : m.named_buffers())
+    if (b.key().find("running_var") != std::string::npos) b.value().uniform_(0.5, 2.0);
+    else if (b.key().find("running_mean") != std::string::npos) b.value().normal_(0, 0.1);
+}
+
+TEST(Int8, FeatureRefinementIsTheFloatOneWithinOneStep) {
+  if (!has_int8()) GTEST_SKIP() << "this LibTorch has no quantized engine";
+  torch::manual_seed(3);
+  geo::FeatureRefinement fr(geo::FeatureRefinementOptions(32));
+  fr->eval();
+  torch::NoGradGuard no_grad;
+  for (const int64_t zero_point : {0, 17}) {
+    const auto x = torch::rand({2, 32, 5, 7}) * 3;
+    const auto q = at::quantize_per_tensor(x.contiguous(at::MemoryFormat::ChannelsLast), 0.02, zero_point, torch::kQUInt8);
+    const double out_scale = 0.015;
+    const auto mine = geo::int8_feature_refinement(*fr, q, out_scale, 3);
+    EXPECT_EQ(mine.q_scale(), out_scale);
+    EXPECT_EQ(mine.q_zero_point(), 3);
+    // The float FR of the same 8-bit values, quantized as the int8 one is.
+    const auto expected = at::quantize_per_tensor(fr(q.dequantize()), out_scale, 3, torch::kQUInt8);
+    const auto diff = (mine.int_repr().to(torch::kInt) - expected.int_repr().to(torch::kInt)).abs();
+    EXPECT_LE(diff.max().item<int>(), 1) << "zero point " << zero_point;  // rounding of float sums
+    EXPECT_LT(diff.to(torch::kFloat).mean().item<float>(), 0.05) << "zero point " << zero_point;
+  }
+}
+
+// DepthNet (ResNet-18 with FR, as the tests train it): calibrated on 4 images, then run in int8 on
+// 2 others. Observing computes what the float network computes; int8 follows it.
+TEST(Int8, CalibratedDepthNetFollowsTheFloatOne) {
+  if (!has_int8()) GTEST_SKIP() << "this LibTorch has no quantized engine";
+  torch::manual_seed(5);
+  geo::DepthNetOptions o;
+  o.encoder_depth = 18;
+  geo::DepthNet net(o);
+  randomize_batchnorm(*net);
+  net->eval();
+  geo::fold_batchnorm(*net);
+  torch::NoGradGuard no_grad;
+  const auto images = torch::rand({6, 3, 64, 96});
+  const auto reference = net(images.narrow(0, 4, 2)).disp;
+
+  geo::observe_int8(*net->net);
+  const auto observed = net(images.narrow(0, 0, 4)).disp;
+  const auto plain = net->net->int8;
+  EXPECT_FALSE(plain->quantized());
+  // Points: input, conv1, 8 blocks (ResNet-18: 2 convs + sum, 7 of them with a projection: all but
+  // the first, GeoNet putting the stride in the last block of a stage), 4 encoder FRs;
+  // 6 decoder stages (upconv, concatenation, iconv, FR), 3 upsampled predictions, 4 predictions.
+  EXPECT_EQ(plain->points(), 1 + 1 + (8 * 3 + 7) + 4 + 6 * 4 + 3 + 4);
+  net->net->int8.reset();
+  const auto again = net(images.narrow(0, 0, 4)).disp;
+  for (size_t s = 0; s < 4; ++s) EXPECT_TRUE(torch::allclose(observed[s], again[s], 1e-4, 1e-5)) << s;
+
+  net->net->int8 = plain;
+  geo::quantize_int8(*net->net);
+  EXPECT_TRUE(plain->quantized());
+  const auto int8 = net(images.narrow(0, 4, 2)).disp;
+  for (size_t s = 0; s < 4; ++s) {
+    ASSERT_EQ(int8[s].sizes(), reference[s].sizes());
+    EXPECT_EQ(int8[s].scalar_type(), torch::kFloat32);
+    // Disparity's spread across pixels is what depth is made of: int8's error against it.
+    const double spread = (reference[s] - reference[s].mean()).abs().mean().item<double>();
+    const double error = (int8[s] - reference[s]).abs().mean().item<double>();
+    EXPECT_LT(error, 0.1 * spread) << "scale " << s << ": error " << error << ", spread " << spread;
+  }
+}
+
+TEST(Int8, FlowNetFollowsTheFloatOne) {
+  if (!has_int8()) GTEST_SKIP() << "this LibTorch has no quantized engine";
+  torch::manual_seed(8);
+  geo::FlowNetOptions o;
+  o.backbone.encoder_depth = 18;
+  o.backbone.use_fr = false;
+  o.zero_init_residual = false;
+  geo::FlowNet net(o);
+  randomize_batchnorm(*net);
+  net->eval();
+  geo::fold_batchnorm(*net);
+  torch::NoGradGuard no_grad;
+  const auto inputs = torch::rand({4, 12, 32, 64}) * 2 - 1;
+  const auto reference = net(inputs.narrow(0, 3, 1)).flow;
+  geo::observe_int8(*net->net);
+  net(inputs.narrow(0, 0, 3));
+  geo::quantize_int8(*net->net);
+  const auto int8 = net(inputs.narrow(0, 3, 1)).flow;
+  for (size_t s = 0; s < 4; ++s) {
+    const double spread = (reference[s] - reference[s].mean()).abs().mean().item<double>();
+    const double error = (int8[s] - reference[s]).abs().mean().item<double>();
+    EXPECT_LT(error, 0.1 * spread) << "scale " << s << ": error " << error << ", spread " << spread;
+  }
+}
+
+TEST(Int8, QuantizingNeedsCalibrationAFoldedNetworkAndInference) {
+  if (!has_int8()) GTEST_SKIP() << "this LibTorch has no quantized engine";
+  geo::DepthNetOptions o;
+  o.encoder_depth = 18;
+  o.use_fr = false;
+  geo::DepthNet net(o);
+  net->eval();
+  EXPECT_THROW(geo::quantize_int8(*net->net), c10::Error);  // not observed
+  geo::observe_int8(*net->net);
+  EXPECT_THROW(geo::quantize_int8(*net->net), c10::Error);  // observed nothing
+  torch::NoGradGuard no_grad;
+  net(torch::rand({1, 3, 32, 64}));
+  EXPECT_THROW(geo::quantize_int8(*net->net), c10::Error);  // BatchNorm not folded
+  net->train();
+  EXPECT_THROW(net(torch::rand({1, 3, 32, 64})), c10::Error);  // int8 is for inference
+}
+
+}  // namespace
