@@ -41,7 +41,7 @@ struct InferOptions {
   std::string checkpoint, input, output, device = "auto", precision = "fp32", ground_truth;
   std::vector<double> intrinsics;
   std::vector<int64_t> ply_frames;
-  int64_t max_frames = 0;
+  int64_t max_frames = 0, calibration_frames = 0;  // 0: 8 with --precision int8
   double camera_height = 0, ply_max_depth = 0;
   int threads = 0;
   bool videos = false, timing = false, force = false;
@@ -51,8 +51,12 @@ struct InferOptions {
     app.add_option("--input", input, "an image, a folder of frames (natural order: 2 before 10) or a video file")->required();
     app.add_option("--output", output, "output folder (created)")->required();
     geo::app::add_device_option(app, device, "default: auto");
-    geo::app::add_precision_option(app, precision, {"fp32", "bf16", "auto"},
-                                   "fp32, bf16 (faster on CPUs with AVX512-BF16/AMX, depth within ~1%) or auto (bf16 on such a CPU)");
+    geo::app::add_precision_option(app, precision, {"fp32", "bf16", "auto", "int8"},
+                                   "fp32, bf16 (faster on CPUs with AVX512-BF16/AMX, depth within ~1%), auto (bf16 on such a "
+                                   "CPU) or int8 (CPU: DepthNet and FlowNet in int8 calibrated on the input's first frames)");
+    app.add_option("--calibration-frames", calibration_frames,
+                   "with --precision int8: how many of the input's first frames calibrate it, 1..1000 (default: 8)")
+        ->check(CLI::Range(1, 1000));
     app.add_option("--intrinsics", intrinsics,
                    "fx fy cx cy of the input images in pixels (default: KITTI-like 0.58 W, 1.92 H, W/2, H/2)")
         ->expected(4);
@@ -264,13 +268,27 @@ int infer(const InferOptions& o) {
   geo::StepTimes times;
   geo::LoadOptions load;
   load.device = o.device;
-  load.precision = o.precision;
+  const bool int8 = o.precision == "int8";
+  if (o.calibration_frames > 0 && !int8)
+    throw std::runtime_error("--calibration-frames calibrates int8: it needs --precision int8 (got " + o.precision + ")");
+  const int64_t calibration_frames = o.calibration_frames > 0 ? o.calibration_frames : 8;
+  load.precision = int8 ? "fp32" : o.precision;  // int8: calibrated on the input's frames once they are read
   load.threads = o.threads;
-  const geo::Model model = times.time("load the model", [&] { return geo::Model::load(o.checkpoint, load); });
+  geo::Model model = times.time("load the model", [&] { return geo::Model::load(o.checkpoint, load); });
   const int64_t h = model.spec().height, w = model.spec().width;
   const auto reading = std::chrono::steady_clock::now();
   const Frames frames = read_frames(o, h, w);
   times.add("read, decode, resize frames", std::chrono::duration<double>(std::chrono::steady_clock::now() - reading).count());
+  if (int8) {
+    std::vector<torch::Tensor> calibration;
+    for (size_t i = 0; i < frames.size() && static_cast<int64_t>(i) < calibration_frames; ++i)
+      calibration.push_back(frames.image(i));
+    if (model.spec().has_flow && calibration.size() < 2)
+      throw std::runtime_error("--precision int8: this model's FlowNet calibrates on pairs: give at least 2 frames "
+                               "(--calibration-frames, and an input of 2 or more frames)");
+    times.time("int8 calibration", [&] { model.quantize_int8(calibration); });
+    spdlog::info("int8: calibrated on the first {} frame(s) of the input", calibration.size());
+  }
   for (const auto f : o.ply_frames)
     if (f >= static_cast<int64_t>(frames.size()))
       throw std::runtime_error("--ply " + std::to_string(f) + ": the input has " + std::to_string(frames.size()) +

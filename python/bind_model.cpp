@@ -24,10 +24,19 @@ py::object with_scale(torch::Tensor result, std::vector<double> scale, bool want
   return py::make_tuple(std::move(result), std::move(scale));
 }
 
+// A sequence of images (frames[i] named in errors).
+std::vector<torch::Tensor> images_arg(const py::sequence& frames, const std::string& what) {
+  std::vector<torch::Tensor> xs;
+  for (size_t i = 0; i < frames.size(); ++i) xs.push_back(image_arg(frames[i], what + "[" + std::to_string(i) + "]"));
+  return xs;
+}
+
 // Model.load's and Model.create's keyword arguments.
-LoadOptions load_options(const std::string& device, const std::string& precision, int threads) {
+LoadOptions load_options(const std::string& device, const std::string& precision, int threads,
+                         const py::object& calibration) {
   LoadOptions options;
   options.device = device, options.precision = precision, options.threads = threads;
+  if (!calibration.is_none()) options.calibration = images_arg(calibration.cast<py::sequence>(), "calibration");
   return options;
 }
 
@@ -84,25 +93,41 @@ void bind_model(py::module_& m) {
                     "that learns it predicts). Safe to call from several threads at once.")
       .def_static(
           "load",
-          [](const std::string& path, const std::string& device, const std::string& precision, int threads) {
-            const LoadOptions options = load_options(device, precision, threads);
+          [](const std::string& path, const std::string& device, const std::string& precision, int threads,
+             const py::object& calibration) {
+            const LoadOptions options = load_options(device, precision, threads, calibration);
             py::gil_scoped_release release;
             return Model::load(path, options);
           },
           "path"_a, py::kw_only(), "device"_a = "cpu", "precision"_a = "fp32", "threads"_a = 0,
+          "calibration"_a = py::none(),
           "A geo_export model file, a training checkpoint or a run folder. device: cpu, cuda, cuda:N or auto;\n"
-          "precision: fp32, bf16 or auto; threads > 0 sets LibTorch's intra-op threads (process-wide).")
+          "precision: fp32, bf16, auto or int8 (CPU; calibration: a few frames like those the model will see, in\n"
+          "order: see quantize_int8); threads > 0 sets LibTorch's intra-op threads (process-wide).")
       .def_static(
           "create",
-          [](const std::string& config_yaml, const std::string& device, const std::string& precision, int threads) {
-            const LoadOptions options = load_options(device, precision, threads);
+          [](const std::string& config_yaml, const std::string& device, const std::string& precision, int threads,
+             const py::object& calibration) {
+            const LoadOptions options = load_options(device, precision, threads, calibration);
             py::gil_scoped_release release;
             return Model::create(config_yaml, options);
           },
           "config_yaml"_a = "{}", py::kw_only(), "device"_a = "cpu", "precision"_a = "fp32", "threads"_a = 0,
+          "calibration"_a = py::none(),
           "Untrained networks (torch.manual_seed first for fixed weights) of a geo config given as YAML text\n"
           "(model.*, data.height/width/seq_length, loss.*; absent keys: geo's defaults, \"{}\": the paper's model\n"
           "at 128x416): for measuring speed or trying a program before a model is trained.")
+      .def(
+          "quantize_int8",
+          [](Model& model, const py::sequence& frames) {
+            const auto xs = images_arg(frames, "frames");
+            py::gil_scoped_release release;
+            model.quantize_int8(xs);
+          },
+          "frames"_a,
+          "Switches this fp32 CPU model to int8: the DepthNet and FlowNet calibrated on frames (like those the\n"
+          "model will see, in order; consecutive pairs calibrate the FlowNet), the PoseNet stays fp32. Not while\n"
+          "another thread uses the model.")
       .def_property_readonly("spec", &Model::spec)
       .def_property_readonly("device", &Model::device)
       .def_property_readonly("training_configs", &Model::training_configs,
@@ -161,8 +186,7 @@ void bind_model(py::module_& m) {
       .def(
           "pose",
           [](const Model& model, const py::sequence& frames) {
-            std::vector<torch::Tensor> xs;
-            for (size_t i = 0; i < frames.size(); ++i) xs.push_back(image_arg(frames[i], "frames[" + std::to_string(i) + "]"));
+            const auto xs = images_arg(frames, "frames");
             py::gil_scoped_release release;
             return model.pose(xs);
           },
@@ -197,8 +221,7 @@ void bind_model(py::module_& m) {
           "sequence_scales",
           [](const Model& model, const py::sequence& frames, double camera_height, py::handle intrinsics,
              bool return_without_road) {
-            std::vector<torch::Tensor> xs;
-            for (size_t i = 0; i < frames.size(); ++i) xs.push_back(image_arg(frames[i], "frames[" + std::to_string(i) + "]"));
+            const auto xs = images_arg(frames, "frames");
             const auto K = optional_tensor_arg(intrinsics, "intrinsics");
             std::vector<size_t> without;
             std::vector<double> scales;

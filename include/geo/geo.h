@@ -41,8 +41,11 @@ struct LoadOptions {
   int threads = 0;             // > 0: set LibTorch's intra-op threads (process-wide); 0: leave them
   // What the networks compute in: "fp32"; "bf16" (weights and arithmetic in bfloat16, outputs
   // float32: ~1.6x faster on CPUs with AVX512-BF16 or AMX, depth within ~1% of fp32); "auto"
-  // (bf16 on such a CPU, else fp32).
+  // (bf16 on such a CPU, else fp32); "int8" (CPU: the DepthNet and FlowNet in int8, calibrated on
+  // `calibration`, the PoseNet in fp32; ~3x faster than fp32: see Model::quantize_int8).
   std::string precision = "fp32";
+  // int8's calibration frames: see Model::quantize_int8.
+  std::vector<torch::Tensor> calibration;
 };
 
 // What a model expects and has (read from the file).
@@ -55,7 +58,7 @@ struct ModelSpec {
   std::string source;              // the file it was loaded from
   bool learns_intrinsics = false;  // its PoseNet predicts the camera (intrinsics() and the default
                                    // of every `intrinsics` argument below)
-  std::string precision = "fp32";  // fp32 or bf16 (LoadOptions::precision resolved)
+  std::string precision = "fp32";  // fp32, bf16 or int8 (LoadOptions::precision resolved)
 };
 
 // [3,H,W] uint8 tensor from interleaved RGB bytes (row stride in bytes; 0 = 3 * width). Copies.
@@ -84,6 +87,14 @@ class Model {
 
   const ModelSpec& spec() const;
   torch::Device device() const;
+  // Switches an fp32 model on the CPU to int8 (post-training quantization): the DepthNet and FlowNet
+  // run on `frames` in fp32 while the range of every activation is recorded, then their weights are
+  // quantized per channel and their activations to 8 bits with those ranges; the PoseNet stays fp32.
+  // Give frames like those the model will see, in order (consecutive pairs calibrate the FlowNet:
+  // at least 2 frames for a model with one); a few frames suffice (8 is plenty). [3,H,W] uint8 or
+  // float images, any size. Copies of this Model share the switch; not to be called while another
+  // thread uses the model. Throws geo::Error on a bf16 or CUDA model, or too few frames.
+  void quantize_int8(const std::vector<torch::Tensor>& frames);
   // What the weights were trained with, as geo config YAML texts: the training checkpoint's own
   // config first, then those of the checkpoints its training started from (geo_train --init),
   // nearest first; a link that carried none reads "unknown: <why>". Empty for geo_export model

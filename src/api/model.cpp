@@ -7,6 +7,7 @@
 #include "geometry/pose.h"
 #include "geometry/road_plane.h"
 #include "geometry/trajectory.h"
+#include "models/int8.h"
 #include "pipeline/checkpoint.h"
 #include "pipeline/networks.h"
 
@@ -53,10 +54,10 @@ ModelSpec public_spec(const NetworkSpec& s, bool has_flow, const std::string& so
 
 // LoadOptions::precision.
 bool use_bf16(const std::string& precision, const torch::Device& device) {
-  if (precision == "fp32") return false;
+  if (precision == "fp32" || precision == "int8") return false;
   if (precision == "bf16") return true;
   if (precision == "auto") return device.is_cpu() && cpu_has_fast_bf16();
-  throw Error("precision '" + precision + "' is not one of fp32, bf16, auto");
+  throw Error("precision '" + precision + "' is not one of fp32, bf16, auto, int8");
 }
 
 // Networks are created with random weights that the file then replaces: the process's random
@@ -164,6 +165,9 @@ void make_ready(Model::Impl& impl, const LoadOptions& options, bool has_flow, co
   impl.nets.prepare_inference(true, bf16);
   impl.spec = public_spec(impl.nets.spec, has_flow, source);
   impl.spec.precision = bf16 ? "bf16" : "fp32";
+  if (options.precision == "int8" && options.calibration.empty())
+    throw Error("precision 'int8' needs calibration frames (LoadOptions::calibration): a few frames like those "
+                "the model will see");
 }
 
 }  // namespace
@@ -173,7 +177,9 @@ Model Model::create(const std::string& config_yaml, const LoadOptions& options) 
     auto impl = std::make_shared<Impl>();
     impl->nets = Networks::create(NetworkSpec::parse(config_yaml, "the config given"), true);  // the caller seeds
     make_ready(*impl, options, true, "untrained");
-    return Model(impl);
+    Model model(impl);
+    if (options.precision == "int8") model.quantize_int8(options.calibration);
+    return model;
   });
 }
 
@@ -188,11 +194,43 @@ Model Model::load(const std::string& path, const LoadOptions& options) {
     checkpoint.load_networks(impl->nets, false);
     make_ready(*impl, options, checkpoint.has_flow(), file);
     if (checkpoint.config()) impl->training_configs = checkpoint.lineage();
-    return Model(impl);
+    Model model(impl);
+    if (options.precision == "int8") model.quantize_int8(options.calibration);
+    return model;
   });
 }
 
 const ModelSpec& Model::spec() const { return impl_->spec; }
+
+void Model::quantize_int8(const std::vector<torch::Tensor>& frames) {
+  guarded("geo::Model::quantize_int8", [&] {
+    auto& nets = impl_->nets;
+    if (impl_->spec.precision == "int8") throw Error("the model is int8 already");
+    if (impl_->spec.precision != "fp32") throw Error("int8 starts from an fp32 model, this one is " + impl_->spec.precision);
+    if (!impl_->device.is_cpu()) throw Error("int8 runs on the CPU, this model is on " + impl_->device.str());
+    if (select_int8_engine().empty()) throw Error("this LibTorch has no quantized engine (onednn, x86, fbgemm, qnnpack)");
+    const size_t needed = nets.flow ? 2 : 1;
+    if (frames.size() < needed)
+      throw Error(std::to_string(frames.size()) + " calibration frame(s): a model with a FlowNet needs at least 2 "
+                  "(consecutive), one without at least 1");
+    std::vector<EncoderDecoderImpl*> nets_int8{nets.depth->net.get()};
+    if (nets.flow) nets_int8.push_back(nets.flow->net.get());
+    try {
+      for (auto* n : nets_int8) observe_int8(*n);
+      if (nets.flow) {  // the FlowNet sees what flow() gives it: rigid flow of depth and motion
+        for (size_t i = 0; i + 1 < frames.size(); ++i) flow_parts(frames[i], frames[i + 1]);
+        depth(frames.back());
+      } else {
+        for (const auto& f : frames) depth(f);
+      }
+      for (auto* n : nets_int8) geo::quantize_int8(*n);
+    } catch (...) {
+      for (auto* n : nets_int8) n->int8.reset();  // back to fp32, as it was
+      throw;
+    }
+    impl_->spec.precision = "int8";
+  });
+}
 torch::Device Model::device() const { return impl_->device; }
 
 torch::Tensor Model::depth(const torch::Tensor& image) const {

@@ -30,6 +30,8 @@ class Predictor {
   // The configs its initial weights were trained with, nearest first ("unknown: ..." where a link
   // carried none): geo::Model::training_configs() after the first.
   std::vector<std::string> init_configs() const;
+  // The model in int8 from now on, calibrated on `frames` (geo::Model::quantize_int8).
+  void quantize_int8(const std::vector<torch::Tensor>& frames) { model_->quantize_int8(frames); }
 
   // image [B,3,H,W] -> depth [B,1,H,W] in the network's (unknown) scale: 1 / disparity.
   torch::Tensor depth(const torch::Tensor& image);

@@ -301,6 +301,17 @@ TEST(GeoInfer, WritesDepthFlowAndTrajectoryAndRefusesMixedFrameSizes) {
             std::string::npos)
       << test::read_file(dir + "/log");
 
+  // int8, calibrated on the input's first frames, with the time of each step; --calibration-frames
+  // alone would be ignored: refused.
+  ASSERT_EQ(run("--input " + dir + "/frames --output " + dir + "/out_int8 --precision int8 --timing"), 0)
+      << test::read_file(dir + "/log");
+  EXPECT_NE(test::read_file(dir + "/log").find("int8: calibrated on the first 3 frame(s)"), std::string::npos);
+  EXPECT_NE(test::read_file(dir + "/log").find("int8 calibration"), std::string::npos) << test::read_file(dir + "/log");
+  EXPECT_TRUE(std::filesystem::exists(dir + "/out_int8/000001-flow.png"));
+  EXPECT_NE(run("--input " + dir + "/frames --output " + dir + "/out7 --calibration-frames 2"), 0);
+  EXPECT_NE(test::read_file(dir + "/log").find("--calibration-frames calibrates int8: it needs --precision int8"),
+            std::string::npos) << test::read_file(dir + "/log");
+
   write_image(dir + "/frames/000003.png", image(32, 104));
   EXPECT_NE(std::system((tool + dir + "/frames --output " + dir + "/out2 > " + dir + "/log 2>&1").c_str()), 0);
   const std::string log = test::read_file(dir + "/log");

@@ -99,6 +99,29 @@ TEST_F(Learning, ShortTrainingBeatsUntrainedAndTrivialBaselines) {
   }
 }
 
+TEST_F(Learning, Int8KeepsTheAccuracyOfFp32) {
+  // int8 (geo::Model::quantize_int8), calibrated on the first 8 frames of the first training drive,
+  // against the same model in fp32 on the held-out data: AbsRel within 2% (relative), flow EPE within
+  // 3%, ATE within 5% (the PoseNet stays fp32: equal).
+  std::vector<torch::Tensor> frames;
+  for (int f = 0; f < 8; ++f)
+    frames.push_back(read_image(root_ + "/world/raw/" + synth_drive_folder(1) + "/image_02/data/" + zero_padded(f, 10) + ".png"));
+  Predictor fp32(run_, "cpu"), int8(run_, "cpu");
+  int8.quantize_int8(frames);
+  struct Check {
+    const char* split;
+    const char* metric;
+    double tolerance;
+  };
+  for (const Check c : {Check{"eigen", "abs_rel", 0.02}, Check{"kitti2015", "epe_all", 0.03},
+                        Check{"odometry", "ate_mean", 0.05}}) {
+    const double a = metric_of(eval(c.split, &fp32), c.metric), b = metric_of(eval(c.split, &int8), c.metric);
+    std::printf("learning check int8 %-9s %-8s fp32 %.4f  int8 %.4f (%+.2f%%)\n", c.split, c.metric, a, b,
+                100 * (b / a - 1));
+    EXPECT_LE(b, (1 + c.tolerance) * a) << c.split << " " << c.metric;
+  }
+}
+
 TEST_F(Learning, ResidualFlowImprovesTheMovingCarsNotTheStaticScene) {
   Predictor trained(run_, "cpu");
   // Stage 2: the residual flow against the rigid flow of the same model, on the moving cars (obj_map)

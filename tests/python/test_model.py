@@ -166,3 +166,22 @@ def test_trajectories_chain_motions_at_their_scales(model, frames):
     # A two-step model sees no road: the error names the frame and the default camera.
     with pytest.raises(geo.Error, match="no road plane in any frame near frame 0 of 3 .with the default KITTI-like camera"):
         model.sequence_scales(list(frames))
+
+
+def test_int8_is_calibrated_on_frames_and_follows_fp32(model_file, frames):
+    fp32 = geo.Model.load(str(model_file))
+    with pytest.raises(geo.Error, match="calibration frames"):
+        geo.Model.load(str(model_file), precision="int8")
+    int8 = geo.Model.load(str(model_file), precision="int8", calibration=[frames[0], frames[1], frames[2]])
+    assert int8.spec.precision == "int8"
+    d32, d8 = fp32.depth(frames), int8.depth(frames)
+    assert d8.shape == d32.shape and d8.dtype == torch.float32
+    assert ((d8 - d32).abs() / d32).mean() < 0.05
+    with pytest.raises(geo.Error, match="int8 already"):
+        int8.quantize_int8(list(frames))
+    # The same frames through quantize_int8: the same calibration, the same int8 model.
+    later = geo.Model.load(str(model_file))
+    later.quantize_int8(list(frames))
+    assert torch.equal(later.depth(frames), d8)
+    with pytest.raises(geo.Error, match="at least 2"):
+        geo.Model.load(str(model_file)).quantize_int8([frames[0]])
