@@ -284,8 +284,7 @@ std::vector<Row> inference_rows(const geo::Config& config, const std::vector<boo
         const bool pose = what == "PoseNet";
         if (pose && made_fr[k] != made_fr[0]) continue;  // no FR in the PoseNet: once per precision
         const std::string& precision = made_precision[k];
-        // int8: the encoder-decoders (the PoseNet stays in float32); geo::Model has no int8 yet.
-        if (precision == "int8" && (pose || what == "Model::depth")) continue;
+        if (precision == "int8" && pose) continue;  // int8: the encoder-decoders (the PoseNet stays in float32)
         geo::Networks& nets = made[k].second;
         Row row{"infer", what + (precision == "fp32" ? "" : " " + precision), pose ? "-" : (made_fr[k] ? "on" : "off"), b};
         row.bf16 = precision == "bf16";
@@ -300,8 +299,9 @@ std::vector<Row> inference_rows(const geo::Config& config, const std::vector<boo
         if (what == "Model::depth") {  // the library's call: an 8-bit RGB frame in, depth at its size out
           geo::LoadOptions lo;
           lo.device = device.str();
-          lo.precision = precision;
+          lo.precision = precision == "int8" ? "fp32" : precision;
           models.push_back(std::make_unique<geo::Model>(geo::Model::create(geo::to_yaml(made[k].first), lo)));
+          if (precision == "int8") models.back()->quantize_int8({frame8[0], (img2[0] * 255).to(torch::kUInt8)});
           fn = [m = models.back().get(), &frame8] { m->depth(frame8); };
         }
         calls.emplace_back(&batch_rows.back(), fn);

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <optional>
 #include <unordered_map>
@@ -16,6 +17,7 @@
 #include "models/fr.h"
 #include "models/layers.h"
 #include "models/resnet_encoder.h"
+#include "models/upsample_conv.h"
 
 namespace geo {
 
@@ -55,42 +57,67 @@ torch::Tensor int8_feature_refinement(FeatureRefinementImpl& fr, const torch::Te
   const uint8_t* x = reinterpret_cast<const uint8_t*>(q.data_ptr<c10::quint8>());
   auto fopt = torch::TensorOptions().dtype(torch::kFloat32);
 
+  // Max and sum over space per channel: pixel ranges in parallel, each with its own partial results
+  // (C is often too small to split), merged after.
   auto cmax = torch::empty({B, C, 1, 1}, fopt), cmean = torch::empty({B, C, 1, 1}, fopt);
   float *cm = cmax.data_ptr<float>(), *ca = cmean.data_ptr<float>();
+  const int64_t parts = std::max<int64_t>(1, std::min<int64_t>(at::get_num_threads(), HW / 64));
   for (int64_t b = 0; b < B; ++b) {
-    at::parallel_for(0, C, 16, [&](int64_t c0, int64_t c1) {
-      std::vector<uint8_t> mx(c1 - c0, 0);
-      std::vector<int64_t> sum(c1 - c0, 0);
-      for (int64_t p = 0; p < HW; ++p) {
-        const uint8_t* row = x + (b * HW + p) * C + c0;
-        for (int64_t c = 0; c < c1 - c0; ++c) {
-          mx[c] = std::max(mx[c], row[c]);
-          sum[c] += row[c];
+    std::vector<uint8_t> part_max(parts * C, 0);
+    std::vector<int32_t> part_sum(parts * C, 0);  // 255 x pixels: fits up to 8 M pixels
+    at::parallel_for(0, parts, 1, [&](int64_t k0, int64_t k1) {
+      for (int64_t k = k0; k < k1; ++k) {
+        uint8_t* mx = part_max.data() + k * C;
+        int32_t* sum = part_sum.data() + k * C;
+        for (int64_t p = HW * k / parts; p < HW * (k + 1) / parts; ++p) {
+          const uint8_t* row = x + (b * HW + p) * C;
+          for (int64_t c = 0; c < C; ++c) {
+            mx[c] = row[c] > mx[c] ? row[c] : mx[c];
+            sum[c] += row[c];
+          }
         }
       }
-      for (int64_t c = 0; c < c1 - c0; ++c) {
-        cm[b * C + c0 + c] = s * (static_cast<float>(mx[c]) - z);
-        ca[b * C + c0 + c] = s * (static_cast<float>(sum[c]) / static_cast<float>(HW) - z);
-      }
     });
+    for (int64_t c = 0; c < C; ++c) {
+      uint8_t m = 0;
+      int64_t total = 0;
+      for (int64_t k = 0; k < parts; ++k) {
+        m = std::max(m, part_max[k * C + c]);
+        total += part_sum[k * C + c];
+      }
+      cm[b * C + c] = s * (static_cast<float>(m) - z);
+      ca[b * C + c] = s * (static_cast<float>(static_cast<double>(total) / static_cast<double>(HW)) - z);
+    }
   }
   const auto gate_c = fr.channel_gate_of(cmax, cmean).to(torch::kFloat32).contiguous();
   const float* ac = gate_c.data_ptr<float>();
 
+  // Max and mean over the channels of x * a_c per pixel. Eight independent lanes, so that the
+  // compiler vectorises the reductions (it may not reorder one float accumulator).
   auto smax = torch::empty({B, 1, H, W}, fopt), smean = torch::empty({B, 1, H, W}, fopt);
   float *sm = smax.data_ptr<float>(), *sa = smean.data_ptr<float>();
-  at::parallel_for(0, B * HW, 256, [&](int64_t p0, int64_t p1) {
+  constexpr int64_t L = 8;
+  for (int64_t b = 0; b < B; ++b) at::parallel_for(b * HW, (b + 1) * HW, 256, [&](int64_t p0, int64_t p1) {
+    const float* a = ac + b * C;
     for (int64_t p = p0; p < p1; ++p) {
       const uint8_t* row = x + p * C;
-      const float* a = ac + (p / HW) * C;
-      float best = -std::numeric_limits<float>::infinity(), sum = 0.f;
-      for (int64_t c = 0; c < C; ++c) {
+      float best[L], sum[L];
+      for (int64_t l = 0; l < L; ++l) best[l] = -std::numeric_limits<float>::infinity(), sum[l] = 0.f;
+      int64_t c = 0;
+      for (; c + L <= C; c += L)
+        for (int64_t l = 0; l < L; ++l) {
+          const float v = (static_cast<float>(row[c + l]) - z) * a[c + l];
+          best[l] = v > best[l] ? v : best[l];
+          sum[l] += v;
+        }
+      for (; c < C; ++c) {
         const float v = (static_cast<float>(row[c]) - z) * a[c];
-        best = std::max(best, v);
-        sum += v;
+        best[0] = v > best[0] ? v : best[0];
+        sum[0] += v;
       }
-      sm[p] = s * best;
-      sa[p] = s * sum / static_cast<float>(C);
+      for (int64_t l = 1; l < L; ++l) best[0] = best[l] > best[0] ? best[l] : best[0], sum[0] += sum[l];
+      sm[p] = s * best[0];
+      sa[p] = s * sum[0] / static_cast<float>(C);
     }
   });
   const auto gate_s = fr.spatial_gate_of(smax, smean).to(torch::kFloat32).contiguous();
@@ -98,16 +125,18 @@ torch::Tensor int8_feature_refinement(FeatureRefinementImpl& fr, const torch::Te
 
   auto out = at::_empty_affine_quantized({B, C, H, W}, q.options(), out_scale, out_zp, at::MemoryFormat::ChannelsLast);
   uint8_t* y = reinterpret_cast<uint8_t*>(out.data_ptr<c10::quint8>());
-  const float zo = static_cast<float>(out_zp), inv = 1.0f / static_cast<float>(out_scale);
-  at::parallel_for(0, B * HW, 256, [&](int64_t p0, int64_t p1) {
+  const float zo = static_cast<float>(out_zp) + 0.5f, inv = 1.0f / static_cast<float>(out_scale);
+  for (int64_t b = 0; b < B; ++b) at::parallel_for(b * HW, (b + 1) * HW, 256, [&](int64_t p0, int64_t p1) {
+    const float* a = ac + b * C;
     for (int64_t p = p0; p < p1; ++p) {
       const uint8_t* row = x + p * C;
       uint8_t* o = y + p * C;
-      const float* a = ac + (p / HW) * C;
       const float g = s * as[p] * inv;
-      for (int64_t c = 0; c < C; ++c) {
-        const float v = std::clamp((static_cast<float>(row[c]) - z) * a[c] * g + zo, 0.f, 255.f);
-        o[c] = static_cast<uint8_t>(v + 0.5f);
+      for (int64_t c = 0; c < C; ++c) {  // rounded to nearest (v >= 0 after the clamp)
+        float v = (static_cast<float>(row[c]) - z) * a[c] * g + zo;
+        v = v < 0.5f ? 0.5f : v;
+        v = v > 255.5f ? 255.5f : v;
+        o[c] = static_cast<uint8_t>(static_cast<int32_t>(v));
       }
     }
   });
@@ -138,10 +167,34 @@ struct Int8EncoderDecoder::State {
   std::vector<Point> points;
   bool quantized = false;
   std::unordered_map<const torch::nn::Module*, c10::IValue> packed;
+  std::unordered_map<const torch::nn::Module*, c10::IValue> packed_phases;  // the upconvs' 2x2 phase kernels
   std::optional<c10::OperatorHandle> conv, conv_relu, add_relu, cat;
 };
 
 namespace {
+
+// phases [B,4*Co,h+1,w+1] quint8 NHWC (phase (a, b) of output pixel (2i+a, 2j+b) in channels
+// (2a+b)*Co.. of pixel (i+a, j+b)) -> [B,Co,2h,2w] quint8 NHWC, the same scale and zero point.
+torch::Tensor interleave_phases_int8(const torch::Tensor& phases_in, int64_t Co) {
+  const auto ph = phases_in.contiguous(at::MemoryFormat::ChannelsLast);
+  const int64_t B = ph.size(0), h = ph.size(2) - 1, w = ph.size(3) - 1;
+  TORCH_CHECK(ph.size(1) == 4 * Co, "int8: phases of ", ph.size(1), " channels for ", Co, " outputs");
+  auto out = at::_empty_affine_quantized({B, Co, 2 * h, 2 * w}, ph.options(), ph.q_scale(), ph.q_zero_point(),
+                                         at::MemoryFormat::ChannelsLast);
+  const uint8_t* src = reinterpret_cast<const uint8_t*>(ph.data_ptr<c10::quint8>());
+  uint8_t* dst = reinterpret_cast<uint8_t*>(out.data_ptr<c10::quint8>());
+  at::parallel_for(0, B * 2 * h, 8, [&](int64_t r0, int64_t r1) {
+    for (int64_t r = r0; r < r1; ++r) {
+      const int64_t b = r / (2 * h), y = r % (2 * h), i = y / 2, a = y % 2;
+      for (int64_t x = 0; x < 2 * w; ++x) {
+        const int64_t j = x / 2, c = x % 2;
+        std::memcpy(dst + ((b * 2 * h + y) * 2 * w + x) * Co,
+                    src + ((b * (h + 1) + i + a) * (w + 1) + j + c) * 4 * Co + (2 * a + c) * Co, Co);
+      }
+    }
+  });
+  return out;
+}
 
 // The network's graph, once, for both passes: `Ops` computes each step in float while recording the
 // ranges of its quantized points (Observe) or in int8 (Quantized). Every point takes the next slot,
@@ -181,7 +234,7 @@ std::vector<torch::Tensor> run_graph(EncoderDecoderImpl& net, Ops& ops, const to
     const torch::Tensor& ref = k < 5 ? feats[4 - k] : x;
     std::vector<torch::Tensor> parts;
     parts.reserve(3);
-    parts.push_back(resize_like(ops.conv(*net.upconv[k], upsample2(y, mode)), ref));
+    parts.push_back(resize_like(ops.upconv(*net.upconv[k], y, mode), ref));
     if (k < 5) parts.push_back(feats[4 - k]);
     if (k >= 3) parts.push_back(ops.quantize(resize_like(upsample2(preds.back(), mode), ref)));
     y = ops.cat(parts);
@@ -203,6 +256,9 @@ struct Observe {
   torch::Tensor input(const torch::Tensor& x) { return seen(x); }
   torch::Tensor quantize(const torch::Tensor& x) { return seen(x); }
   torch::Tensor conv(ConvBnImpl& m, const torch::Tensor& x) { return seen(m.forward(x)); }
+  torch::Tensor upconv(ConvBnImpl& m, const torch::Tensor& x, UpsampleMode mode) {
+    return seen(mode == UpsampleMode::kNearest ? m.forward_upsampled(x) : m.forward(upsample2(x, mode)));
+  }
   torch::Tensor add_relu(const torch::Tensor& a, const torch::Tensor& b) { return seen(torch::relu(a + b)); }
   torch::Tensor max_pool(const torch::Tensor& x) { return torch::max_pool2d(x, {3, 3}, {2, 2}, {1, 1}, {1, 1}); }
   torch::Tensor fr(FeatureRefinementImpl& m, const torch::Tensor& x) { return seen(m.forward(x)); }
@@ -220,11 +276,20 @@ struct Quantized {
                                    p.zero_point, torch::kQUInt8);
   }
   torch::Tensor input(const torch::Tensor& x) { return quantize(x); }
-  torch::Tensor conv_packed(const torch::nn::Module& m, const torch::Tensor& x, bool relu) {
+  torch::Tensor conv_with(const c10::IValue& packed, const torch::Tensor& x, bool relu) {
     const auto& p = next();
-    return call(relu ? *st.conv_relu : *st.conv, {x, st.packed.at(&m), p.scale, p.zero_point});
+    return call(relu ? *st.conv_relu : *st.conv, {x, packed, p.scale, p.zero_point});
   }
-  torch::Tensor conv(ConvBnImpl& m, const torch::Tensor& x) { return conv_packed(m, x, m.relu); }
+  torch::Tensor conv(ConvBnImpl& m, const torch::Tensor& x) { return conv_with(st.packed.at(&m), x, m.relu); }
+  // Nearest x2 upsampling then m: as ConvBn::forward_upsampled, the four 2x2 phase convolutions at
+  // x's resolution (2.25x fewer multiply-adds), the phases interleaved as bytes.
+  torch::Tensor upconv(ConvBnImpl& m, const torch::Tensor& x, UpsampleMode mode) {
+    const auto phases = st.packed_phases.find(&m);
+    if (mode != UpsampleMode::kNearest || phases == st.packed_phases.end() ||
+        x.size(2) * x.size(3) < ConvBnImpl::kMinSubpixelArea)
+      return conv(m, upsample2(x, mode));
+    return interleave_phases_int8(conv_with(phases->second, x, m.relu), m.conv->options.out_channels());
+  }
   torch::Tensor add_relu(const torch::Tensor& a, const torch::Tensor& b) {
     const auto& p = next();
     return call(*st.add_relu, {a, b, p.scale, p.zero_point});
@@ -239,7 +304,7 @@ struct Quantized {
     return call(*st.cat, {c10::List<torch::Tensor>(parts), int64_t{1}, p.scale, p.zero_point});
   }
   torch::Tensor pred(Conv2dImpl& m, const torch::Tensor& y) {
-    return conv_packed(m, y, false).dequantize().contiguous();
+    return conv_with(st.packed.at(&m), y, false).dequantize().contiguous();
   }
 };
 
@@ -298,6 +363,10 @@ void Int8EncoderDecoder::quantize() {
     }
   }
   for (const auto& p : st.net.pred) st.packed[p.get()] = pack(p->weight, p->bias, 1, 1);
+  if (st.net.options.upsample == UpsampleMode::kNearest)
+    for (const auto& u : st.net.upconv)
+      st.packed_phases[u.get()] = pack(phase_kernels(u->folded_weight().to(torch::kFloat32)),
+                                       u->folded_bias().to(torch::kFloat32).repeat({4}), 1, 1);
   st.quantized = true;
 }
 
