@@ -10,14 +10,19 @@
 #include "app_options.h"
 #include "geo/geo.h"
 #include "pipeline/checkpoint.h"
+#ifdef GEO_EXPORT_FRAMES
+#include "data/cv_tensor.h"
+#include "data/video/frame_stream.h"
+#endif
 
 namespace fs = std::filesystem;
 
 namespace {
 
 struct ExportCommand {
-  std::string checkpoint, out;
-  bool half = false, force = false;
+  std::string checkpoint, out, calibration;
+  int calibration_frames = 8;
+  bool half = false, force = false, int8 = false;
 };
 
 void add_options(CLI::App& app, ExportCommand& c) {
@@ -25,22 +30,56 @@ void add_options(CLI::App& app, ExportCommand& c) {
   app.add_option("--out", c.out, "model file to write")->required();
   app.add_flag("--force", c.force, "replace --out even when it is not a geo_export model file");
   app.add_flag("--half", c.half, "store the weights as float16 (half the size; computed in float32 when loaded)");
+  app.add_flag("--int8", c.int8,
+               "calibrate int8 inference on --calibration and keep it in the file (loaded with precision int8, the "
+               "DepthNet and FlowNet run in int8 without calibrating again)");
+  app.add_option("--calibration", c.calibration,
+                 "with --int8: a folder of frames or a video like those the model will see (its first frames are used)");
+  app.add_option("--calibration-frames", c.calibration_frames, "with --int8: how many frames calibrate it, 1..1000")
+      ->check(CLI::Range(1, 1000));
+}
+
+// The first `count` frames of a folder or video, at the model's size.
+std::vector<torch::Tensor> calibration_frames(const ExportCommand& c, const geo::ModelSpec& s) {
+#ifdef GEO_EXPORT_FRAMES
+  geo::FrameStream stream(c.calibration, "--calibration");
+  std::vector<torch::Tensor> frames;
+  std::string name;
+  cv::Mat m;
+  while (static_cast<int>(frames.size()) < c.calibration_frames && stream.next(name, &m))
+    frames.push_back(geo::resized_mat_to_frame(m, s.height, s.width, c.calibration + " [" + name + "]"));
+  return frames;
+#else
+  (void)s;
+  throw std::runtime_error("--calibration '" + c.calibration + "': this geo_export was built without OpenCV and reads "
+                           "no frames (calibrate with geo::Model::quantize_int8 and save from C++ or Python)");
+#endif
 }
 
 int export_model(const ExportCommand& c) {
-  const geo::Model model = geo::Model::load(c.checkpoint);
+  if (c.int8 && c.calibration.empty()) throw std::runtime_error("--int8 needs --calibration FRAMES (a folder or a video)");
+  if (!c.int8 && !c.calibration.empty())
+    throw std::runtime_error("--calibration calibrates int8: it needs --int8 (or it would be ignored)");
+  geo::Model model = geo::Model::load(c.checkpoint);
   const auto& s = model.spec();
   geo::check_model_file_target(c.out, s.source, c.force);
+  if (c.int8) {
+    const auto frames = calibration_frames(c, s);
+    model.quantize_int8(frames);
+    spdlog::info("int8: calibrated on {} frame(s) of {}", frames.size(), c.calibration);
+  }
   model.save(c.out, c.half);
   // Check what was written: the same depth from both on a fixed image.
-  const geo::Model back = geo::Model::load(c.out);
+  geo::LoadOptions as_written;
+  as_written.precision = c.int8 ? "int8" : "fp32";
+  const geo::Model back = geo::Model::load(c.out, as_written);
   auto image = torch::linspace(0, 1, 3 * s.height * s.width).view({3, s.height, s.width});
   const double diff = (model.depth(image) - back.depth(image)).abs().max().item<double>();
   const double scale = model.depth(image).abs().max().item<double>();
   const auto in_size = fs::file_size(s.source), out_size = fs::file_size(c.out);
   spdlog::info("{} -> {}: {}x{} input, {}-frame PoseNet, ResNet-{}, FR {}, FlowNet {}, {} weights", s.source, c.out,
                s.height, s.width, s.seq_length, s.encoder_depth, s.feature_refinement ? "on" : "off",
-               s.has_flow ? "yes" : "no", c.half ? "float16" : "float32");
+               s.has_flow ? "yes" : "no", std::string(c.half ? "float16" : "float32") + (c.int8 ? ", int8 calibration" : ""));
   spdlog::info("{:.1f} MB -> {:.1f} MB ({:.0f}%); depth from the written file differs by at most {:.3g} ({:.2g} relative)",
                static_cast<double>(in_size) / 1e6, static_cast<double>(out_size) / 1e6,
                100.0 * static_cast<double>(out_size) / static_cast<double>(in_size), diff, diff / scale);

@@ -44,7 +44,8 @@ struct LoadOptions {
   // (bf16 on such a CPU, else fp32); "int8" (CPU: the DepthNet and FlowNet in int8, calibrated on
   // `calibration`, the PoseNet in fp32; ~3x faster than fp32: see Model::quantize_int8).
   std::string precision = "fp32";
-  // int8's calibration frames: see Model::quantize_int8.
+  // int8's calibration frames: see Model::quantize_int8. Not needed for a model file written in
+  // int8 (geo_export --int8), which keeps its calibration (frames given here replace it).
   std::vector<torch::Tensor> calibration;
 };
 
@@ -93,7 +94,8 @@ class Model {
   // Give frames like those the model will see, in order (consecutive pairs calibrate the FlowNet:
   // at least 2 frames for a model with one); a few frames suffice (8 is plenty). [3,H,W] uint8 or
   // float images, any size. Copies of this Model share the switch; not to be called while another
-  // thread uses the model. Throws geo::Error on a bf16 or CUDA model, or too few frames.
+  // thread uses the model. Throws geo::Error on a bf16 or CUDA model, or too few frames. save()
+  // then writes the calibration with the weights.
   void quantize_int8(const std::vector<torch::Tensor>& frames);
   // What the weights were trained with, as geo config YAML texts: the training checkpoint's own
   // config first, then those of the checkpoints its training started from (geo_train --init),
@@ -153,13 +155,15 @@ class Model {
                                       std::vector<size_t>* without_road = nullptr) const;
 
   // Writes the weights only (no optimiser, no training config) with the spec: geo_export.
-  // `half`: weights stored as float16 (half the size; loaded back as float32).
+  // `half`: weights stored as float16 (half the size; loaded back as float32). An int8 model's file
+  // keeps its calibration too: loaded with precision "int8" it needs no frames.
   void save(const std::string& path, bool half = false) const;
 
   struct Impl;
 
  private:
   explicit Model(std::shared_ptr<Impl> impl) : impl_(std::move(impl)) {}
+  void check_int8_possible() const;  // throws geo::Error saying why this model cannot become int8
   std::shared_ptr<Impl> impl_;  // shared by copies; the networks are only read after loading
 };
 

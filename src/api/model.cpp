@@ -165,9 +165,11 @@ void make_ready(Model::Impl& impl, const LoadOptions& options, bool has_flow, co
   impl.nets.prepare_inference(true, bf16);
   impl.spec = public_spec(impl.nets.spec, has_flow, source);
   impl.spec.precision = bf16 ? "bf16" : "fp32";
-  if (options.precision == "int8" && options.calibration.empty())
-    throw Error("precision 'int8' needs calibration frames (LoadOptions::calibration): a few frames like those "
-                "the model will see");
+}
+
+Error needs_calibration() {
+  return Error("precision 'int8' needs calibration frames (LoadOptions::calibration): a few frames like those the "
+               "model will see (or a model file written in int8: geo_export --int8)");
 }
 
 }  // namespace
@@ -178,7 +180,10 @@ Model Model::create(const std::string& config_yaml, const LoadOptions& options) 
     impl->nets = Networks::create(NetworkSpec::parse(config_yaml, "the config given"), true);  // the caller seeds
     make_ready(*impl, options, true, "untrained");
     Model model(impl);
-    if (options.precision == "int8") model.quantize_int8(options.calibration);
+    if (options.precision == "int8") {
+      if (options.calibration.empty()) throw needs_calibration();
+      model.quantize_int8(options.calibration);
+    }
     return model;
   });
 }
@@ -195,20 +200,37 @@ Model Model::load(const std::string& path, const LoadOptions& options) {
     make_ready(*impl, options, checkpoint.has_flow(), file);
     if (checkpoint.config()) impl->training_configs = checkpoint.lineage();
     Model model(impl);
-    if (options.precision == "int8") model.quantize_int8(options.calibration);
+    if (options.precision != "int8") return model;
+    const auto depth_ranges = checkpoint.int8_ranges("depth");
+    if (!options.calibration.empty() || !depth_ranges) {  // frames given: a calibration of their own
+      if (options.calibration.empty()) throw needs_calibration();
+      model.quantize_int8(options.calibration);
+      return model;
+    }
+    model.check_int8_possible();
+    const auto flow_ranges = checkpoint.int8_ranges("flow");
+    if (impl->nets.flow && !flow_ranges) throw Error(file + " keeps int8 ranges of its DepthNet but not of its FlowNet");
+    const int64_t H = impl->spec.height, W = impl->spec.width;
+    geo::quantize_int8(*impl->nets.depth->net, *depth_ranges, H, W);
+    if (impl->nets.flow) geo::quantize_int8(*impl->nets.flow->net, *flow_ranges, H, W);
+    impl->spec.precision = "int8";
     return model;
   });
 }
 
 const ModelSpec& Model::spec() const { return impl_->spec; }
 
+void Model::check_int8_possible() const {
+  if (impl_->spec.precision == "int8") throw Error("the model is int8 already");
+  if (impl_->spec.precision != "fp32") throw Error("int8 starts from an fp32 model, this one is " + impl_->spec.precision);
+  if (!impl_->device.is_cpu()) throw Error("int8 runs on the CPU, this model is on " + impl_->device.str());
+  if (select_int8_engine().empty()) throw Error("this LibTorch has no quantized engine (onednn, x86, fbgemm, qnnpack)");
+}
+
 void Model::quantize_int8(const std::vector<torch::Tensor>& frames) {
   guarded("geo::Model::quantize_int8", [&] {
     auto& nets = impl_->nets;
-    if (impl_->spec.precision == "int8") throw Error("the model is int8 already");
-    if (impl_->spec.precision != "fp32") throw Error("int8 starts from an fp32 model, this one is " + impl_->spec.precision);
-    if (!impl_->device.is_cpu()) throw Error("int8 runs on the CPU, this model is on " + impl_->device.str());
-    if (select_int8_engine().empty()) throw Error("this LibTorch has no quantized engine (onednn, x86, fbgemm, qnnpack)");
+    check_int8_possible();
     const size_t needed = nets.flow ? 2 : 1;
     if (frames.size() < needed)
       throw Error(std::to_string(frames.size()) + " calibration frame(s): a model with a FlowNet needs at least 2 "

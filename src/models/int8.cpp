@@ -156,8 +156,12 @@ struct Int8EncoderDecoder::State {
       hi = std::max(hi, t.max().item<float>());
     }
     void fix() {
-      const double l = std::min(0.0, static_cast<double>(lo)), h = std::max(0.0, static_cast<double>(hi));
-      scale = std::max(h - l, 1e-6) / 255.0;
+      const double l = std::min(0.0, static_cast<double>(lo));
+      double h = std::max(0.0, static_cast<double>(hi));
+      // A point that stayed (nearly) constant at 0 during calibration (a dead ReLU): any scale
+      // represents it, but a tiny one makes oneDNN's requantization factors overflow.
+      if (h - l < 1e-4) h = l + 1e-4 * 255;
+      scale = (h - l) / 255.0;
       zero_point = std::clamp<int64_t>(std::llround(-l / scale), 0, 255);
     }
   };
@@ -338,7 +342,10 @@ std::vector<torch::Tensor> Int8EncoderDecoder::forward(const torch::Tensor& x) {
   if (state_->quantized) {
     TORCH_CHECK(x.device().is_cpu(), "int8 inference runs on the CPU, got an input on ", x.device());
     Quantized ops{*state_};
-    return run_graph(state_->net, ops, input);
+    auto out = run_graph(state_->net, ops, input);
+    TORCH_CHECK(ops.i == state_->points.size(), "int8: ", state_->points.size(), " quantized points for a network of ",
+                ops.i);
+    return out;
   }
   Observe ops{state_->points};
   auto out = run_graph(state_->net, ops, input);
@@ -370,7 +377,46 @@ void Int8EncoderDecoder::quantize() {
   st.quantized = true;
 }
 
+torch::Tensor Int8EncoderDecoder::ranges() const {
+  auto r = torch::empty({points(), 2}, torch::kFloat32);
+  auto a = r.accessor<float, 2>();
+  for (int64_t i = 0; i < points(); ++i) a[i][0] = state_->points[i].lo, a[i][1] = state_->points[i].hi;
+  return r;
+}
+
+void Int8EncoderDecoder::set_ranges(const torch::Tensor& ranges) {
+  TORCH_CHECK(!state_->quantized && state_->points.empty(), "int8: ranges are set on a network not yet calibrated");
+  TORCH_CHECK(ranges.dim() == 2 && ranges.size(1) == 2 && ranges.size(0) > 0, "int8: ranges must be [points,2], got ",
+              ranges.sizes());
+  const auto r = ranges.to(torch::kFloat32).contiguous();
+  TORCH_CHECK(torch::isfinite(r).all().item<bool>(), "int8: the ranges hold a non-finite value");
+  auto a = r.accessor<float, 2>();
+  for (int64_t i = 0; i < r.size(0); ++i) {
+    TORCH_CHECK(a[i][0] <= a[i][1], "int8: range ", i, " has its low end above its high end");
+    state_->points.emplace_back();
+    state_->points.back().lo = a[i][0];
+    state_->points.back().hi = a[i][1];
+  }
+}
+
 void observe_int8(EncoderDecoderImpl& net) { net.int8 = std::make_shared<Int8EncoderDecoder>(net); }
+
+void quantize_int8(EncoderDecoderImpl& net, const torch::Tensor& ranges, int64_t height, int64_t width) {
+  auto int8 = std::make_shared<Int8EncoderDecoder>(net);
+  int8->set_ranges(ranges);
+  int8->quantize();
+  // One call checks that the ranges are this network's (one per point). At the network's own input
+  // size: LibTorch 1.13's oneDNN int8 convolutions, on 2 threads, failed ("could not create a
+  // primitive descriptor for a reorder primitive") on a 2x7 input after a first call on 2x2.
+  net.int8 = int8;
+  try {
+    torch::NoGradGuard no_grad;
+    int8->forward(torch::zeros({1, net.encoder->options.in_channels, height, width}));
+  } catch (...) {
+    net.int8.reset();
+    throw;
+  }
+}
 
 void quantize_int8(EncoderDecoderImpl& net) {
   TORCH_CHECK(net.int8, "int8: the network was not observed (observe_int8) before quantize_int8");

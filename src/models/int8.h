@@ -44,6 +44,10 @@ class Int8EncoderDecoder {
   void quantize();
   bool quantized() const;
   int64_t points() const;  // quantized points (activations) of the network
+  // The calibrated range (low, high) of each point [points,2]: what a model file keeps of the
+  // calibration; set_ranges (before quantize, instead of observing) takes them back.
+  torch::Tensor ranges() const;
+  void set_ranges(const torch::Tensor& ranges);
 
   struct State;  // (models/int8.cpp)
 
@@ -55,5 +59,9 @@ class Int8EncoderDecoder {
 void observe_int8(EncoderDecoderImpl& net);
 // Ends calibrating: net's forward runs in int8 from now on. Throws when net was not observed.
 void quantize_int8(EncoderDecoderImpl& net);
+// net in int8 with calibrated ranges kept from an earlier calibration (Int8EncoderDecoder::ranges);
+// throws when they are not one per point of this network (checked by one call on a height x width input:
+// the size the network will see).
+void quantize_int8(EncoderDecoderImpl& net, const torch::Tensor& ranges, int64_t height, int64_t width);
 
 }  // namespace geo

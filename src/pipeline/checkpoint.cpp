@@ -2,6 +2,7 @@
 
 #include "core/files.h"
 #include "core/state_io.h"
+#include "models/int8.h"
 
 #include <algorithm>
 #include <cmath>
@@ -62,6 +63,10 @@ void write_model_file(const std::string& path, const Networks& nets, bool half) 
   a.write("geo_model_format", c10::IValue(std::string(kModelFormat)));
   a.write("spec", c10::IValue(nets.spec.to_yaml()));
   write_networks(a, nets, half ? std::optional<torch::ScalarType>(torch::kHalf) : std::nullopt);
+  // An int8 model's calibration: its ranges, so that loading it in int8 needs no frames.
+  if (nets.depth->net->int8 && nets.depth->net->int8->quantized()) a.write("int8_depth", nets.depth->net->int8->ranges());
+  if (nets.flow && nets.flow->net->int8 && nets.flow->net->int8->quantized())
+    a.write("int8_flow", nets.flow->net->int8->ranges());
   save_archive(a, path);
 }
 
@@ -178,6 +183,12 @@ void CheckpointFile::load_networks(Networks& nets, bool allow_missing_flow) {
   if (!get("pose", *nets.pose)) throw std::runtime_error(path_ + ": no PoseNet in this checkpoint");
   if (nets.flow && !get("flow", *nets.flow) && !allow_missing_flow)
     throw std::runtime_error(path_ + ": no FlowNet in this checkpoint");
+}
+
+std::optional<torch::Tensor> CheckpointFile::int8_ranges(const std::string& network) {
+  torch::Tensor ranges;
+  if (!archive_.try_read("int8_" + network, ranges)) return std::nullopt;
+  return ranges;
 }
 
 Networks CheckpointFile::networks() {

@@ -139,6 +139,30 @@ TEST(Api, ExportedFilesGiveTheCheckpointsOutputs) {
             static_cast<double>(std::filesystem::file_size(dir + "/m.pt")) * 1.01);
 }
 
+// An int8 model's file keeps its calibration: loaded in int8 without frames it computes exactly what
+// the calibrated model computed, loaded in fp32 what the fp32 model did; a file without one needs frames.
+TEST(Api, Int8FilesKeepTheirCalibration) {
+  const auto a = image(64, 208), b = image(64, 208, 0.1), c = image(64, 208, 0.2);
+  const Model fp32 = Model::load(checkpoint());
+  Model int8 = Model::load(checkpoint());
+  int8.quantize_int8({a, b, c});
+  EXPECT_EQ(int8.spec().precision, "int8");
+  EXPECT_FALSE(torch::equal(int8.depth(a), fp32.depth(a)));  // it did compute in int8
+  const auto dir = test::fresh_dir("api_int8");
+  int8.save(dir + "/int8.pt");
+  LoadOptions o;
+  o.precision = "int8";
+  const Model back = Model::load(dir + "/int8.pt", o);
+  EXPECT_EQ(back.spec().precision, "int8");
+  EXPECT_TRUE(torch::equal(back.depth(a), int8.depth(a)));
+  EXPECT_TRUE(torch::equal(back.flow(a, b), int8.flow(a, b)));
+  EXPECT_TRUE(torch::equal(Model::load(dir + "/int8.pt").depth(a), fp32.depth(a)));
+  GEO_EXPECT_THROW_WITH(Model::load(checkpoint(), o), "precision 'int8' needs calibration frames");
+  GEO_EXPECT_THROW_WITH(int8.quantize_int8({a, b}), "int8 already");
+  o.calibration = {a};
+  GEO_EXPECT_THROW_WITH(Model::load(checkpoint(), o), "at least 2");
+}
+
 TEST(Api, CreatedModelsAreTheConfigsNetworksAndOnlyCheckpointsCarryTrainingConfigs) {
   const std::string yaml = "model: {encoder_depth: 18}\ndata: {height: 64, width: 208}\n";
   const Model trained = Model::load(checkpoint());  // its networks: created from `yaml` after manual_seed(1)
