@@ -201,12 +201,12 @@ Model Model::load(const std::string& path, const LoadOptions& options) {
     if (checkpoint.config()) impl->training_configs = checkpoint.lineage();
     Model model(impl);
     if (options.precision != "int8") return model;
-    const auto depth_ranges = checkpoint.int8_ranges("depth");
-    if (!options.calibration.empty() || !depth_ranges) {  // frames given: a calibration of their own
-      if (options.calibration.empty()) throw needs_calibration();
+    if (!options.calibration.empty()) {  // frames given: a calibration of their own
       model.quantize_int8(options.calibration);
       return model;
     }
+    const auto depth_ranges = checkpoint.int8_ranges("depth");  // else the file's
+    if (!depth_ranges) throw needs_calibration();
     model.check_int8_possible();
     const auto flow_ranges = checkpoint.int8_ranges("flow");
     if (impl->nets.flow && !flow_ranges) throw Error(file + " keeps int8 ranges of its DepthNet but not of its FlowNet");

@@ -207,9 +207,10 @@ template <class Ops>
 std::vector<torch::Tensor> run_graph(EncoderDecoderImpl& net, Ops& ops, const torch::Tensor& x) {
   auto& enc = *net.encoder;
   std::vector<torch::Tensor> feats;
-  const auto input = ops.input(x);
+  const auto input = ops.quantize(x);
   feats.push_back(ops.conv(*enc.conv1, input));
-  feats.push_back(ops.max_pool(feats.back()));
+  // (Max-pooling keeps a quantized tensor's scale: no point of its own, the same call for both.)
+  feats.push_back(torch::max_pool2d(feats.back(), {3, 3}, {2, 2}, {1, 1}, {1, 1}));
   for (size_t s = 0; s < enc.stages.size(); ++s) {
     auto y = feats.back();
     for (const auto& m : enc.stages[s]->children()) {
@@ -257,14 +258,12 @@ struct Observe {
     points[i++].see(t);
     return t;
   }
-  torch::Tensor input(const torch::Tensor& x) { return seen(x); }
   torch::Tensor quantize(const torch::Tensor& x) { return seen(x); }
   torch::Tensor conv(ConvBnImpl& m, const torch::Tensor& x) { return seen(m.forward(x)); }
   torch::Tensor upconv(ConvBnImpl& m, const torch::Tensor& x, UpsampleMode mode) {
     return seen(mode == UpsampleMode::kNearest ? m.forward_upsampled(x) : m.forward(upsample2(x, mode)));
   }
   torch::Tensor add_relu(const torch::Tensor& a, const torch::Tensor& b) { return seen(torch::relu(a + b)); }
-  torch::Tensor max_pool(const torch::Tensor& x) { return torch::max_pool2d(x, {3, 3}, {2, 2}, {1, 1}, {1, 1}); }
   torch::Tensor fr(FeatureRefinementImpl& m, const torch::Tensor& x) { return seen(m.forward(x)); }
   torch::Tensor cat(const std::vector<torch::Tensor>& parts) { return seen(torch::cat(parts, 1)); }
   torch::Tensor pred(Conv2dImpl& m, const torch::Tensor& y) { return seen(m.forward(y)); }
@@ -279,7 +278,6 @@ struct Quantized {
     return at::quantize_per_tensor(x.to(torch::kFloat32).contiguous(at::MemoryFormat::ChannelsLast), p.scale,
                                    p.zero_point, torch::kQUInt8);
   }
-  torch::Tensor input(const torch::Tensor& x) { return quantize(x); }
   torch::Tensor conv_with(const c10::IValue& packed, const torch::Tensor& x, bool relu) {
     const auto& p = next();
     return call(relu ? *st.conv_relu : *st.conv, {x, packed, p.scale, p.zero_point});
@@ -298,7 +296,6 @@ struct Quantized {
     const auto& p = next();
     return call(*st.add_relu, {a, b, p.scale, p.zero_point});
   }
-  torch::Tensor max_pool(const torch::Tensor& x) { return torch::max_pool2d(x, {3, 3}, {2, 2}, {1, 1}, {1, 1}); }
   torch::Tensor fr(FeatureRefinementImpl& m, const torch::Tensor& x) {
     const auto& p = next();
     return int8_feature_refinement(m, x, p.scale, p.zero_point);
