@@ -172,7 +172,7 @@ struct Options {
     app.add_flag("--no-train", no_train, "skip the training-step timings");
     app.add_flag("--no-comm", no_comm, "skip the gradient all-reduce timings (data-parallel training's cost per step)");
     app.add_flag("--int8", int8,
-                 "also time int8 inference (DepthNet, FlowNet, pipeline; calibrated on random frames; CPU)");
+                 "also time int8 inference (DepthNet, PoseNet, FlowNet, pipeline; calibrated on random frames; CPU)");
     app.add_flag("--no-fold", no_fold, "inference with BatchNorm as separate layers (default: folded into the convolutions)");
     app.add_flag("--no-ceiling", no_ceiling, "skip the matrix-product ceiling (and the rows' share of it)");
     app.add_option("--ceiling-size", ceiling_size,
@@ -228,8 +228,8 @@ double gflops_at(const std::vector<Row>& params, const std::string& what, const 
   return -1;
 }
 
-// The DepthNet and FlowNet of `nets` (prepared for inference in float32) calibrated on random
-// inputs of `batch` frames and quantized to int8: for timing (the values of random frames are not
+// The networks of `nets` (prepared for inference in float32) calibrated on random inputs of
+// `batch` frames and quantized to int8: for timing (the values of random frames are not
 // what a model sees; geo::Model calibrates on real frames).
 void calibrate_int8(geo::Networks& nets, const geo::Config& config, int64_t batch) {
   torch::InferenceMode guard;
@@ -237,6 +237,10 @@ void calibrate_int8(geo::Networks& nets, const geo::Config& config, int64_t batc
   geo::observe_int8(*nets.depth->net);
   nets.depth(torch::rand({batch, 3, H, W}));
   geo::quantize_int8(*nets.depth->net);
+  geo::observe_int8(*nets.pose);
+  nets.pose(torch::rand({batch, 3, H, W}),
+            std::vector<torch::Tensor>(static_cast<size_t>(config.data.seq_length - 1), torch::rand({batch, 3, H, W})));
+  geo::quantize_int8(*nets.pose);
   if (nets.flow) {
     geo::observe_int8(*nets.flow->net);
     nets.flow(torch::rand({batch, 12, H, W}) * 2 - 1);
@@ -284,7 +288,6 @@ std::vector<Row> inference_rows(const geo::Config& config, const std::vector<boo
         const bool pose = what == "PoseNet";
         if (pose && made_fr[k] != made_fr[0]) continue;  // no FR in the PoseNet: once per precision
         const std::string& precision = made_precision[k];
-        if (precision == "int8" && pose) continue;  // int8: the encoder-decoders (the PoseNet stays in float32)
         geo::Networks& nets = made[k].second;
         Row row{"infer", what + (precision == "fp32" ? "" : " " + precision), pose ? "-" : (made_fr[k] ? "on" : "off"), b};
         row.bf16 = precision == "bf16";

@@ -3,6 +3,7 @@
 //   geo_eval --split kitti2015 --data-root <kitti2015>  --checkpoint <ckpt>
 //   geo_eval --split odometry  --data-root <odometry>   --sequence 09 --checkpoint <ckpt>
 //   geo_eval --split eigen --predictions depths.npy|folder     (precomputed predictions)
+//   geo_eval ... --precision int8 --calibration FRAMES         (the model in int8, calibrated on FRAMES)
 //   geo_eval --compare a.json b.json                           (side-by-side table)
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
@@ -20,7 +21,8 @@ namespace {
 struct EvalCommand {
   geo::EvalOptions eval;
   std::string checkpoint, output, device = "auto", runs = "runs", predictions, untrained, export_gt;
-  std::string scaling = "median", flow_resize = "nearest";
+  std::string scaling = "median", flow_resize = "nearest", precision = "fp32", calibration;
+  int64_t calibration_frames = 8;
   bool trivial = false, exact_pixels = false;
   std::vector<std::string> compare;
 };
@@ -67,6 +69,13 @@ void add_options(CLI::App& app, EvalCommand& c) {
       ->check(geo::app::above_zero());
   app.add_option("--export-gt", c.export_gt, "eigen: write the ground-truth depth maps (uint16 PNG, depth x 256)");
   geo::app::add_device_option(app, c.device, "default: auto");
+  geo::app::add_precision_option(app, c.precision, {"fp32", "bf16", "auto", "int8"},
+                                 "what the model computes in: fp32 (default), bf16, auto (bf16 on CPUs with AVX512-BF16/AMX) "
+                                 "or int8 (CPU; calibrated on --calibration): its accuracy against fp32's");
+  app.add_option("--calibration", c.calibration,
+                 "with --precision int8: a folder of frames or a video like those evaluated (its first frames calibrate it)");
+  app.add_option("--calibration-frames", c.calibration_frames, "with --precision int8: how many frames calibrate it, 1..1000")
+      ->check(CLI::Range(1, 1000));
   app.add_option("--flow-resize", c.flow_resize, "kitti2015: resize predicted flow to the ground truth by nearest (GeoNet) or bilinear")
       ->check(CLI::IsMember({"nearest", "bilinear"}));
   app.add_flag("--exact-pixels", c.exact_pixels, "eigen: project Velodyne points without the reference code's -1 pixel shift");
@@ -99,6 +108,7 @@ int evaluate(EvalCommand& c) {
   geo::SourceChoice choice;
   choice.checkpoint = c.checkpoint, choice.runs = c.runs, choice.predictions = c.predictions;
   choice.untrained_config = c.untrained, choice.device = c.device, choice.trivial = c.trivial;
+  choice.precision = c.precision, choice.calibration = c.calibration, choice.calibration_frames = c.calibration_frames;
   choice.need_model = c.export_gt.empty();
   const auto chosen = geo::choose_source(choice);
   // Before minutes of evaluation: the outputs replace nothing this command reads (the model, the

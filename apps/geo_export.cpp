@@ -11,7 +11,6 @@
 #include "geo/geo.h"
 #include "pipeline/checkpoint.h"
 #ifdef GEO_EXPORT_FRAMES
-#include "data/cv_tensor.h"
 #include "data/video/frame_stream.h"
 #endif
 
@@ -32,7 +31,7 @@ void add_options(CLI::App& app, ExportCommand& c) {
   app.add_flag("--half", c.half, "store the weights as float16 (half the size; computed in float32 when loaded)");
   app.add_flag("--int8", c.int8,
                "calibrate int8 inference on --calibration and keep it in the file (loaded with precision int8, the "
-               "DepthNet and FlowNet run in int8 without calibrating again)");
+               "networks run in int8 without calibrating again)");
   app.add_option("--calibration", c.calibration,
                  "with --int8: a folder of frames or a video like those the model will see (its first frames are used)");
   app.add_option("--calibration-frames", c.calibration_frames, "with --int8: how many frames calibrate it, 1..1000")
@@ -42,13 +41,7 @@ void add_options(CLI::App& app, ExportCommand& c) {
 // The first `count` frames of a folder or video, at the model's size.
 std::vector<torch::Tensor> calibration_frames(const ExportCommand& c, const geo::ModelSpec& s) {
 #ifdef GEO_EXPORT_FRAMES
-  geo::FrameStream stream(c.calibration, "--calibration");
-  std::vector<torch::Tensor> frames;
-  std::string name;
-  cv::Mat m;
-  while (static_cast<int>(frames.size()) < c.calibration_frames && stream.next(name, &m))
-    frames.push_back(geo::resized_mat_to_frame(m, s.height, s.width, c.calibration + " [" + name + "]"));
-  return frames;
+  return geo::first_frames(c.calibration, c.calibration_frames, s.height, s.width, "--calibration");
 #else
   (void)s;
   throw std::runtime_error("--calibration '" + c.calibration + "': this geo_export was built without OpenCV and reads "

@@ -53,7 +53,7 @@ struct InferOptions {
     geo::app::add_device_option(app, device, "default: auto");
     geo::app::add_precision_option(app, precision, {"fp32", "bf16", "auto", "int8"},
                                    "fp32, bf16 (faster on CPUs with AVX512-BF16/AMX, depth within ~1%), auto (bf16 on such a "
-                                   "CPU) or int8 (CPU: DepthNet and FlowNet in int8 calibrated on the input's first frames)");
+                                   "CPU) or int8 (CPU: the networks in int8 calibrated on the input's first frames)");
     app.add_option("--calibration-frames", calibration_frames,
                    "with --precision int8: how many of the input's first frames calibrate it, 1..1000 (default: 8)")
         ->check(CLI::Range(1, 1000));

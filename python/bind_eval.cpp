@@ -20,6 +20,7 @@ py::object evaluate_split(const std::string& split, const std::string& data_root
                           const std::string& predictions, bool trivial, const std::string& split_file,
                           const std::string& sequence, const std::string& scaling, double camera_height,
                           const std::string& flow_resize, bool exact_pixels, const std::string& device,
+                          const std::string& precision, const std::string& calibration, int64_t calibration_frames,
                           const std::string& output) {
   EvalOptions o;
   o.split = split, o.split_file = split_file, o.sequence = sequence, o.camera_height = camera_height;
@@ -35,6 +36,7 @@ py::object evaluate_split(const std::string& split, const std::string& data_root
     o.data_root = eval_data_root(data_root);
     SourceChoice choice;
     choice.checkpoint = checkpoint, choice.predictions = predictions, choice.trivial = trivial, choice.device = device;
+    choice.precision = precision, choice.calibration = calibration, choice.calibration_frames = calibration_frames;
     const auto chosen = choose_source(choice);
     check_outputs({{"output", output}}, {chosen.reads, checkpoint, o.data_root});
     const EvalResult r = evaluate(o, *chosen.source);
@@ -51,11 +53,13 @@ void bind_eval(py::module_& m) {
   eval.def("evaluate", &evaluate_split, "split"_a, py::kw_only(), "data_root"_a = "", "checkpoint"_a = "",
            "predictions"_a = "", "trivial"_a = false, "split_file"_a = "", "sequence"_a = "09", "scaling"_a = "median",
            "camera_height"_a = 0.0, "flow_resize"_a = "nearest", "exact_pixels"_a = false, "device"_a = "auto",
-           "output"_a = "",
+           "precision"_a = "fp32", "calibration"_a = "", "calibration_frames"_a = 8, "output"_a = "",
            "geo_eval's protocols: split eigen (depth), kitti2015 (flow) or odometry (pose) on data_root (KITTI's\n"
            "folders or a geo_synth world; default $GEO_KITTI_ROOT, else ./data/kitti), of a checkpoint / run folder /\n"
            "model file, of predictions (files as geo_eval --predictions reads them) or of the trivial baseline.\n"
-           "Returns the results as a dict (geo_eval's JSON); output: also write that JSON file.");
+           "precision: fp32, bf16, auto or int8 (calibrated on the first calibration_frames frames of calibration, a\n"
+           "folder of frames or a video), as geo_eval --precision. Returns the results as a dict (geo_eval's JSON);\n"
+           "output: also write that JSON file.");
   eval.def(
       "compare",
       [](const std::vector<std::string>& files) {

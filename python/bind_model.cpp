@@ -125,8 +125,8 @@ void bind_model(py::module_& m) {
             model.quantize_int8(xs);
           },
           "frames"_a,
-          "Switches this fp32 CPU model to int8: the DepthNet and FlowNet calibrated on frames (like those the\n"
-          "model will see, in order; consecutive pairs calibrate the FlowNet), the PoseNet stays fp32. Not while\n"
+          "Switches this fp32 CPU model to int8: the DepthNet, PoseNet and FlowNet calibrated on frames (like\n"
+          "those the model will see, in order; consecutive pairs calibrate the FlowNet and PoseNet). Not while\n"
           "another thread uses the model.")
       .def_property_readonly("spec", &Model::spec)
       .def_property_readonly("device", &Model::device)

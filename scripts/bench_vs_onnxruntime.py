@@ -2,9 +2,14 @@
 """geo against ONNX Runtime's CPU engine, side by side in one run (scripts/bench_vs_onnxruntime.sh
 sets it up). DepthNet inference at batch 1 and --height x --width on --threads threads:
 
-  geo fp32 / bf16        geo_bench's "infer DepthNet" row (BatchNorm folded), FR off and on
+  geo fp32 / bf16 / int8 geo_bench's "infer DepthNet" rows (BatchNorm folded; int8 calibrated on
+                         random frames), FR off and on
   ORT geo's DepthNet     geo.nn.DepthNet (the same network in torch.nn) exported with torch.onnx.export
-  ORT GeoNet's DepthNet  scripts/pytorch_reference.py's, exported the same way (the issue's anchor)
+  ORT GeoNet's DepthNet  scripts/pytorch_reference.py's, exported the same way (the reference a
+                         deployment user would start from)
+  ORT int8               each of those quantized statically to ONNX's QDQ form (scripts/ort_qdq.py:
+                         MinMax calibration on 8 inputs through ONNX Runtime, uint8 activations, int8
+                         weights per channel), which ONNX Runtime runs with its int8 kernels
 
 Variants are interleaved within each round (a slow spell hits all alike); the table gives each
 one's median over rounds of its per-run medians, and geo / ORT at equal precision and FR.
@@ -34,23 +39,47 @@ def cpu():
 
 
 def geo_ms(a, fr):
-    """geo_bench's DepthNet rows, fp32 and bf16 from one process: {"geo fp32": ms, "geo bf16": ms}."""
+    """geo_bench's DepthNet rows, fp32, bf16 and int8 from one process: {"geo fp32": ms, ...}."""
     out = a.out / f"geo-{fr}.json"
     cmd = [str(a.build / "apps" / "geo_bench"), "--set", f"data.height={a.height}", f"data.width={a.width}", "--batch", "1",
            "--fr", fr, "--no-train", "--no-comm", "--no-ceiling", "--threads", str(a.threads), "--iters", str(a.iters),
-           "--warmup", "3", "--precision", "bf16", "--json", str(out)]
+           "--warmup", "3", "--precision", "bf16", "--int8", "--json", str(out)]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     rows = {r["what"]: r["ms"] for r in json.load(open(out))["rows"] if r["section"] == "infer"}
-    return {"geo fp32": rows["DepthNet"], "geo bf16": rows["DepthNet bf16"]}
+    return {"geo fp32": rows["DepthNet"], "geo bf16": rows["DepthNet bf16"], "geo int8": rows["DepthNet int8"]}
 
 
-def ort_ms(a, model):
-    cmd = ["node", str(a.repo / "scripts" / "ort_bench.mjs"), str(model), "--threads", str(a.threads),
-           "--iters", str(a.iters), "--warmup", "3"]
+def ort(a, *args):
+    """scripts/ort_bench.mjs with args; its JSON line, if it printed one."""
+    cmd = ["node", str(a.repo / "scripts" / "ort_bench.mjs"), *map(str, args)]
     r = subprocess.run(cmd, check=True, capture_output=True, text=True, env={**os.environ, "GEO_ORT_DIR": str(a.ort)})
-    line = json.loads(r.stdout.strip().splitlines()[-1])
+    lines = r.stdout.strip().splitlines()
+    return json.loads(lines[-1]) if lines else None
+
+
+def ort_ms(a, model, reference=None):
+    line = ort(a, model, "--threads", a.threads, "--iters", a.iters, "--warmup", 3,
+               *(["--reference", reference] if reference else []))
     a.ort_version = line["onnxruntime"]
+    if reference:
+        a.int8_error[pathlib.Path(model).name] = line["relative_error"]
     return line["median_ms"]
+
+
+def ort_int8(a, model):
+    """model quantized for ONNX Runtime (scripts/ort_qdq.py): optimised by ONNX Runtime (basic), every
+    activation's range over 8 calibration inputs, then the QDQ model."""
+    stem = model.with_suffix("")
+    optimized, augmented = f"{stem}-opt.onnx", f"{stem}-augmented.onnx"
+    ranges, out = f"{stem}-ranges.json", a.out / f"{stem.name}-int8.onnx"
+    qdq = [sys.executable, str(a.repo / "scripts" / "ort_qdq.py")]
+    ort(a, model, "--optimized", optimized)
+    subprocess.run(qdq + ["augment", optimized, augmented], check=True)
+    ort(a, augmented, "--ranges", ranges, "--calibration", 8)
+    subprocess.run(qdq + ["quantize", optimized, ranges, str(out)], check=True, stdout=subprocess.DEVNULL)
+    for f in (optimized, augmented):
+        os.remove(f)
+    return out
 
 
 def main():
@@ -83,11 +112,16 @@ def main():
                     str(a.width), "--export-onnx", str(models[("geonet", "off")])], check=True,
                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     # Each entry: FR, what it runs -> {variant name: ms}.
+    int8 = {k: ort_int8(a, m) for k, m in models.items()}
+    a.int8_error = {}
     runs = [("off", lambda: geo_ms(a, "off")),
             ("off", lambda: {"ORT fp32, geo's DepthNet": ort_ms(a, models[("geo", "off")])}),
+            ("off", lambda: {"ORT int8, geo's DepthNet": ort_ms(a, int8[("geo", "off")], models[("geo", "off")])}),
             ("off", lambda: {"ORT fp32, GeoNet's DepthNet": ort_ms(a, models[("geonet", "off")])}),
+            ("off", lambda: {"ORT int8, GeoNet's DepthNet": ort_ms(a, int8[("geonet", "off")], models[("geonet", "off")])}),
             ("on", lambda: geo_ms(a, "on")),
-            ("on", lambda: {"ORT fp32, geo's DepthNet": ort_ms(a, models[("geo", "on")])})]
+            ("on", lambda: {"ORT fp32, geo's DepthNet": ort_ms(a, models[("geo", "on")])}),
+            ("on", lambda: {"ORT int8, geo's DepthNet": ort_ms(a, int8[("geo", "on")], models[("geo", "on")])})]
     times = {}
     for r in range(a.rounds):
         for fr, run in runs:
@@ -100,10 +134,16 @@ def main():
     lines = [f"DepthNet inference, batch 1, {a.height}x{a.width}, {a.threads} threads, median of {a.rounds} rounds "
              f"(each the median of {a.iters} runs); CPU {model} ({flags}); ONNX Runtime {a.ort_version} (onnxruntime-node); "
              f"command: scripts/bench_vs_onnxruntime.sh --rounds {a.rounds} --iters {a.iters}", "",
-             "| variant | FR | ms | per round | geo fp32 / this |", "|---|---|---|---|---|"]
+             "| variant | FR | ms | per round | geo fp32 / this | geo / this at equal precision |", "|---|---|---|---|---|---|"]
     for name, fr in variants:
         ratio = med[("geo fp32", fr)] / med[(name, fr)]
-        lines.append(f"| {name} | {fr} | {med[(name, fr)]:.1f} | {' '.join(f'{t:.0f}' for t in times[(name, fr)])} | {ratio:.2f} |")
+        precision = "int8" if "int8" in name else "fp32"
+        equal = f"{med[(f'geo {precision}', fr)] / med[(name, fr)]:.2f}" if name.startswith("ORT") else "-"
+        lines.append(f"| {name} | {fr} | {med[(name, fr)]:.1f} | {' '.join(f'{t:.0f}' for t in times[(name, fr)])} "
+                     f"| {ratio:.2f} | {equal} |")
+    lines += ["", "ONNX Runtime's int8 models against their float selves (mean |difference| / mean |float| of the "
+              "full-resolution disparity, one input): " +
+              ", ".join(f"{k} {v * 100:.2f}%" for k, v in sorted(a.int8_error.items()))]
     table = "\n".join(lines) + "\n"
     (a.out / "onnxruntime.md").write_text(table)
     print(table)

@@ -41,8 +41,8 @@ struct LoadOptions {
   int threads = 0;             // > 0: set LibTorch's intra-op threads (process-wide); 0: leave them
   // What the networks compute in: "fp32"; "bf16" (weights and arithmetic in bfloat16, outputs
   // float32: ~1.6x faster on CPUs with AVX512-BF16 or AMX, depth within ~1% of fp32); "auto"
-  // (bf16 on such a CPU, else fp32); "int8" (CPU: the DepthNet and FlowNet in int8, calibrated on
-  // `calibration`, the PoseNet in fp32; ~3x faster than fp32: see Model::quantize_int8).
+  // (bf16 on such a CPU, else fp32); "int8" (CPU: the DepthNet, PoseNet and FlowNet in int8,
+  // calibrated on `calibration`; ~3x faster than fp32: see Model::quantize_int8).
   std::string precision = "fp32";
   // int8's calibration frames: see Model::quantize_int8. Not needed for a model file written in
   // int8 (geo_export --int8), which keeps its calibration (frames given here replace it).
@@ -88,11 +88,12 @@ class Model {
 
   const ModelSpec& spec() const;
   torch::Device device() const;
-  // Switches an fp32 model on the CPU to int8 (post-training quantization): the DepthNet and FlowNet
-  // run on `frames` in fp32 while the range of every activation is recorded, then their weights are
-  // quantized per channel and their activations to 8 bits with those ranges; the PoseNet stays fp32.
-  // Give frames like those the model will see, in order (consecutive pairs calibrate the FlowNet:
-  // at least 2 frames for a model with one); a few frames suffice (8 is plenty). [3,H,W] uint8 or
+  // Switches an fp32 model on the CPU to int8 (post-training quantization): the DepthNet, PoseNet
+  // and FlowNet run on `frames` in fp32 while the range of every activation is recorded, then their
+  // weights are quantized per channel and their activations to 8 bits with those ranges (the
+  // PoseNet's last convolution and its pose and camera heads stay in float). Give frames like those the model will see,
+  // in order (consecutive pairs calibrate the FlowNet and PoseNet: at least 2 frames for a model
+  // with a FlowNet); a few frames suffice (8 is plenty). [3,H,W] uint8 or
   // float images, any size. Copies of this Model share the switch; not to be called while another
   // thread uses the model. Throws geo::Error on a bf16 or CUDA model, or too few frames. save()
   // then writes the calibration with the weights.

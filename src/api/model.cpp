@@ -208,10 +208,14 @@ Model Model::load(const std::string& path, const LoadOptions& options) {
     const auto depth_ranges = checkpoint.int8_ranges("depth");  // else the file's
     if (!depth_ranges) throw needs_calibration();
     model.check_int8_possible();
-    const auto flow_ranges = checkpoint.int8_ranges("flow");
+    const auto flow_ranges = checkpoint.int8_ranges("flow"), pose_ranges = checkpoint.int8_ranges("pose");
     if (impl->nets.flow && !flow_ranges) throw Error(file + " keeps int8 ranges of its DepthNet but not of its FlowNet");
+    if (!pose_ranges)
+      throw Error(file + " keeps int8 ranges of its DepthNet but not of its PoseNet (an int8 file of an earlier geo): "
+                  "calibrate it again (geo_export --int8, or LoadOptions::calibration)");
     const int64_t H = impl->spec.height, W = impl->spec.width;
     geo::quantize_int8(*impl->nets.depth->net, *depth_ranges, H, W);
+    geo::quantize_int8(*impl->nets.pose, *pose_ranges, H, W);
     if (impl->nets.flow) geo::quantize_int8(*impl->nets.flow->net, *flow_ranges, H, W);
     impl->spec.precision = "int8";
     return model;
@@ -237,17 +241,30 @@ void Model::quantize_int8(const std::vector<torch::Tensor>& frames) {
                   "(consecutive), one without at least 1");
     std::vector<EncoderDecoderImpl*> nets_int8{nets.depth->net.get()};
     if (nets.flow) nets_int8.push_back(nets.flow->net.get());
+    auto back_to_fp32 = [&] {
+      for (auto* n : nets_int8) n->int8.reset();
+      nets.pose->int8.reset();
+    };
     try {
       for (auto* n : nets_int8) observe_int8(*n);
+      observe_int8(*nets.pose);
       if (nets.flow) {  // the FlowNet sees what flow() gives it: rigid flow of depth and motion
         for (size_t i = 0; i + 1 < frames.size(); ++i) flow_parts(frames[i], frames[i + 1]);
         depth(frames.back());
       } else {
         for (const auto& f : frames) depth(f);
       }
+      // The PoseNet sees pairs (relative_pose, flow: `from` repeated) and snippets of consecutive frames (pose).
+      const size_t L = static_cast<size_t>(impl_->spec.seq_length);
+      for (size_t i = 0; i + 1 < frames.size(); ++i) relative_pose(frames[i], frames[i + 1]);
+      if (frames.size() == 1) relative_pose(frames[0], frames[0]);
+      for (size_t i = 0; i + L <= frames.size(); ++i)
+        pose(std::vector<torch::Tensor>(frames.begin() + static_cast<std::ptrdiff_t>(i),
+                                        frames.begin() + static_cast<std::ptrdiff_t>(i + L)));
       for (auto* n : nets_int8) geo::quantize_int8(*n);
+      geo::quantize_int8(*nets.pose);
     } catch (...) {
-      for (auto* n : nets_int8) n->int8.reset();  // back to fp32, as it was
+      back_to_fp32();  // as it was
       throw;
     }
     impl_->spec.precision = "int8";

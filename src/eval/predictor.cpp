@@ -8,21 +8,30 @@ namespace fs = std::filesystem;
 
 namespace geo {
 
-Predictor::Predictor(const std::string& checkpoint, const std::string& device)
-    : path_(fs::is_directory(checkpoint) ? resolve_checkpoint(checkpoint) : checkpoint) {
+namespace {
+LoadOptions on_device(const std::string& device) {
   LoadOptions o;
   o.device = device.empty() ? "auto" : device;
-  model_ = Model::load(path_, o);
+  return o;
+}
+}  // namespace
+
+Predictor::Predictor(const std::string& checkpoint, const std::string& device)
+    : Predictor(checkpoint, on_device(device)) {}
+
+Predictor::Predictor(const std::string& checkpoint, const LoadOptions& options)
+    : path_(fs::is_directory(checkpoint) ? resolve_checkpoint(checkpoint) : checkpoint) {
+  model_ = Model::load(path_, options);
   const auto& configs = model_->training_configs();
   if (!configs.empty()) training_config_ = parse_config(configs.front(), path_ + " [config]");
 }
 
-Predictor::Predictor(const Config& config, const std::string& device)
+Predictor::Predictor(const Config& config, const std::string& device) : Predictor(config, on_device(device)) {}
+
+Predictor::Predictor(const Config& config, const LoadOptions& options)
     : path_("untrained (" + config.run.name + ", seed " + std::to_string(config.run.seed) + ")") {
   torch::manual_seed(static_cast<uint64_t>(config.run.seed));
-  LoadOptions o;
-  o.device = device.empty() ? "auto" : device;
-  model_ = Model::create(to_yaml(config), o);
+  model_ = Model::create(to_yaml(config), options);
 }
 
 std::vector<std::string> Predictor::init_configs() const {

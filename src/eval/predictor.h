@@ -16,8 +16,10 @@ class Predictor {
  public:
   // `checkpoint`: a .pt file or a run folder (its best, else latest checkpoint).
   explicit Predictor(const std::string& checkpoint, const std::string& device = "auto");
+  Predictor(const std::string& checkpoint, const LoadOptions& options);  // device, precision, ...
   // An untrained model of this config (seeded with run.seed): the "before training" baseline.
   Predictor(const Config& config, const std::string& device);
+  Predictor(const Config& config, const LoadOptions& options);
   int64_t seq_length() const { return model_->spec().seq_length; }
   const std::string& path() const { return path_; }
   int64_t height() const { return model_->spec().height; }

@@ -8,6 +8,7 @@
 #include "data/kitti/calib.h"
 #include "data/image_io.h"
 #include "data/text_io.h"
+#include "data/video/frame_stream.h"
 #include "geometry/camera.h"
 #include "geometry/road_plane.h"
 #include "geometry/trajectory.h"
@@ -240,8 +241,19 @@ std::unique_ptr<PredictionSource> trivial_source() { return std::make_unique<Tri
 
 ChosenSource choose_source(const SourceChoice& c) {
   ChosenSource out;
+  const bool int8 = c.precision == "int8";
+  if (int8 && c.calibration.empty())
+    throw std::runtime_error("--precision int8 needs --calibration FRAMES: a folder of frames or a video like those "
+                             "evaluated (its first --calibration-frames frames)");
+  if (c.calibration_frames < 1 || c.calibration_frames > 1000)
+    throw std::runtime_error("--calibration-frames must be in 1..1000 (got " + std::to_string(c.calibration_frames) + ")");
+  if (!int8 && !c.calibration.empty())
+    throw std::runtime_error("--calibration calibrates int8: it needs --precision int8 (or it would be ignored)");
+  LoadOptions load;
+  load.device = c.device;
+  load.precision = int8 ? "fp32" : c.precision;  // int8: calibrated once the model's input size is known
   if (!c.untrained_config.empty()) {
-    out.predictor = std::make_unique<Predictor>(load_config(resolve_config_path(c.untrained_config)), c.device);
+    out.predictor = std::make_unique<Predictor>(load_config(resolve_config_path(c.untrained_config)), load);
   } else if (c.trivial) {
     out.source = trivial_source();
   } else if (!c.predictions.empty()) {
@@ -255,8 +267,16 @@ ChosenSource choose_source(const SourceChoice& c) {
         throw std::runtime_error("no model: give --checkpoint FILE|RUN_DIR (no training run found under '" + c.runs +
                                  "'), or --predictions PATH");
     }
-    out.predictor = std::make_unique<Predictor>(checkpoint, c.device);
+    out.predictor = std::make_unique<Predictor>(checkpoint, load);
     out.reads = out.predictor->path();
+  }
+  if (!out.predictor && c.precision != "fp32")
+    throw std::runtime_error("--precision " + c.precision + " is a model's (--checkpoint, --untrained): there is none to run");
+  if (out.predictor && int8) {
+    const auto frames = first_frames(c.calibration, c.calibration_frames, out.predictor->height(),
+                                     out.predictor->width(), "--calibration");
+    out.predictor->quantize_int8(frames);
+    spdlog::info("int8: calibrated on {} frame(s) of {}", frames.size(), c.calibration);
   }
   if (out.predictor) {
     spdlog::info("model {} ({}x{}, FlowNet {})", out.predictor->path(), out.predictor->width(), out.predictor->height(),

@@ -77,8 +77,12 @@ std::unique_ptr<PredictionSource> trivial_source();
 // What geo_eval scores, chosen from its options: an untrained network of a config, the trivial
 // baseline, prediction files, or a model (a checkpoint file or run folder; the newest run under
 // `runs` when none is given). `need_model` false (--export-gt alone) and nothing given: no source.
+// A model runs in `precision` (LoadOptions::precision); int8 calibrated on the first
+// `calibration_frames` frames of `calibration` (an image, frame folder or video).
 struct SourceChoice {
   std::string checkpoint, runs = "runs", predictions, untrained_config, device = "auto";
+  std::string precision = "fp32", calibration;
+  int64_t calibration_frames = 8;
   bool trivial = false;
   bool need_model = true;
 };

@@ -1,9 +1,9 @@
-// int8 inference of the encoder-decoders (DepthNet, FlowNet) on the CPU: per-channel int8 weights
+// int8 inference of the networks (DepthNet, FlowNet, PoseNet) on the CPU: per-channel int8 weights
 // (BatchNorm folded), uint8 activations in NHWC flowing from one convolution to the next, with
 // quantized residual additions, pooling, upsampling and concatenations (LibTorch's quantized
 // engine: oneDNN's where LibTorch has it); FR's gates are computed in float from pooled 8-bit
 // features and applied to them in one pass; the predictions leave 8 bits before the head (sigmoid
-// or flow scale), in float.
+// or flow scale), in float; the PoseNet's last convolution and its heads run in float.
 //
 // Post-training calibration: observe(net) makes net's forward record the range of every quantized
 // point while computing in float as before; run it on representative inputs, then quantize(net)
@@ -19,8 +19,11 @@
 
 namespace geo {
 
+struct Conv2dImpl;
+struct ConvBnImpl;
 struct EncoderDecoderImpl;
 struct FeatureRefinementImpl;
+struct PoseNetImpl;
 
 // LibTorch's quantized engine for int8 convolutions and products, selected process-wide: oneDNN's
 // where this LibTorch has it, else x86's, FBGEMM's or QNNPACK's; "" when it has none.
@@ -33,12 +36,11 @@ std::string select_int8_engine();
 torch::Tensor int8_feature_refinement(FeatureRefinementImpl& fr, const torch::Tensor& q, double scale,
                                       int64_t zero_point);
 
-class Int8EncoderDecoder {
+// What every int8 network shares: its quantized points (each calibrated range -> a scale and zero
+// point), its prepacked int8 weights, and the two passes of its graph (models/int8.cpp).
+class Int8Graph {
  public:
-  explicit Int8EncoderDecoder(EncoderDecoderImpl& net);
-  ~Int8EncoderDecoder();
-  // Observing: the float forward, recording ranges; quantized: the int8 forward.
-  std::vector<torch::Tensor> forward(const torch::Tensor& x);
+  virtual ~Int8Graph();
   // Ranges seen -> scales and zero points, weights quantized and prepacked. Throws when nothing was
   // observed or the engine cannot run a convolution.
   void quantize();
@@ -51,17 +53,51 @@ class Int8EncoderDecoder {
 
   struct State;  // (models/int8.cpp)
 
- private:
+ protected:
+  // net: the network whose BatchNorm-folded ConvBn layers run in int8; heads: its convolutions
+  // without BatchNorm that run in int8 too; upconvs: its ConvBn layers after a nearest x2 upsampling
+  // (their 2x2 phase kernels are packed as well).
+  Int8Graph(torch::nn::Module& net, std::vector<Conv2dImpl*> heads, std::vector<ConvBnImpl*> upconvs);
+  // Observing: the float graph, recording ranges; quantized: the int8 graph. graph(ops, x) is the
+  // network written once against either pass (models/int8.cpp).
+  template <class Graph>
+  std::vector<torch::Tensor> run(const torch::Tensor& x, Graph&& graph);
+
   std::unique_ptr<State> state_;
+};
+
+// The DepthNet's and FlowNet's encoder-decoder: its four predictions, as EncoderDecoderImpl::forward.
+class Int8EncoderDecoder : public Int8Graph {
+ public:
+  explicit Int8EncoderDecoder(EncoderDecoderImpl& net);
+  std::vector<torch::Tensor> forward(const torch::Tensor& x);
+
+ private:
+  EncoderDecoderImpl& net_;
+};
+
+// The PoseNet's convolutions: the normalised snippet [B,3L,H,W] -> conv7's features [B,256,h,w] in
+// float; conv1..conv6 in int8, conv7 and the pose and camera heads (1x1) in float (1% of the
+// multiply-adds, on a few pixels: what keeps the pose's accuracy).
+class Int8PoseNet : public Int8Graph {
+ public:
+  explicit Int8PoseNet(PoseNetImpl& net);
+  torch::Tensor forward(const torch::Tensor& x);
+
+ private:
+  PoseNetImpl& net_;
 };
 
 // Starts calibrating `net` (in eval mode, BatchNorm folded): its forward records ranges from now on.
 void observe_int8(EncoderDecoderImpl& net);
+void observe_int8(PoseNetImpl& net);
 // Ends calibrating: net's forward runs in int8 from now on. Throws when net was not observed.
 void quantize_int8(EncoderDecoderImpl& net);
-// net in int8 with calibrated ranges kept from an earlier calibration (Int8EncoderDecoder::ranges);
-// throws when they are not one per point of this network (checked by one call on a height x width input:
+void quantize_int8(PoseNetImpl& net);
+// net in int8 with calibrated ranges kept from an earlier calibration (Int8Graph::ranges); throws
+// when they are not one per point of this network (checked by one call on a height x width input:
 // the size the network will see).
 void quantize_int8(EncoderDecoderImpl& net, const torch::Tensor& ranges, int64_t height, int64_t width);
+void quantize_int8(PoseNetImpl& net, const torch::Tensor& ranges, int64_t height, int64_t width);
 
 }  // namespace geo

@@ -36,7 +36,11 @@ PoseOutput PoseNetImpl::predict(const torch::Tensor& tgt, const std::vector<torc
   }
   TORCH_CHECK(tgt.dim() == 4 && tgt.size(1) == 3, "PoseNet target must be [B,3,H,W], got ", tgt.sizes());
   auto x = normalize_image(torch::cat(frames, 1).to(compute_dtype));
-  for (auto& c : convs) x = c(x);
+  if (int8) {
+    x = int8->forward(x);
+  } else {
+    for (auto& c : convs) x = c(x);
+  }
   PoseOutput out;
   if (intrinsics) {
     // Scaled as the poses are (intrinsics_output_scale: why, in pose_net.h).

@@ -3,9 +3,11 @@
 
 #include <torch/torch.h>
 
+#include <memory>
 #include <vector>
 
 #include "models/conv_bn.h"
+#include "models/int8.h"
 
 namespace geo {
 
@@ -45,6 +47,8 @@ struct PoseNetImpl : torch::nn::Module {
   std::vector<ConvBn> convs;     // conv1..conv7: 16 (7x7), 32 (5x5), 64, 128, 256, 256, 256 (3x3), /2
   Conv2d pred{nullptr};  // 1x1 to 6 * num_sources, no BN / activation
   Conv2d intrinsics{nullptr};  // learn_intrinsics: 1x1, 256 -> 4 on the averaged conv7 output
+  // Set by observe_int8 (models/int8.h): conv1..conv7 calibrate, then (quantize_int8) run in int8.
+  std::shared_ptr<Int8PoseNet> int8;
 };
 TORCH_MODULE(PoseNet);
 

@@ -67,6 +67,7 @@ void write_model_file(const std::string& path, const Networks& nets, bool half) 
   if (nets.depth->net->int8 && nets.depth->net->int8->quantized()) a.write("int8_depth", nets.depth->net->int8->ranges());
   if (nets.flow && nets.flow->net->int8 && nets.flow->net->int8->quantized())
     a.write("int8_flow", nets.flow->net->int8->ranges());
+  if (nets.pose->int8 && nets.pose->int8->quantized()) a.write("int8_pose", nets.pose->int8->ranges());
   save_archive(a, path);
 }
 

@@ -85,7 +85,7 @@ class CheckpointFile {
   // Weights into `nets` (strict per network; a network absent from the file is an error unless
   // `allow_missing_flow` and it is the FlowNet).
   void load_networks(Networks& nets, bool allow_missing_flow);
-  // The int8 calibration a geo_export model file keeps for a network ("depth", "flow"): the range of
+  // The int8 calibration a geo_export model file keeps for a network ("depth", "flow", "pose"): the range of
   // each quantized point [points,2] (models/int8.h), or nullopt.
   std::optional<torch::Tensor> int8_ranges(const std::string& network);
   // Networks created from the file's spec (a FlowNet when it holds one) with its weights.

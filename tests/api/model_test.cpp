@@ -148,6 +148,7 @@ TEST(Api, Int8FilesKeepTheirCalibration) {
   int8.quantize_int8({a, b, c});
   EXPECT_EQ(int8.spec().precision, "int8");
   EXPECT_FALSE(torch::equal(int8.depth(a), fp32.depth(a)));  // it did compute in int8
+  EXPECT_FALSE(torch::equal(int8.pose({a, b, c}), fp32.pose({a, b, c})));
   const auto dir = test::fresh_dir("api_int8");
   int8.save(dir + "/int8.pt");
   LoadOptions o;
@@ -156,7 +157,9 @@ TEST(Api, Int8FilesKeepTheirCalibration) {
   EXPECT_EQ(back.spec().precision, "int8");
   EXPECT_TRUE(torch::equal(back.depth(a), int8.depth(a)));
   EXPECT_TRUE(torch::equal(back.flow(a, b), int8.flow(a, b)));
+  EXPECT_TRUE(torch::equal(back.pose({a, b, c}), int8.pose({a, b, c})));
   EXPECT_TRUE(torch::equal(Model::load(dir + "/int8.pt").depth(a), fp32.depth(a)));
+  EXPECT_TRUE(torch::equal(Model::load(dir + "/int8.pt").pose({a, b, c}), fp32.pose({a, b, c})));
   GEO_EXPECT_THROW_WITH(Model::load(checkpoint(), o), "precision 'int8' needs calibration frames");
   GEO_EXPECT_THROW_WITH(int8.quantize_int8({a, b}), "int8 already");
   o.calibration = {a};

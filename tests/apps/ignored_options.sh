@@ -1,7 +1,8 @@
 #!/bin/sh
 # Options that would be accepted and silently ignored are refused, naming them: --resume with
 # --init or --run-dir, --compare beside an evaluation's options, --camera-height without
-# --scaling camera-height, camera-height scaling of flow, a negative geo_bench --train-batch; and
+# --scaling camera-height, camera-height scaling of flow, geo_eval's --calibration without
+# --precision int8 (and int8 without a model or frames), a negative geo_bench --train-batch; and
 # sizes that would not fit are refused where they are read, naming them, before any allocation or
 # write (geo_bench batches and ceiling, geo_synth worlds beyond the disk, data sizes in a config).
 #   ignored_options.sh APPS_DIR WORK_DIR
@@ -16,6 +17,12 @@ refused "--camera-height is used by --scaling camera-height only (the scaling is
   "$apps/geo_eval" --split eigen --trivial --camera-height 1.5 --data-root "$work"
 refused "--scaling camera-height is for --split eigen and odometry" \
   "$apps/geo_eval" --split kitti2015 --trivial --scaling camera-height --data-root "$work"
+refused "--calibration calibrates int8: it needs --precision int8" \
+  "$apps/geo_eval" --split eigen --trivial --calibration "$work" --data-root "$work"
+refused "--precision int8 is a model's" \
+  "$apps/geo_eval" --split eigen --trivial --precision int8 --calibration "$work" --data-root "$work"
+refused "--precision int8 needs --calibration FRAMES" \
+  "$apps/geo_eval" --split eigen --checkpoint "$work/x.pt" --precision int8 --data-root "$work"
 refused "--train-batch: Value -3 not in range 1 to 1024" "$apps/geo_bench" --train-batch -3
 refused "--batch: Value 100000 not in range 1 to 1024" "$apps/geo_bench" --batch 100000
 refused "--ceiling-size: Value 1000000 not in range 64 to 16384" "$apps/geo_bench" --ceiling-size 1000000

@@ -102,7 +102,7 @@ TEST_F(Learning, ShortTrainingBeatsUntrainedAndTrivialBaselines) {
 TEST_F(Learning, Int8KeepsTheAccuracyOfFp32) {
   // int8 (geo::Model::quantize_int8), calibrated on the first 8 frames of the first training drive,
   // against the same model in fp32 on the held-out data: AbsRel within 2% (relative), flow EPE within
-  // 3%, ATE within 5% (the PoseNet stays fp32: equal).
+  // 3%, ATE within 5%.
   std::vector<torch::Tensor> frames;
   for (int f = 0; f < 8; ++f)
     frames.push_back(read_image(root_ + "/world/raw/" + synth_drive_folder(1) + "/image_02/data/" + zero_padded(f, 10) + ".png"));

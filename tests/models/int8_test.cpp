@@ -1,11 +1,12 @@
-// int8 inference of the encoder-decoders (models/int8.h): FR on 8-bit features against the float FR,
-// a calibrated DepthNet and FlowNet against their float selves, and what is refused.
+// int8 inference (models/int8.h): FR on 8-bit features against the float FR, a calibrated DepthNet,
+// FlowNet and PoseNet against their float selves, and what is refused.
 #include <gtest/gtest.h>
 
 #include "models/conv_bn.h"
 #include "models/depth_net.h"
 #include "models/flow_net.h"
 #include "models/int8.h"
+#include "models/pose_net.h"
 
 namespace {
 
@@ -104,6 +105,53 @@ TEST(Int8, FlowNetFollowsTheFloatOne) {
     const double error = (int8[s] - reference[s]).abs().mean().item<double>();
     EXPECT_LT(error, 0.1 * spread) << "scale " << s << ": error " << error << ", spread " << spread;
   }
+}
+
+// PoseNet (with the learned camera): conv1..conv6 in int8 (7 points: the snippet and each of their
+// outputs), conv7 and the pose and camera heads in float on the dequantized features.
+TEST(Int8, PoseNetFollowsTheFloatOne) {
+  if (!has_int8()) GTEST_SKIP() << "this LibTorch has no quantized engine";
+  torch::manual_seed(9);
+  geo::PoseNetOptions o;
+  o.learn_intrinsics = true;
+  geo::PoseNet net(o);
+  randomize_batchnorm(*net);
+  {  // a camera head of its own (it starts at zero)
+    torch::NoGradGuard no_grad;
+    net->intrinsics->weight.normal_(0, 0.05);
+  }
+  net->eval();
+  geo::fold_batchnorm(*net);
+  torch::NoGradGuard no_grad;
+  const auto frames = torch::rand({6, 3, 3, 64, 128});  // snippet, frame, RGB, H, W
+  auto snippet = [&](int64_t i) {
+    return std::make_pair(frames[i][1].unsqueeze(0),
+                          std::vector<torch::Tensor>{frames[i][0].unsqueeze(0), frames[i][2].unsqueeze(0)});
+  };
+  std::vector<geo::PoseOutput> reference;
+  for (int64_t i = 4; i < 6; ++i) reference.push_back(net->predict(snippet(i).first, snippet(i).second));
+  geo::observe_int8(*net);
+  for (int64_t i = 0; i < 4; ++i) net->predict(snippet(i).first, snippet(i).second);
+  // Observing is the float forward.
+  EXPECT_TRUE(torch::allclose(net->predict(snippet(4).first, snippet(4).second).poses, reference[0].poses));
+  geo::quantize_int8(*net);
+  EXPECT_EQ(net->int8->points(), 7);
+  const auto spread = torch::cat({reference[0].poses, reference[1].poses}).std().item<double>();
+  for (int64_t i = 4; i < 6; ++i) {
+    const auto got = net->predict(snippet(i).first, snippet(i).second);
+    const auto& want = reference[static_cast<size_t>(i - 4)];
+    const double error = (got.poses - want.poses).abs().mean().item<double>();
+    EXPECT_LT(error, 0.05 * spread) << "snippet " << i << ": error " << error << ", spread " << spread;
+    EXPECT_TRUE(torch::allclose(got.K, want.K, 0.02)) << got.K << want.K;
+  }
+  // A file's ranges give the same network back.
+  const auto ranges = net->int8->ranges();
+  const auto before = net->predict(snippet(5).first, snippet(5).second).poses;
+  net->int8.reset();
+  geo::quantize_int8(*net, ranges, 64, 128);
+  EXPECT_TRUE(torch::equal(net->predict(snippet(5).first, snippet(5).second).poses, before));
+  EXPECT_THROW(geo::quantize_int8(*net, ranges.narrow(0, 0, 6), 64, 128), c10::Error);
+  EXPECT_FALSE(net->int8);  // a refused calibration leaves the float network
 }
 
 TEST(Int8, QuantizingNeedsCalibrationAFoldedNetworkAndInference) {

@@ -106,13 +106,19 @@ def test_flow_and_depth_png_round_trips(tmp_path):
     assert torch.equal(geo.io.read_depth_png(str(tmp_path / "d.png")), depth)
 
 
-@pytest.mark.parametrize("split,source", [("eigen", "model"), ("kitti2015", "model"), ("odometry", "trivial")])
+@pytest.mark.parametrize("split,source", [("eigen", "model"), ("kitti2015", "model"), ("odometry", "trivial"),
+                                          ("odometry", "int8")])
 def test_evaluate_equals_geo_eval_byte_for_byte(split, source, model_file, world_dir, tmp_path):
     if not geo.has_opencv:
         pytest.skip("geo.eval.evaluate needs OpenCV")
-    args = ["--checkpoint", model_file] if source == "model" else ["--trivial"]
-    run_app("geo_eval", "--split", split, "--data-root", world_dir, "--device", "cpu", "--output", tmp_path / "cpp.json", *args)
-    kwargs = {"checkpoint": str(model_file)} if source == "model" else {"trivial": True}
+    # int8: the model calibrated on the first 4 frames of a drive of the world, the same in both.
+    frames = str(next((world_dir / "raw").glob("*/*_sync/image_02/data")))
+    args = {"model": ["--checkpoint", model_file], "trivial": ["--trivial"],
+            "int8": ["--checkpoint", model_file, "--precision", "int8", "--calibration", frames, "--calibration-frames", "4"]}
+    run_app("geo_eval", "--split", split, "--data-root", world_dir, "--device", "cpu", "--output", tmp_path / "cpp.json",
+            *args[source])
+    kwargs = {"model": {"checkpoint": str(model_file)}, "trivial": {"trivial": True},
+              "int8": {"checkpoint": str(model_file), "precision": "int8", "calibration": frames, "calibration_frames": 4}}[source]
     result = geo.eval.evaluate(split, data_root=str(world_dir), device="cpu", output=str(tmp_path / "py.json"), **kwargs)
     assert (tmp_path / "py.json").read_bytes() == (tmp_path / "cpp.json").read_bytes()
     assert result["split"] == split and result["metrics"]
@@ -120,3 +126,8 @@ def test_evaluate_equals_geo_eval_byte_for_byte(split, source, model_file, world
         geo.eval.evaluate("kitti2015", data_root=str(world_dir), trivial=True, scaling="camera-height")
     with pytest.raises(geo.Error, match="one source of predictions"):
         geo.eval.evaluate(split, data_root=str(world_dir))
+    if source == "int8":
+        with pytest.raises(geo.Error, match="needs --calibration FRAMES"):
+            geo.eval.evaluate(split, data_root=str(world_dir), checkpoint=str(model_file), precision="int8")
+        with pytest.raises(geo.Error, match="is a model's"):
+            geo.eval.evaluate(split, data_root=str(world_dir), trivial=True, precision="int8", calibration=frames)

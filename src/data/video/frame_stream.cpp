@@ -1,5 +1,6 @@
 #include "data/video/frame_stream.h"
 
+#include "data/cv_tensor.h"
 #include "data/video/frame_selection.h"
 
 #include <opencv2/imgcodecs.hpp>
@@ -91,6 +92,17 @@ bool FrameStream::next(std::string& name, cv::Mat* bgr) {
     *bgr = m;
   }
   return true;
+}
+
+std::vector<torch::Tensor> first_frames(const std::string& path, int64_t count, int64_t height, int64_t width,
+                                        const std::string& label) {
+  FrameStream stream(path, label);
+  std::vector<torch::Tensor> frames;
+  std::string name;
+  cv::Mat m;
+  while (static_cast<int64_t>(frames.size()) < count && stream.next(name, &m))
+    frames.push_back(resized_mat_to_frame(m, height, width, path + " [" + name + "]"));
+  return frames;
 }
 
 }  // namespace geo

@@ -5,6 +5,7 @@
 
 #include <opencv2/core.hpp>
 #include <opencv2/videoio.hpp>
+#include <torch/torch.h>
 
 #include <cstdint>
 #include <string>
@@ -51,5 +52,11 @@ class FrameStream {
   double fps_ = 0;
   int64_t index_ = -1, width_ = 0, height_ = 0;
 };
+
+// The first `count` frames of an image, frame folder or video (fewer when it has fewer), each
+// resized to height x width (resized_mat_to_frame: uint8 RGB [3,H,W] for 8-bit input): calibration
+// frames (int8). Errors as FrameStream's, labelled `label`.
+std::vector<torch::Tensor> first_frames(const std::string& path, int64_t count, int64_t height, int64_t width,
+                                        const std::string& label);
 
 }  // namespace geo
