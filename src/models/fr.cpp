@@ -174,9 +174,11 @@ torch::Tensor FeatureRefinementImpl::spatial_gate(const torch::Tensor& f1) {
 }
 
 torch::Tensor FeatureRefinementImpl::spatial_gate_of(const torch::Tensor& max, const torch::Tensor& mean) {
-  auto a = conv2d(*spatial, torch::cat({max, mean}, 1));
-  if (options.spatial_bn) a = spatial_bn(a);
-  return torch::sigmoid(a);
+  return spatial_gate_from(conv2d(*spatial, torch::cat({max, mean}, 1)));
+}
+
+torch::Tensor FeatureRefinementImpl::spatial_gate_from(const torch::Tensor& conv_out) {
+  return torch::sigmoid(options.spatial_bn ? spatial_bn(conv_out) : conv_out);
 }
 
 torch::Tensor FeatureRefinementImpl::forward(const torch::Tensor& x) {

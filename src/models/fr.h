@@ -34,6 +34,9 @@ struct FeatureRefinementImpl : torch::nn::Module {
   // [B,1,H,W]): for a caller that pools itself (the int8 path pools 8-bit features).
   torch::Tensor channel_gate_of(const torch::Tensor& max, const torch::Tensor& mean);
   torch::Tensor spatial_gate_of(const torch::Tensor& max, const torch::Tensor& mean);
+  // The spatial gate from its convolution's output [B,1,H,W] (BatchNorm if any, sigmoid): for a
+  // caller that convolves itself.
+  torch::Tensor spatial_gate_from(const torch::Tensor& conv_out);
 
   FeatureRefinementOptions options;
   Conv2d mlp_in{nullptr}, mlp_out{nullptr}, spatial{nullptr};

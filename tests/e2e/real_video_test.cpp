@@ -11,6 +11,7 @@
 // must fail: what passes is learnt from the images, not from the schedule or the smoothness prior.
 #include "core/config.h"
 #include "core/files.h"
+#include "data/image_io.h"
 #include "data/kitti/calib.h"
 #include "eval/predictor.h"
 #include "eval/protocols.h"
@@ -166,6 +167,22 @@ TEST_F(RealVideo, DepthAndMotionOfUnseenFramesBeatTheBaselines) {
   for (size_t i = 0; i < kRuns.size(); ++i)
     EXPECT_LT(t.ate[i], kMotionMargin * v.ate[i]) << "camera motion of the unseen end of " << kRuns[i];
   EXPECT_TRUE(passes(t, u, v));
+}
+
+// int8 (geo::Model::quantize_int8) on real frames: calibrated on the first 8 training frames of the
+// straight run, the trained model keeps its accuracy on the unseen frames: AbsRel within 2%
+// (relative) and each run's ATE within 5% of fp32's.
+TEST_F(RealVideo, Int8KeepsTheAccuracyOfFp32) {
+  std::vector<torch::Tensor> frames;
+  for (int f = 0; f < 8; ++f) frames.push_back(read_image(root_ + "/clips/forward/" + zero_padded(f, 6) + ".png"));
+  Predictor fp32(root_ + "/run", "cpu"), int8(root_ + "/run", "cpu");
+  int8.quantize_int8(frames);
+  const Scores a = score(&fp32), b = score(&int8);
+  print("fp32", a);
+  print("int8", b);
+  EXPECT_LE(b.abs_rel, 1.02 * a.abs_rel) << "AbsRel: int8 " << b.abs_rel << ", fp32 " << a.abs_rel;
+  for (size_t i = 0; i < kRuns.size(); ++i)
+    EXPECT_LE(b.ate[i], 1.05 * a.ate[i]) << "ATE of " << kRuns[i] << ": int8 " << b.ate[i] << ", fp32 " << a.ate[i];
 }
 
 TEST_F(RealVideo, WithoutThePhotometricTermTheCheckFails) {
