@@ -159,7 +159,47 @@ GEO_MULTIVERSIONED void conv_two_planes(const float* __restrict__ in0, const flo
   }
 }
 
+// Pixels [p0, p1) of x [C, HW] (float planes) quantized into y [HW, C] (NHWC bytes): round(x / scale)
+// + zero_point clamped to 0..255, computed over a block of pixels per channel (vectorised), then
+// stored interleaved.
+GEO_MULTIVERSIONED void quantize_planes(const float* __restrict__ x, int64_t C, int64_t HW, int64_t p0, int64_t p1,
+                                        float inv_scale, float zo, uint8_t* __restrict__ y) {
+  constexpr int64_t N = 64;
+  uint8_t block[N];
+  for (int64_t p = p0; p < p1; p += N) {
+    const int64_t n = std::min(N, p1 - p);
+    for (int64_t c = 0; c < C; ++c) {
+      const float* src = x + c * HW + p;
+      for (int64_t i = 0; i < n; ++i) {
+        float v = src[i] * inv_scale + zo;  // zo = zero_point + 0.5: truncation rounds to nearest
+        v = v < 0.5f ? 0.5f : v;
+        v = v > 255.5f ? 255.5f : v;
+        block[i] = static_cast<uint8_t>(static_cast<int32_t>(v));
+      }
+      for (int64_t i = 0; i < n; ++i) y[(p + i) * C + c] = block[i];
+    }
+  }
+}
+
 }  // namespace
+
+// x float [B,C,H,W] -> quint8 [B,C,H,W] channels-last with (scale, zero_point), as
+// at::quantize_per_tensor computes it (ties rounded up rather than to even) at ~10x its speed here
+// (it took ~2 ms for the PoseNet's 9-channel input at 128x416).
+torch::Tensor quantize_to_nhwc(const torch::Tensor& x_in, double scale, int64_t zero_point) {
+  const auto x = x_in.to(torch::kFloat32).contiguous();
+  TORCH_CHECK(x.dim() == 4, "int8: quantizing a [B,C,H,W] tensor, got ", x.sizes());
+  const int64_t B = x.size(0), C = x.size(1), HW = x.size(2) * x.size(3);
+  auto out = at::_empty_affine_quantized(x.sizes(), x.options().dtype(torch::kQUInt8), scale, zero_point,
+                                         at::MemoryFormat::ChannelsLast);
+  const float* src = x.data_ptr<float>();
+  uint8_t* dst = reinterpret_cast<uint8_t*>(out.data_ptr<c10::quint8>());
+  const float inv = static_cast<float>(1.0 / scale), zo = static_cast<float>(zero_point) + 0.5f;
+  for (int64_t b = 0; b < B; ++b) at::parallel_for(0, HW, 1024, [&](int64_t p0, int64_t p1) {
+    quantize_planes(src + b * C * HW, C, HW, p0, p1, inv, zo, dst + b * C * HW);
+  });
+  return out;
+}
 
 torch::Tensor int8_feature_refinement(FeatureRefinementImpl& fr, const torch::Tensor& q_in, double out_scale, int64_t out_zp) {
   const auto q = q_in.contiguous(at::MemoryFormat::ChannelsLast);
@@ -372,8 +412,7 @@ struct Quantized {
   }
   torch::Tensor quantize(const torch::Tensor& x) {
     const auto& p = next();
-    return at::quantize_per_tensor(x.to(torch::kFloat32).contiguous(at::MemoryFormat::ChannelsLast), p.scale,
-                                   p.zero_point, torch::kQUInt8);
+    return quantize_to_nhwc(x, p.scale, p.zero_point);
   }
   torch::Tensor conv_with(const c10::IValue& packed, const torch::Tensor& x, bool relu) {
     const auto& p = next();

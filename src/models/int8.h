@@ -29,6 +29,10 @@ struct PoseNetImpl;
 // where this LibTorch has it, else x86's, FBGEMM's or QNNPACK's; "" when it has none.
 std::string select_int8_engine();
 
+// x float [B,C,H,W] -> quint8 [B,C,H,W] channels-last (NHWC bytes) with (scale, zero_point): what
+// at::quantize_per_tensor computes (ties rounded up rather than to even), vectorised.
+torch::Tensor quantize_to_nhwc(const torch::Tensor& x, double scale, int64_t zero_point);
+
 // FR on an 8-bit NHWC feature q (quint8): the channel gate from q's max and mean over space, the
 // spatial gate from the max and mean over the channels of q * a_c (both pooled from the 8-bit
 // values), then q * a_c * a_s requantized to (scale, zero_point) in one pass; the gates themselves

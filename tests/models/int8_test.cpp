@@ -20,6 +20,23 @@ void randomize_batchnorm(torch::nn::Module& m) {
     else if (b.key().find("running_mean") != std::string::npos) b.value().normal_(0, 0.1);
 }
 
+// geo's quantization of a float tensor into NHWC bytes: by hand, and ATen's on random values (no ties).
+TEST(Int8, QuantizingToNhwcIsAtensQuantization) {
+  if (!has_int8()) GTEST_SKIP() << "this LibTorch has no quantized engine";
+  // scale 0.5, zero point 10: -10 -> -20 + 10 clamped to 0; 1.2 -> 2.4 -> 2 + 10 = 12; 1.3 -> 13;
+  // 200 -> 410 clamped to 255; 0 -> 10.
+  const auto hand = geo::quantize_to_nhwc(torch::tensor({-10.f, 1.2f, 1.3f, 200.f, 0.f, 0.f}).view({1, 2, 1, 3}), 0.5, 10);
+  EXPECT_TRUE(hand.is_contiguous(at::MemoryFormat::ChannelsLast));
+  EXPECT_TRUE(torch::equal(hand.int_repr().contiguous().flatten(),
+                           torch::tensor({0, 12, 13, 255, 10, 10}, torch::kUInt8)));
+  torch::manual_seed(5);
+  const auto x = torch::randn({2, 9, 13, 70}) * 3;  // 9 channels: the PoseNet's snippet
+  const auto mine = geo::quantize_to_nhwc(x, 0.037, 117), aten = at::quantize_per_tensor(x, 0.037, 117, torch::kQUInt8);
+  EXPECT_EQ(mine.q_scale(), 0.037);
+  EXPECT_EQ(mine.q_zero_point(), 117);
+  EXPECT_TRUE(torch::equal(mine.int_repr().contiguous(), aten.int_repr().contiguous()));
+}
+
 TEST(Int8, FeatureRefinementIsTheFloatOneWithinOneStep) {
   if (!has_int8()) GTEST_SKIP() << "this LibTorch has no quantized engine";
   torch::manual_seed(3);
