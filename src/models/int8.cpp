@@ -181,7 +181,56 @@ GEO_MULTIVERSIONED void quantize_planes(const float* __restrict__ x, int64_t C, 
   }
 }
 
+// Pixels [p0, p1) of x [pixels, Ci] (bytes) into Ci channels of y [pixels, Co]: round(x factor +
+// offset) clamped to 0..255 (offset = the output's zero point - x's zero point x factor + 0.5).
+GEO_MULTIVERSIONED void requantize_into(const uint8_t* __restrict__ x, int64_t Ci, float factor, float offset, int64_t p0,
+                                        int64_t p1, int64_t Co, uint8_t* __restrict__ y) {
+  for (int64_t p = p0; p < p1; ++p) {
+    const uint8_t* row = x + p * Ci;
+    uint8_t* o = y + p * Co;
+    auto one = [&](int64_t c) {
+      float v = static_cast<float>(row[c]) * factor + offset;
+      v = v < 0.5f ? 0.5f : v;
+      v = v > 255.5f ? 255.5f : v;
+      o[c] = static_cast<uint8_t>(static_cast<int32_t>(v));
+    };
+    int64_t c = 0;
+    for (; c + V <= Ci; c += V)
+      for (int64_t l = 0; l < V; ++l) one(c + l);
+    for (; c < Ci; ++c) one(c);
+  }
+}
+
 }  // namespace
+
+torch::Tensor cat_int8(const std::vector<torch::Tensor>& parts_in, double scale, int64_t zero_point) {
+  TORCH_CHECK(!parts_in.empty(), "int8: nothing to concatenate");
+  std::vector<torch::Tensor> parts;
+  int64_t Co = 0;
+  for (const auto& t : parts_in) {
+    TORCH_CHECK(t.dim() == 4 && t.scalar_type() == torch::kQUInt8 && t.size(0) == parts_in[0].size(0) &&
+                    t.size(2) == parts_in[0].size(2) && t.size(3) == parts_in[0].size(3),
+                "int8: concatenating quint8 [B,C,H,W] tensors of one size, got ", t.sizes(), " beside ",
+                parts_in[0].sizes());
+    parts.push_back(t.contiguous(at::MemoryFormat::ChannelsLast));
+    Co += t.size(1);
+  }
+  const int64_t B = parts[0].size(0), H = parts[0].size(2), W = parts[0].size(3);
+  auto out = at::_empty_affine_quantized({B, Co, H, W}, parts[0].options(), scale, zero_point,
+                                         at::MemoryFormat::ChannelsLast);
+  uint8_t* y = reinterpret_cast<uint8_t*>(out.data_ptr<c10::quint8>());
+  at::parallel_for(0, B * H * W, 256, [&](int64_t p0, int64_t p1) {
+    int64_t offset = 0;
+    for (const auto& t : parts) {
+      const float factor = static_cast<float>(t.q_scale() / scale);
+      const float shift = static_cast<float>(zero_point) - static_cast<float>(t.q_zero_point()) * factor + 0.5f;
+      requantize_into(reinterpret_cast<const uint8_t*>(t.data_ptr<c10::quint8>()), t.size(1), factor, shift, p0, p1, Co,
+                      y + offset);
+      offset += t.size(1);
+    }
+  });
+  return out;
+}
 
 // x float [B,C,H,W] -> quint8 [B,C,H,W] channels-last with (scale, zero_point), as
 // at::quantize_per_tensor computes it (ties rounded up rather than to even) at ~10x its speed here
@@ -296,7 +345,7 @@ struct Int8Graph::State {
   bool quantized = false;
   std::unordered_map<const torch::nn::Module*, c10::IValue> packed;
   std::unordered_map<const torch::nn::Module*, c10::IValue> packed_phases;  // the upconvs' 2x2 phase kernels
-  std::optional<c10::OperatorHandle> conv, conv_relu, add_relu, cat;
+  std::optional<c10::OperatorHandle> conv, conv_relu, add_relu;
 };
 
 namespace {
@@ -438,7 +487,7 @@ struct Quantized {
   }
   torch::Tensor cat(const std::vector<torch::Tensor>& parts) {
     const auto& p = next();
-    return call(*st.cat, {c10::List<torch::Tensor>(parts), int64_t{1}, p.scale, p.zero_point});
+    return cat_int8(parts, p.scale, p.zero_point);
   }
   torch::Tensor pred(Conv2dImpl& m, const torch::Tensor& y) {
     return dequantize(conv_with(st.packed.at(&m), y, false));
@@ -524,7 +573,6 @@ void Int8Graph::quantize() {
   st.conv = op("quantized::conv2d", "new");
   st.conv_relu = op("quantized::conv2d_relu", "new");
   st.add_relu = op("quantized::add_relu", "");
-  st.cat = op("quantized::cat", "");
   for (const auto& m : st.net.modules(/*include_self=*/false)) {
     if (auto* cb = m->as<ConvBnImpl>()) {
       TORCH_CHECK(cb->folded(), "int8: BatchNorm must be folded before quantizing");

@@ -37,6 +37,25 @@ TEST(Int8, QuantizingToNhwcIsAtensQuantization) {
   EXPECT_TRUE(torch::equal(mine.int_repr().contiguous(), aten.int_repr().contiguous()));
 }
 
+// Concatenation with requantization: the float concatenation of the dequantized parts, quantized
+// with the output's scale, within one step (rounding), and a part of the output's own scale copied.
+TEST(Int8, ConcatenatingRequantizesEachPart) {
+  if (!has_int8()) GTEST_SKIP() << "this LibTorch has no quantized engine";
+  torch::manual_seed(6);
+  const auto a = geo::quantize_to_nhwc(torch::rand({2, 32, 5, 7}) * 4, 4.0 / 255, 0);
+  const auto b = geo::quantize_to_nhwc(torch::randn({2, 17, 5, 7}), 0.02, 128);
+  const auto c = geo::quantize_to_nhwc(torch::randn({2, 1, 5, 7}) * 3, 0.05, 100);
+  const auto mine = geo::cat_int8({a, b, c}, 0.05, 100);
+  ASSERT_EQ(mine.sizes(), torch::IntArrayRef({2, 50, 5, 7}));
+  EXPECT_TRUE(mine.is_contiguous(at::MemoryFormat::ChannelsLast));
+  const auto reference =
+      at::quantize_per_tensor(torch::cat({a.dequantize(), b.dequantize(), c.dequantize()}, 1), 0.05, 100, torch::kQUInt8);
+  const auto diff = (mine.int_repr().to(torch::kInt32) - reference.int_repr().to(torch::kInt32)).abs();
+  EXPECT_LE(diff.max().item<int>(), 1);
+  EXPECT_LT(diff.to(torch::kFloat32).mean().item<double>(), 0.02);
+  EXPECT_TRUE(torch::equal(mine.int_repr().narrow(1, 49, 1), c.int_repr()));  // the same scale: copied
+}
+
 TEST(Int8, FeatureRefinementIsTheFloatOneWithinOneStep) {
   if (!has_int8()) GTEST_SKIP() << "this LibTorch has no quantized engine";
   torch::manual_seed(3);
