@@ -7,6 +7,8 @@ sets it up). DepthNet inference at batch 1 and --height x --width on --threads t
   ORT geo's DepthNet     geo.nn.DepthNet (the same network in torch.nn) exported with torch.onnx.export
   ORT GeoNet's DepthNet  scripts/pytorch_reference.py's, exported the same way (the reference a
                          deployment user would start from)
+  PyTorch fp32 / bf16    GeoNet's DepthNet in eager PyTorch (scripts/pytorch_reference.py; Debian's
+                         python3-torch, the LibTorch geo links), fp32 and bf16 autocast
   ORT int8               each of those quantized statically to ONNX's QDQ form (scripts/ort_qdq.py:
                          MinMax calibration on 8 inputs through ONNX Runtime, uint8 activations, int8
                          weights per channel), which ONNX Runtime runs with its int8 kernels
@@ -47,6 +49,16 @@ def geo_ms(a, fr):
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     rows = {r["what"]: r["ms"] for r in json.load(open(out))["rows"] if r["section"] == "infer"}
     return {"geo fp32": rows["DepthNet"], "geo bf16": rows["DepthNet bf16"], "geo int8": rows["DepthNet int8"]}
+
+
+def pytorch_ms(a, precision):
+    """GeoNet's DepthNet in eager PyTorch (scripts/pytorch_reference.py), batch 1."""
+    cmd = [sys.executable, str(a.repo / "scripts" / "pytorch_reference.py"), "--row", "depth", "--height", str(a.height),
+           "--width", str(a.width), "--threads", str(a.threads), "--iters", str(a.iters), "--warmup", "3",
+           "--precision", precision]
+    r = subprocess.run(cmd, check=True, capture_output=True, text=True)
+    a.torch_version = json.loads(r.stdout.strip().splitlines()[-1]).get("torch", "?")
+    return json.loads(r.stdout.strip().splitlines()[-1])["median_ms"]
 
 
 def ort(a, *args):
@@ -118,6 +130,8 @@ def main():
             ("off", lambda: {"ORT fp32, geo's DepthNet": ort_ms(a, models[("geo", "off")])}),
             ("off", lambda: {"ORT int8, geo's DepthNet": ort_ms(a, int8[("geo", "off")], models[("geo", "off")])}),
             ("off", lambda: {"ORT fp32, GeoNet's DepthNet": ort_ms(a, models[("geonet", "off")])}),
+            ("off", lambda: {"PyTorch fp32 eager, GeoNet's DepthNet": pytorch_ms(a, "fp32")}),
+            ("off", lambda: {"PyTorch bf16 eager, GeoNet's DepthNet": pytorch_ms(a, "bf16")}),
             ("off", lambda: {"ORT int8, GeoNet's DepthNet": ort_ms(a, int8[("geonet", "off")], models[("geonet", "off")])}),
             ("on", lambda: geo_ms(a, "on")),
             ("on", lambda: {"ORT fp32, geo's DepthNet": ort_ms(a, models[("geo", "on")])}),
@@ -133,12 +147,13 @@ def main():
     med = {k: statistics.median(v) for k, v in times.items()}
     lines = [f"DepthNet inference, batch 1, {a.height}x{a.width}, {a.threads} threads, median of {a.rounds} rounds "
              f"(each the median of {a.iters} runs); CPU {model} ({flags}); ONNX Runtime {a.ort_version} (onnxruntime-node); "
+             f"PyTorch {a.torch_version} (eager); "
              f"command: scripts/bench_vs_onnxruntime.sh --rounds {a.rounds} --iters {a.iters}", "",
              "| variant | FR | ms | per round | geo fp32 / this | geo / this at equal precision |", "|---|---|---|---|---|---|"]
     for name, fr in variants:
         ratio = med[("geo fp32", fr)] / med[(name, fr)]
-        precision = "int8" if "int8" in name else "fp32"
-        equal = f"{med[(f'geo {precision}', fr)] / med[(name, fr)]:.2f}" if name.startswith("ORT") else "-"
+        precision = next(p for p in ("int8", "bf16", "fp32") if p in name)
+        equal = f"{med[(f'geo {precision}', fr)] / med[(name, fr)]:.2f}" if not name.startswith("geo") else "-"
         lines.append(f"| {name} | {fr} | {med[(name, fr)]:.1f} | {' '.join(f'{t:.0f}' for t in times[(name, fr)])} "
                      f"| {ratio:.2f} | {equal} |")
     lines += ["", "ONNX Runtime's int8 models against their float selves (mean |difference| / mean |float| of the "
