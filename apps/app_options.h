@@ -12,6 +12,7 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -89,6 +90,16 @@ inline CLI::Option* add_device_option(CLI::App& app, std::string& device, const 
 inline CLI::Option* add_precision_option(CLI::App& app, std::string& precision, const std::vector<std::string>& choices,
                                          const std::string& help) {
   return app.add_option("--precision", precision, help)->check(CLI::IsMember(choices));
+}
+
+// --calibration FRAMES and --calibration-frames N (1..1000) of a tool that calibrates int8 on the
+// first frames of a folder or video; `with` names the option they serve ("--int8", "--precision int8").
+inline void add_calibration_options(CLI::App& app, std::string& frames, int64_t& count, const std::string& with) {
+  app.add_option("--calibration", frames,
+                 "with " + with + ": a folder of frames or a video like those the model will see (its first frames "
+                 "calibrate it)");
+  app.add_option("--calibration-frames", count, "with " + with + ": how many frames calibrate it, 1..1000")
+      ->check(CLI::Range(1, 1000));
 }
 
 }  // namespace geo::app

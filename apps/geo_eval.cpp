@@ -72,10 +72,7 @@ void add_options(CLI::App& app, EvalCommand& c) {
   geo::app::add_precision_option(app, c.precision, {"fp32", "bf16", "auto", "int8"},
                                  "what the model computes in: fp32 (default), bf16, auto (bf16 on CPUs with AVX512-BF16/AMX) "
                                  "or int8 (CPU; calibrated on --calibration): its accuracy against fp32's");
-  app.add_option("--calibration", c.calibration,
-                 "with --precision int8: a folder of frames or a video like those evaluated (its first frames calibrate it)");
-  app.add_option("--calibration-frames", c.calibration_frames, "with --precision int8: how many frames calibrate it, 1..1000")
-      ->check(CLI::Range(1, 1000));
+  geo::app::add_calibration_options(app, c.calibration, c.calibration_frames, "--precision int8");
   app.add_option("--flow-resize", c.flow_resize, "kitti2015: resize predicted flow to the ground truth by nearest (GeoNet) or bilinear")
       ->check(CLI::IsMember({"nearest", "bilinear"}));
   app.add_flag("--exact-pixels", c.exact_pixels, "eigen: project Velodyne points without the reference code's -1 pixel shift");

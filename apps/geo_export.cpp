@@ -20,7 +20,7 @@ namespace {
 
 struct ExportCommand {
   std::string checkpoint, out, calibration;
-  int calibration_frames = 8;
+  int64_t calibration_frames = 8;
   bool half = false, force = false, int8 = false;
 };
 
@@ -32,10 +32,7 @@ void add_options(CLI::App& app, ExportCommand& c) {
   app.add_flag("--int8", c.int8,
                "calibrate int8 inference on --calibration and keep it in the file (loaded with precision int8, the "
                "networks run in int8 without calibrating again)");
-  app.add_option("--calibration", c.calibration,
-                 "with --int8: a folder of frames or a video like those the model will see (its first frames are used)");
-  app.add_option("--calibration-frames", c.calibration_frames, "with --int8: how many frames calibrate it, 1..1000")
-      ->check(CLI::Range(1, 1000));
+  geo::app::add_calibration_options(app, c.calibration, c.calibration_frames, "--int8");
 }
 
 // The first `count` frames of a folder or video, at the model's size.

@@ -94,6 +94,16 @@ def params(lo, hi):
     return np.float32(scale), np.uint8(min(255, max(0, round(-lo / scale))))
 
 
+def dequantized_constant(name, q, scale, new_inits, new_nodes):
+    """q (integers, per output channel: dimension 0) with its scales, as an initializer read through a
+    DequantizeLinear (zero points 0); returns the name of the float tensor it gives."""
+    new_inits += [numpy_helper.from_array(q, name), numpy_helper.from_array(scale, name + "_scale"),
+                  numpy_helper.from_array(np.zeros(q.shape[0], q.dtype), name + "_zero_point")]
+    new_nodes.append(helper.make_node("DequantizeLinear", [name, name + "_scale", name + "_zero_point"], [name + "_dq"],
+                                      name=name + "_DQ", axis=0))
+    return name + "_dq"
+
+
 def quantize(src, ranges_file, dst):
     model = onnx.load(src)
     g = model.graph
@@ -141,28 +151,18 @@ def quantize(src, ranges_file, dst):
         wq = np.clip(np.round(w / w_scale.reshape(-1, *([1] * (w.ndim - 1)))), -127, 127).astype(np.int8)
         # (Named after the node: ONNX Runtime shares equal constants between nodes, and each node's
         # quantized copy is its own.)
-        wn = node.output[0] + "_weight_int8"
-        new_inits += [numpy_helper.from_array(wq, wn), numpy_helper.from_array(w_scale, wn + "_scale"),
-                      numpy_helper.from_array(np.zeros(w.shape[0], np.int8), wn + "_zero_point")]
-        new_nodes.append(helper.make_node("DequantizeLinear", [wn, wn + "_scale", wn + "_zero_point"], [wn + "_dq"],
-                                          name=wn + "_DQ", axis=0))
-        node.input[1] = wn + "_dq"
+        node.input[1] = dequantized_constant(node.output[0] + "_weight_int8", wq, w_scale, new_inits, new_nodes)
         if len(node.input) > 2 and node.input[2] in inits:
             b = numpy_helper.to_array(inits[node.input[2]]).astype(np.float32)
             x_scale = qp[node.input[0][: -len("_dq")]][0]
             b_scale = (x_scale * w_scale).astype(np.float32)
             bq = np.round(b / b_scale).astype(np.int32)
-            bn = node.output[0] + "_bias_int32"
-            new_inits += [numpy_helper.from_array(bq, bn), numpy_helper.from_array(b_scale, bn + "_scale"),
-                          numpy_helper.from_array(np.zeros(w.shape[0], np.int32), bn + "_zero_point")]
-            new_nodes.append(helper.make_node("DequantizeLinear", [bn, bn + "_scale", bn + "_zero_point"], [bn + "_dq"],
-                                              name=bn + "_DQ", axis=0))
-            node.input[2] = bn + "_dq"
+            node.input[2] = dequantized_constant(node.output[0] + "_bias_int32", bq, b_scale, new_inits, new_nodes)
 
     # The float weights no longer read go; the new nodes go before the first reader (topological
     # order: a QuantizeLinear right after the node making its tensor).
     used = {n for node in list(g.node) + new_nodes for n in node.input}
-    keep = [i for i in g.initializer if i.name in used or i.name in {x.name for x in new_inits}]
+    keep = [i for i in g.initializer if i.name in used]
     del g.initializer[:]
     g.initializer.extend(keep + [i for i in new_inits if i.name in used])
     producers = {}

@@ -66,21 +66,32 @@ namespace {
 // operations however few the channels (FR's counts are multiples of 16).
 constexpr int64_t V = 16;
 
+// f(c) for the channels 0..C-1: blocks of V, then the rest.
+template <class F>
+inline void each_channel(int64_t C, F&& f) {
+  int64_t c = 0;
+  for (; c + V <= C; c += V)
+    for (int64_t l = 0; l < V; ++l) f(c + l);
+  for (; c < C; ++c) f(c);
+}
+
+// v, a value on the byte scale plus 0.5, clamped to [0.5, 255.5] and truncated: rounded to the
+// nearest of 0..255.
+inline uint8_t rounded_byte(float v) {
+  v = v < 0.5f ? 0.5f : v;
+  v = v > 255.5f ? 255.5f : v;
+  return static_cast<uint8_t>(static_cast<int32_t>(v));
+}
+
 // Max and sum over pixels [p0, p1) of each channel of x [pixels, C] (NHWC bytes).
 GEO_MULTIVERSIONED void max_sum_over_pixels(const uint8_t* __restrict__ x, int64_t p0, int64_t p1, int64_t C,
                                             uint8_t* __restrict__ mx, int32_t* __restrict__ sum) {
   for (int64_t p = p0; p < p1; ++p) {
     const uint8_t* row = x + p * C;
-    int64_t c = 0;
-    for (; c + V <= C; c += V)
-      for (int64_t l = 0; l < V; ++l) {
-        mx[c + l] = row[c + l] > mx[c + l] ? row[c + l] : mx[c + l];
-        sum[c + l] += row[c + l];
-      }
-    for (; c < C; ++c) {
+    each_channel(C, [&](int64_t c) {
       mx[c] = row[c] > mx[c] ? row[c] : mx[c];
       sum[c] += row[c];
-    }
+    });
   }
 }
 
@@ -112,8 +123,8 @@ GEO_MULTIVERSIONED void max_mean_over_channels(const uint8_t* __restrict__ x, co
   }
 }
 
-// y = round((x - z) a'_c g_p + zo) clamped to 0..255 for the pixels [p0, p1) (a' = a_c s / out_scale,
-// zo = out_zero_point + 0.5: v >= 0.5 after the clamp, so truncation rounds to nearest).
+// y = round((x - z) a'_c g_p) + zero point, clamped to 0..255, for the pixels [p0, p1) (a' = a_c s /
+// out_scale, zo = out_zero_point + 0.5).
 GEO_MULTIVERSIONED void gate_bytes(const uint8_t* __restrict__ x, const float* __restrict__ a,
                                    const float* __restrict__ g, int64_t p0, int64_t p1, int64_t C, float z, float zo,
                                    uint8_t* __restrict__ y) {
@@ -121,16 +132,7 @@ GEO_MULTIVERSIONED void gate_bytes(const uint8_t* __restrict__ x, const float* _
     const uint8_t* row = x + p * C;
     uint8_t* o = y + p * C;
     const float gp = g[p];
-    auto one = [&](int64_t c) {
-      float v = (static_cast<float>(row[c]) - z) * a[c] * gp + zo;
-      v = v < 0.5f ? 0.5f : v;
-      v = v > 255.5f ? 255.5f : v;
-      o[c] = static_cast<uint8_t>(static_cast<int32_t>(v));
-    };
-    int64_t c = 0;
-    for (; c + V <= C; c += V)
-      for (int64_t l = 0; l < V; ++l) one(c + l);
-    for (; c < C; ++c) one(c);
+    each_channel(C, [&](int64_t c) { o[c] = rounded_byte((static_cast<float>(row[c]) - z) * a[c] * gp + zo); });
   }
 }
 
@@ -170,12 +172,7 @@ GEO_MULTIVERSIONED void quantize_planes(const float* __restrict__ x, int64_t C, 
     const int64_t n = std::min(N, p1 - p);
     for (int64_t c = 0; c < C; ++c) {
       const float* src = x + c * HW + p;
-      for (int64_t i = 0; i < n; ++i) {
-        float v = src[i] * inv_scale + zo;  // zo = zero_point + 0.5: truncation rounds to nearest
-        v = v < 0.5f ? 0.5f : v;
-        v = v > 255.5f ? 255.5f : v;
-        block[i] = static_cast<uint8_t>(static_cast<int32_t>(v));
-      }
+      for (int64_t i = 0; i < n; ++i) block[i] = rounded_byte(src[i] * inv_scale + zo);  // zo = zero_point + 0.5
       for (int64_t i = 0; i < n; ++i) y[(p + i) * C + c] = block[i];
     }
   }
@@ -188,16 +185,7 @@ GEO_MULTIVERSIONED void requantize_into(const uint8_t* __restrict__ x, int64_t C
   for (int64_t p = p0; p < p1; ++p) {
     const uint8_t* row = x + p * Ci;
     uint8_t* o = y + p * Co;
-    auto one = [&](int64_t c) {
-      float v = static_cast<float>(row[c]) * factor + offset;
-      v = v < 0.5f ? 0.5f : v;
-      v = v > 255.5f ? 255.5f : v;
-      o[c] = static_cast<uint8_t>(static_cast<int32_t>(v));
-    };
-    int64_t c = 0;
-    for (; c + V <= Ci; c += V)
-      for (int64_t l = 0; l < V; ++l) one(c + l);
-    for (; c < Ci; ++c) one(c);
+    each_channel(Ci, [&](int64_t c) { o[c] = rounded_byte(static_cast<float>(row[c]) * factor + offset); });
   }
 }
 
