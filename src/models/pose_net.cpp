@@ -1,5 +1,7 @@
 #include "models/pose_net.h"
 
+#include "models/layers.h"
+
 namespace geo {
 
 PoseNetImpl::PoseNetImpl(const PoseNetOptions& o) : options(o) {
