@@ -19,7 +19,7 @@ struct SynthCommand {
   uint64_t seed = 1;
   int drives = -1, test_drives = -1, flow_pairs = -1, threads = 0;
   int64_t frames = -1, odometry_frames = -1;
-  bool force = false;
+  bool force = false, traffic = false;
   double turns = 1.0;
 
   geo::SynthOptions options() const {  // the preset with the options given
@@ -27,6 +27,7 @@ struct SynthCommand {
     o.seed = seed;
     o.threads = threads;
     o.turns = turns;
+    o.traffic = traffic;
     if (drives > 0) o.train_drives = drives;
     if (test_drives > 0) o.test_drives = test_drives;
     if (frames > 0) o.frames_per_drive = frames;
@@ -53,6 +54,10 @@ void add_options(CLI::App& app, SynthCommand& c) {
   app.add_option("--turns", c.turns, "how winding the road is: 1 gentle (~1 degree of heading per frame), "
                  "2 four times the heading change (a learned camera needs rotation to pin its focal length)")
       ->check(CLI::Range(0.1, 10.0));
+  app.add_flag("--traffic", c.traffic,
+               "stop-and-go city traffic: the camera stands for stretches of 6-14 frames, a car ahead in its "
+               "lane keeps its gap, a truck overtakes on the right while the camera stands, oncoming cars on the "
+               "left (obj_map/ marks every moving object)");
   app.add_flag("--force", c.force, "write into a non-empty --out");
   app.add_option("--video", c.video,
                  "also write the first training drive as a Motion-JPEG AVI at 10 fps (train on it with "

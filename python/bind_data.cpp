@@ -21,7 +21,7 @@ using namespace pybind11::literals;
 namespace {
 
 py::dict synth_world(int64_t frames, uint64_t seed, int drive, const std::string& preset, int64_t height,
-                     int64_t width, int supersample, double turns, bool flow, bool lidar) {
+                     int64_t width, int supersample, double turns, bool traffic, bool flow, bool lidar) {
   if (frames < 1 || frames > 10000) throw Error("frames must be in 1..10000 (got " + std::to_string(frames) + ")");
   if (drive < 0 || drive > 999) throw Error("drive must be in 0..999 (got " + std::to_string(drive) + ")");
   if (supersample < 1 || supersample > 8) throw Error("supersample must be in 1..8 (got " + std::to_string(supersample) + ")");
@@ -31,19 +31,20 @@ py::dict synth_world(int64_t frames, uint64_t seed, int drive, const std::string
   if (height && (height < 16 || height > 4096 || width < 16 || width > 4096))
     throw Error("height and width must be in 16..4096 (got " + std::to_string(height) + "x" + std::to_string(width) + ")");
   SynthOptions o = height ? synth_world_at(preset, height, width) : base;
-  o.seed = seed, o.supersample = supersample, o.turns = turns;
-  torch::Tensor images, depths, objects, poses, flows, noc, occ;
+  o.seed = seed, o.supersample = supersample, o.turns = turns, o.traffic = traffic;
+  torch::Tensor images, depths, objects, poses, flows, noc, occ, moving;
   std::vector<torch::Tensor> scans;
   {
     py::gil_scoped_release release;
-    const SynthScene scene(synth_drive_seed(seed, 0, drive), frames, turns);
-    std::vector<torch::Tensor> im, de, ob, po, fl, nc, oc;
+    const SynthScene scene(synth_drive_seed(seed, 0, drive), frames, turns, traffic);
+    std::vector<torch::Tensor> im, de, ob, po, fl, nc, oc, mv;
     for (int64_t f = 0; f < frames; ++f) {
       auto frame = render_frame(scene, f, o);
       // As geo_synth's PNGs hold it (8-bit RGB).
       im.push_back((frame.image.clamp(0, 1) * 255).round().to(torch::kUInt8));
       de.push_back(frame.depth[0]);
       ob.push_back(frame.object);
+      mv.push_back(synth_object_map(scene, frame.object) > 0);
       po.push_back(frame.pose.matrix());
       if (flow && f + 1 < frames) {
         auto sf = render_flow(scene, f, o);
@@ -52,12 +53,14 @@ py::dict synth_world(int64_t frames, uint64_t seed, int drive, const std::string
       if (lidar) scans.push_back(render_lidar(scene, f, o));
     }
     images = torch::stack(im), depths = torch::stack(de), objects = torch::stack(ob), poses = torch::stack(po);
+    moving = torch::stack(mv);
     if (!fl.empty()) flows = torch::stack(fl), noc = torch::stack(nc), occ = torch::stack(oc);
   }
   py::dict d;
   d["images"] = images;    // [N,3,H,W] uint8
   d["depths"] = depths;    // [N,H,W] float32 metres (camera z), 0 = sky
   d["objects"] = objects;  // [N,H,W] int32: box id, -1 road, -2 sky
+  d["moving"] = moving;    // [N,H,W] bool: independently moving objects (KITTI 2015's obj_map > 0)
   d["poses"] = poses;      // [N,4,4] float64 camera-to-world
   d["intrinsics"] = o.intrinsics.K();
   d["camera_height"] = kSynthCameraHeight;
@@ -98,10 +101,13 @@ py::dict depth_metrics(py::handle gt, py::handle pred, py::object scaling, doubl
 void bind_data(py::module_& m) {
   auto synth = m.def_submodule("synth", "geo's synthetic driving world, rendered in memory with exact ground truth.");
   synth.def("world", &synth_world, py::kw_only(), "frames"_a = 3, "seed"_a = 1, "drive"_a = 0, "preset"_a = "tiny",
-            "height"_a = 0, "width"_a = 0, "supersample"_a = 3, "turns"_a = 1.0, "flow"_a = true, "lidar"_a = false,
+            "height"_a = 0, "width"_a = 0, "supersample"_a = 3, "turns"_a = 1.0, "traffic"_a = false, "flow"_a = true, "lidar"_a = false,
             "Renders `frames` consecutive frames of training drive `drive` of the world `seed` (geo_synth's\n"
             "drive drive+1, frames 0..frames-1) at the preset's size (tiny 64x208, kitti 375x1242) or height x width.\n"
+            "traffic: stop-and-go traffic (the camera stands for stretches, a car ahead keeps its gap, trucks\n"
+            "overtake, oncoming cars).\n"
             "Returns a dict: images [N,3,H,W] uint8, depths [N,H,W] (metres, 0 = sky), objects [N,H,W],\n"
+            "moving [N,H,W] bool (independently moving objects),\n"
             "poses [N,4,4] camera-to-world, intrinsics [3,3], camera_height (m); with flow: flow [N-1,2,H,W]\n"
             "(pixels, frame i -> i+1), flow_noc / flow_occ [N-1,H,W] bool; with lidar: lidar (N scans [M,4]),\n"
             "cam_from_velo [4,4].");

@@ -168,6 +168,13 @@ struct VideoDataConfig {
   // grey thumbnail) since the last kept frame is below this: parked, waiting at lights, a frozen
   // stream. Static frames are left out (GeoNet's static-frame list does so for KITTI); 0 keeps all.
   double static_threshold = 0.05;
+  // A frame where enough pixels changed is still left out when the camera stood while other things
+  // moved (a truck passing, the traffic ahead): when at least standing_share of the features tracked
+  // from the last kept frame moved as a rotation of the camera alone explains, within
+  // standing_parallax pixels at a width of 416 (the frame's crop, tracked at up to 416 columns;
+  // data/video/camera_motion.h). 0 turns this off.
+  double standing_parallax = 0.5;
+  double standing_share = 0.5;
   double val_fraction = 0.1;         // frames held out for validation, as whole time blocks (GeoNet: 10%)
   int val_block = 100;               // frames per validation block (10 s at 10 fps)
   bool crop = true;                  // crop to the training aspect ratio before resizing (else stretch)
@@ -177,6 +184,8 @@ struct VideoDataConfig {
     v("fps", fps);
     v("source_fps", source_fps);
     v("static_threshold", static_threshold);
+    v("standing_parallax", standing_parallax);
+    v("standing_share", standing_share);
     v("val_fraction", val_fraction);
     v("val_block", val_block);
     v("crop", crop);

@@ -145,6 +145,10 @@ void VideoDataConfig::validate(Checker& c) const {
             "must be in [0, 1000] (0 = unknown)");
   c.require(std::isfinite(static_threshold) && static_threshold >= 0 && static_threshold < 1, "static_threshold",
             static_threshold, "must be in [0, 1) (a fraction of changed pixels; 0 keeps every frame)");
+  c.require(std::isfinite(standing_parallax) && standing_parallax >= 0 && standing_parallax <= 10, "standing_parallax",
+            standing_parallax, "must be in [0, 10] pixels at a width of 416 (0 turns the standing-camera test off)");
+  c.require(std::isfinite(standing_share) && standing_share > 0 && standing_share <= 1, "standing_share", standing_share,
+            "must be in (0, 1] (the share of tracked features a rotation alone explains when the camera stands)");
   c.require(std::isfinite(val_fraction) && val_fraction >= 0 && val_fraction <= 0.5, "val_fraction", val_fraction,
             "must be in [0, 0.5]");
   c.require(val_block >= 3 && val_block <= 1000000, "val_block", val_block, "must be in 3..1000000 frames");

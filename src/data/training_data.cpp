@@ -165,6 +165,7 @@ TrainingData open_videos(const DataConfig& d) {
 #else
   auto clips = open_video_clips(d);
   for (const auto& line : clips.report) spdlog::info("{}", line);
+  for (const auto& line : clips.warnings) spdlog::warn("{}", line);
   TrainingData out;
   out.root = join_list(d.videos, ",");
   out.format = "video";

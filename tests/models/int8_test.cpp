@@ -208,3 +208,85 @@ TEST(Int8, QuantizingNeedsCalibrationAFoldedNetworkAndInference) {
 }
 
 }  // namespace
+
+// int8 at every size a model may have (multiples of 8 from 16, odd multiples and shapes taller than
+// wide included) and on every calibration a user may give (1-3 frames, random, black or constant grey):
+// the DepthNet with FR, the FlowNet with FR and the PoseNet with its camera, calibrated, run, then
+// quantized again from their ranges as a model file does. Outputs are finite and of the float
+// network's shapes; scripts/fuzz.sh runs this under AddressSanitizer and UBSan, where any memory
+// error fails it.
+TEST(Int8, EverySizeAndCalibrationIsMemorySafe) {
+  if (!has_int8()) GTEST_SKIP() << "this LibTorch has no quantized engine";
+  torch::manual_seed(11);
+  geo::DepthNetOptions d;
+  d.encoder_depth = 18;
+  geo::DepthNet depth(d);
+  geo::FlowNetOptions f;
+  f.backbone.encoder_depth = 18;
+  f.zero_init_residual = false;
+  geo::FlowNet flow(f);
+  geo::PoseNetOptions p;
+  p.learn_intrinsics = true;
+  geo::PoseNet pose(p);
+  for (torch::nn::Module* m : {static_cast<torch::nn::Module*>(depth.get()), static_cast<torch::nn::Module*>(flow.get()),
+                               static_cast<torch::nn::Module*>(pose.get())}) {
+    randomize_batchnorm(*m);
+    m->eval();
+    geo::fold_batchnorm(*m);
+  }
+  torch::NoGradGuard no_grad;
+  const std::vector<std::pair<int64_t, int64_t>> sizes = {{16, 16}, {16, 48}, {24, 40}, {32, 96}, {40, 24}, {56, 120}};
+  for (const auto& [H, W] : sizes) {
+    const std::vector<torch::Tensor> calibrations = {torch::rand({1, 3, 3, H, W}), torch::zeros({2, 3, 3, H, W}),
+                                                     torch::full({3, 3, 3, H, W}, 0.5)};
+    for (size_t k = 0; k < calibrations.size(); ++k) {
+      SCOPED_TRACE(std::to_string(H) + "x" + std::to_string(W) + ", calibration " + std::to_string(k));
+      const auto& frames = calibrations[k];  // [N, frame, RGB, H, W]
+      const auto test = torch::rand({2, 3, 3, H, W});
+      auto finite = [](const std::vector<torch::Tensor>& out, const std::vector<torch::Tensor>& want) {
+        ASSERT_EQ(out.size(), want.size());
+        for (size_t s = 0; s < out.size(); ++s) {
+          EXPECT_EQ(out[s].sizes(), want[s].sizes()) << s;
+          EXPECT_TRUE(torch::isfinite(out[s]).all().item<bool>()) << s;
+        }
+      };
+      // DepthNet on the middle frames.
+      depth->net->int8.reset();
+      const auto depth_want = depth(test.select(1, 1)).disp;
+      geo::observe_int8(*depth->net);
+      depth(frames.select(1, 1));
+      geo::quantize_int8(*depth->net);
+      finite(depth(test.select(1, 1)).disp, depth_want);
+      const auto depth_ranges = depth->net->int8->ranges();
+      depth->net->int8.reset();
+      geo::quantize_int8(*depth->net, depth_ranges, H, W);
+      finite(depth(test.select(1, 1)).disp, depth_want);
+      // FlowNet on 12 channels built from the frames (what the pipeline stacks, in [-1, 1]).
+      auto flow_in = [](const torch::Tensor& s) {
+        return torch::cat({s.select(1, 1), s.select(1, 2), s.select(1, 0), s.select(1, 1).narrow(1, 0, 3)}, 1) * 2 - 1;
+      };
+      flow->net->int8.reset();
+      const auto flow_want = flow(flow_in(test)).flow;
+      geo::observe_int8(*flow->net);
+      flow(flow_in(frames));
+      geo::quantize_int8(*flow->net);
+      finite(flow(flow_in(test)).flow, flow_want);
+      // PoseNet on the snippets.
+      pose->int8.reset();
+      auto snippet = [](const torch::Tensor& s) {
+        return std::make_pair(s.select(1, 1), std::vector<torch::Tensor>{s.select(1, 0), s.select(1, 2)});
+      };
+      const auto pose_want = pose->predict(snippet(test).first, snippet(test).second);
+      geo::observe_int8(*pose);
+      pose->predict(snippet(frames).first, snippet(frames).second);
+      geo::quantize_int8(*pose);
+      const auto got = pose->predict(snippet(test).first, snippet(test).second);
+      finite({got.poses, got.K}, {pose_want.poses, pose_want.K});
+      const auto pose_ranges = pose->int8->ranges();
+      pose->int8.reset();
+      geo::quantize_int8(*pose, pose_ranges, H, W);
+      const auto again = pose->predict(snippet(test).first, snippet(test).second);
+      finite({again.poses, again.K}, {pose_want.poses, pose_want.K});
+    }
+  }
+}

@@ -70,6 +70,12 @@ def test_the_synthetic_world_reprojects_onto_its_flow():
     assert torch.allclose(u1, u + flow[0, v, u], atol=1e-3) and torch.allclose(v1, v + flow[1, v, u], atol=1e-3)
     lidar = geo.synth.world(frames=1, lidar=True, flow=False)
     assert lidar["lidar"][0].shape[1] == 4 and "flow" not in lidar
+    # Stop-and-go traffic: somewhere the camera stands (two equal poses), and the car ahead, which
+    # keeps its gap, is among the moving objects.
+    t = geo.synth.world(frames=30, seed=5, traffic=True, flow=False)
+    assert any(torch.equal(t["poses"][i], t["poses"][i + 1]) for i in range(29))
+    assert t["moving"].dtype == torch.bool and t["moving"][:, 36:44, 98:106].float().mean() > 0.5
+    assert not w["moving"].any() or w["moving"].float().mean() < 0.5
 
 
 def test_kitti_formats(tmp_path):

@@ -136,7 +136,7 @@ torch::Tensor RigidPose::matrix() const {
   return m;
 }
 
-SynthScene::SynthScene(uint64_t seed, int64_t frames, double turns) : seed_(seed) {
+SynthScene::SynthScene(uint64_t seed, int64_t frames, double turns, bool traffic) : seed_(seed) {
   if (!(turns > 0 && turns <= 10)) throw std::invalid_argument("synthetic world: turns must be in (0, 10], got " + std::to_string(turns));
   std::mt19937_64 rng(mix(seed + 12345));
   auto U = [&](double a, double b) { return std::uniform_real_distribution<double>(a, b)(rng); };
@@ -144,8 +144,23 @@ SynthScene::SynthScene(uint64_t seed, int64_t frames, double turns) : seed_(seed
   sway_amp_ = U(0.4, 1.0);
   sway_period_ = U(40, 80) / turns;
   sway_phase_ = U(0, 2 * M_PI);
+  // Traffic: stretches of 6-14 frames standing and 8-16 moving (the first and last moving frame at
+  // half speed), from a random start, a little past the last frame; city lane keeping sways less.
+  std::vector<std::pair<int64_t, int64_t>> stands;  // [first, last] frames equal to the frame before
+  if (traffic) {
+    sway_amp_ *= 0.3;
+    bool standing = U(0, 1) < 0.5;
+    travel_.push_back(0);
+    while (static_cast<int64_t>(travel_.size()) < frames + 64) {
+      const auto n = static_cast<int64_t>(std::llround(standing ? U(6, 14) : U(8, 16)));
+      if (standing) stands.emplace_back(static_cast<int64_t>(travel_.size()), static_cast<int64_t>(travel_.size()) + n - 1);
+      for (int64_t i = 0; i < n; ++i)
+        travel_.push_back(travel_.back() + (standing ? 0 : (i == 0 || i == n - 1 ? 0.5 : 1.0) * speed_));
+      standing = !standing;
+    }
+  }
   const double h = kCameraHeight;
-  const double z_end = static_cast<double>(frames) * speed_ + 90;
+  const double z_end = travel(frames) + 90;
   auto colour = [&](double lo, double hi) {
     return std::array<float, 3>{float(U(lo, hi)), float(U(lo, hi)), float(U(lo, hi))};
   };
@@ -170,21 +185,62 @@ SynthScene::SynthScene(uint64_t seed, int64_t frames, double turns) : seed_(seed
       const double x = side * U(4.2, 5.5), height = U(3.5, 6);
       add({x - 0.15, h - height, z - 0.15}, {x + 0.15, h, z + 0.15}, 2, colour(0.2, 0.8));
     }
-    for (double z = U(5, 15); z < z_end; z += U(10, 25)) {  // boxes
-      const double s = U(0.8, 2.0), x = side * U(3.5, 5.0), height = U(0.8, 2.5);
+    for (double z = U(5, 15); z < z_end; z += U(10, 25)) {  // boxes (beyond the overtaking lane in traffic)
+      const double s = U(0.8, 2.0), x = side * U(3.5, 5.0) + (traffic && side > 0 ? 1.5 : 0.0), height = U(0.8, 2.5);
       add({x - s / 2, h - height, z - s / 2}, {x + s / 2, h, z + s / 2}, 3, colour(0.15, 0.95));
     }
   }
-  for (double z = U(10, 20); z < z_end - 20; z += U(18, 30)) {  // cars: oncoming left, ahead right
-    const bool oncoming = U(0, 1) < 0.5;
-    const double x = oncoming ? -3.2 : 3.2, v = oncoming ? -U(0.3, 1.0) : U(0.2, 0.7);
-    add({x - 0.9, h - 1.5, z}, {x + 0.9, h, z + 4.2}, 4, colour(0.1, 0.95), {0, 0, v});
+  if (!traffic) {
+    for (double z = U(10, 20); z < z_end - 20; z += U(18, 30)) {  // cars: oncoming left, ahead right
+      const bool oncoming = U(0, 1) < 0.5;
+      const double x = oncoming ? -3.2 : 3.2, v = oncoming ? -U(0.3, 1.0) : U(0.2, 0.7);
+      add({x - 0.9, h - 1.5, z}, {x + 0.9, h, z + 4.2}, 4, colour(0.1, 0.95), {0, 0, v});
+    }
+  } else {
+    // Oncoming cars on the left all along the drive (they keep coming while the camera stands).
+    const double reach = z_end + static_cast<double>(frames);
+    for (double z = U(5, 15); z < reach; z += U(10, 20))
+      add({-4.1, h - 1.5, z}, {-2.3, h, z + 4.2}, 4, colour(0.1, 0.95), {0, 0, -U(0.5, 1.2)});
+    // The car ahead in the camera's lane, 7-11 m ahead, moving with the camera.
+    const double gap = U(7, 11);
+    add({-0.9, h - 1.5, gap}, {0.9, h, gap + 4.2}, 4, colour(0.1, 0.95));
+    boxes_.back().follows_camera = true;
+    // A truck overtaking on the right in the middle of every stretch the camera stands, its front
+    // 2-8 m ahead of the camera then.
+    for (const auto& [first, last] : stands) {
+      if (first >= frames) break;
+      const double mid = 0.5 * static_cast<double>(first + last), v = U(0.7, 1.1), len = U(9, 12);
+      const double front = travel(first) + U(2, 8), z0 = front - len - v * mid;
+      add({1.5, h - U(3.2, 3.8), z0}, {4.0, h, z0 + len}, 4, colour(0.2, 0.95), {0, 0, v});
+    }
   }
   add({-300, h - 80, z_end}, {300, h, z_end + 1}, 5, colour(0.45, 0.75));  // distant backdrop
 }
 
+double SynthScene::travel(int64_t frame) const {
+  const auto n = static_cast<int64_t>(travel_.size());
+  if (frame < 0 || n == 0) return speed_ * static_cast<double>(frame);
+  if (frame < n) return travel_[static_cast<size_t>(frame)];
+  return travel_.back() + speed_ * static_cast<double>(frame - n + 1);  // past the schedule: driving on
+}
+
+bool SynthScene::is_moving(int id) const {
+  if (id < 0) return false;
+  const auto& b = boxes_[static_cast<size_t>(id)];
+  return b.follows_camera || b.velocity.x != 0 || b.velocity.y != 0 || b.velocity.z != 0;
+}
+
+Vec3 SynthScene::offset(int id, int64_t frame) const {
+  const auto& b = boxes_[static_cast<size_t>(id)];
+  Vec3 d = static_cast<double>(frame) * b.velocity;
+  if (b.follows_camera) d.z += travel(frame);
+  return d;
+}
+
 RigidPose SynthScene::camera(int64_t frame) const {
-  const double t = static_cast<double>(frame);
+  // The sway is a function of the road driven (frames at the mean speed): a standing camera neither
+  // moves nor turns.
+  const double t = travel_.empty() ? static_cast<double>(frame) : travel(frame) / speed_;
   const double w = 2 * M_PI / sway_period_;
   const double x = sway_amp_ * std::sin(w * t + sway_phase_);
   const double dx = sway_amp_ * w * std::cos(w * t + sway_phase_);
@@ -192,7 +248,7 @@ RigidPose SynthScene::camera(int64_t frame) const {
   RigidPose p;
   const double c = std::cos(yaw), s = std::sin(yaw);
   p.R = {c, 0, s, 0, 1, 0, -s, 0, c};
-  p.c = {x, 0, speed_ * t};
+  p.c = {x, 0, travel_.empty() ? speed_ * t : travel(frame)};
   return p;
 }
 
@@ -207,10 +263,9 @@ SynthScene::Hit SynthScene::cast(const Vec3& o, const Vec3& d, int64_t frame, do
       best.normal = {0, -1, 0};
     }
   }
-  const double f = static_cast<double>(frame);
   for (size_t i = 0; i < boxes_.size(); ++i) {
     const auto& b = boxes_[i];
-    const Vec3 lo = b.lo + f * b.velocity, hi = b.hi + f * b.velocity;
+    const Vec3 shift = offset(static_cast<int>(i), frame), lo = b.lo + shift, hi = b.hi + shift;
     double t0 = 1e-6, t1 = best.t;
     int axis = -1;
     double sign = 0;
@@ -247,9 +302,12 @@ SynthScene::Hit SynthScene::cast(const Vec3& o, const Vec3& d, int64_t frame, do
   return best;
 }
 
-Vec3 SynthScene::move(const Vec3& p, int id, int64_t df) const {
+Vec3 SynthScene::move(const Vec3& p, int id, int64_t frame, int64_t df) const {
   if (id < 0) return p;
-  return p + static_cast<double>(df) * boxes_[id].velocity;
+  const auto& b = boxes_[static_cast<size_t>(id)];
+  Vec3 q = p + static_cast<double>(df) * b.velocity;
+  if (b.follows_camera) q.z += travel(frame + df) - travel(frame);
+  return q;
 }
 
 std::array<float, 3> SynthScene::shade(const Hit& hit, int64_t frame) const {
@@ -269,7 +327,7 @@ std::array<float, 3> SynthScene::shade(const Hit& hit, int64_t frame) const {
     b = v * (std::abs(p.x) > 6 ? 0.85 : 1.05);
   } else {
     const SynthBox& box = boxes_[hit.id];
-    p = p - static_cast<double>(frame) * box.velocity;  // texture lives in the object's frame
+    p = p - offset(hit.id, frame);  // texture lives in the object's frame
     const double n = fbm(p, box.texture_scale, seed_ + 31 * hit.id);
     double k = 0.55 + 0.6 * n;
     const double up = kCameraHeight - p.y;  // height above the road
@@ -344,7 +402,7 @@ SynthFlow render_flow(const SynthScene& scene, int64_t frame, const SynthOptions
         const Vec3 d = rotate(p0.R, {(x - k.cx) / k.fx, (y - k.cy) / k.fy, 1.0});
         const auto hit = scene.cast(p0.c, d, frame);
         if (hit.id == -2) continue;
-        const Vec3 cam1 = rotate_transposed(p1.R, scene.move(hit.point, hit.id, 1) - p1.c);
+        const Vec3 cam1 = rotate_transposed(p1.R, scene.move(hit.point, hit.id, frame, 1) - p1.c);
         if (cam1.z < 1e-3) continue;
         const double u = k.fx * cam1.x / cam1.z + k.cx, v = k.fy * cam1.y / cam1.z + k.cy;
         if (u < 0 || v < 0 || u > W - 1 || v > H - 1) continue;

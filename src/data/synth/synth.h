@@ -1,6 +1,9 @@
 // A procedural driving world with exact ground truth: a road plane, building facades on
 // both sides, poles and boxes at 5-80 m, and independently moving cars, seen by a pinhole camera
-// that drives forward about 1 m per frame with gentle turns. Rendered by exact ray casting with
+// that drives forward about 1 m per frame with gentle turns. With `traffic`, stop-and-go city
+// traffic instead: the camera stands for stretches and starts again, a car ahead in its lane keeps
+// its gap (moving with the camera: the case self-supervised depth learns as infinitely far), a
+// truck overtakes on the right while the camera stands, and oncoming cars pass on the left. Rendered by exact ray casting with
 // supersampling; every texture is a deterministic function of the surface point (solid noise,
 // stripes, windows, lane marks), so images of one point agree across frames.
 //
@@ -39,6 +42,8 @@ struct SynthOptions {
   int threads = 0;                // 0 = all cores
   double turns = 1.0;             // how winding the road is: the sway's frequency x turns (heading
                                   // change per frame x turns^2); rotation is what pins a learned focal length
+  bool traffic = false;           // stop-and-go traffic (SynthScene): standing stretches, a car ahead
+                                  // keeping its gap, overtaking trucks, oncoming cars
 
   // "tiny" (64x208, CI) or "kitti" (375x1242, KITTI's intrinsics). Unknown names throw.
   static SynthOptions preset_named(const std::string& name);
@@ -58,6 +63,7 @@ struct RigidPose {
 struct SynthBox {
   Vec3 lo, hi;           // extent at frame 0
   Vec3 velocity;         // metres per frame (0 for static objects)
+  bool follows_camera = false;  // moves along z with the camera's travel (a car keeping its gap)
   int material = 0;      // 1 wall, 2 pole, 3 box, 4 car, 5 backdrop (0 = ground plane)
   std::array<float, 3> colour{0.5f, 0.5f, 0.5f};
   double texture_scale = 1.0;
@@ -69,12 +75,20 @@ inline constexpr double kSynthCameraHeight = 1.65;
 
 class SynthScene {
  public:
-  // `turns` > 0 scales the sway's frequency (1: gentle turns, up to ~1 degree of heading per frame).
-  SynthScene(uint64_t seed, int64_t frames, double turns = 1.0);
+  // `turns` > 0 scales the sway's frequency (1: gentle turns, up to ~1 degree of heading per frame);
+  // `traffic`: stop-and-go traffic (see the top of this file).
+  SynthScene(uint64_t seed, int64_t frames, double turns = 1.0, bool traffic = false);
 
   RigidPose camera(int64_t frame) const;  // camera-to-world at `frame`
+  // Metres the camera has driven along the road by `frame` (frame >= 0); the camera stands between
+  // two frames of equal travel (only with traffic).
+  double travel(int64_t frame) const;
+  bool camera_moves(int64_t frame) const { return frame > 0 && travel(frame) != travel(frame - 1); }  // since frame-1
   const std::vector<SynthBox>& boxes() const { return boxes_; }
-  bool is_moving(int id) const { return id >= 0 && boxes_[id].velocity.x + boxes_[id].velocity.y + boxes_[id].velocity.z != 0; }
+  // Whether box `id` moves independently of the static world (KITTI 2015's obj_map objects).
+  bool is_moving(int id) const;
+  // Displacement of box `id` at `frame` from where it stands at frame 0.
+  Vec3 offset(int id, int64_t frame) const;
 
   struct Hit {
     double t = 0;      // ray parameter (camera z for camera rays, metres for unit rays)
@@ -86,11 +100,12 @@ class SynthScene {
   // Colour of a hit at `frame` (texture in the object's own frame, fixed Lambertian shading).
   std::array<float, 3> shade(const Hit& hit, int64_t frame) const;
   // Where the surface point `p` (on object id, at `frame`) is at frame `frame + df`.
-  Vec3 move(const Vec3& p, int id, int64_t df) const;
+  Vec3 move(const Vec3& p, int id, int64_t frame, int64_t df) const;
 
  private:
   uint64_t seed_;
   double speed_, sway_amp_, sway_period_, sway_phase_;
+  std::vector<double> travel_;  // traffic: metres driven by each frame (empty: speed_ x frame)
   std::vector<SynthBox> boxes_;
   static constexpr double kCameraHeight = kSynthCameraHeight;  // ground plane y (camera y points down)
 };
@@ -103,7 +118,7 @@ struct SynthFrame {
 };
 SynthFrame render_frame(const SynthScene& scene, int64_t frame, const SynthOptions& options);
 // KITTI 2015's obj_map of a frame: 0 = static scene (ground, buildings, poles, boxes, sky),
-// k = the k-th moving car of the scene (1-based, in box order) -> [H,W] uint8.
+// k = the k-th moving object of the scene (1-based, in box order) -> [H,W] uint8.
 torch::Tensor synth_object_map(const SynthScene& scene, const torch::Tensor& object);
 
 struct SynthFlow {

@@ -65,7 +65,7 @@ SynthSnippetSets render_synth_snippets(const SynthOptions& world, int64_t seq_le
   std::vector<SynthSnippets::Target> train, val;
   const int64_t half = seq_length / 2;
   for (int d = 0; d < world.train_drives; ++d) {
-    const SynthScene scene(synth_drive_seed(world.seed, 0, d), world.frames_per_drive, world.turns);
+    const SynthScene scene(synth_drive_seed(world.seed, 0, d), world.frames_per_drive, world.turns, world.traffic);
     auto& drive = frames->emplace_back();
     for (int64_t f = 0; f < world.frames_per_drive; ++f) {
       // As a PNG holds it (image_io's write_image, then the 8-bit read scaled by 1/255).

@@ -82,15 +82,16 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
   std::vector<std::string> train, val, test, test_scenes;
   for (int d = 0; d < drives; ++d) {
     const bool is_test = d >= o.train_drives;
-    const SynthScene scene(synth_drive_seed(o.seed, 0, d), o.frames_per_drive, o.turns);
+    const SynthScene scene(synth_drive_seed(o.seed, 0, d), o.frames_per_drive, o.turns, o.traffic);
     const std::string folder = synth_drive_folder(d + 1), dir = raw + "/" + folder;
-    for (const char* sub : {"/image_02/data", "/velodyne_points/data", "/proj_depth/groundtruth/image_02"})
+    for (const char* sub : {"/image_02/data", "/velodyne_points/data", "/proj_depth/groundtruth/image_02", "/obj_map/image_02"})
       fs::create_directories(dir + sub);
     for (int64_t f = 0; f < o.frames_per_drive; ++f) {
       const auto frame = render_frame(scene, f, o);
       const std::string name = zero_padded(f, 10);
       write_image(dir + "/image_02/data/" + name + ".png", frame.image);
       write_depth_png(dir + "/proj_depth/groundtruth/image_02/" + name + ".png", frame.depth);
+      write_object_map(dir + "/obj_map/image_02/" + name + ".png", synth_object_map(scene, frame.object));
       write_velodyne(dir + "/velodyne_points/data/" + name + ".bin", render_lidar(scene, f, o));
       if (f > 0 && f + 1 < o.frames_per_drive) {  // targets need both neighbours
         if (is_test) test.push_back(folder + "/image_02/data/" + name + ".png");
@@ -112,7 +113,7 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
   for (const char* sub : {"/image_2", "/flow_occ", "/flow_noc", "/obj_map", "/calib_cam_to_cam", "/depth"})
     fs::create_directories(flow + sub);
   for (int i = 0; i < o.flow_pairs; ++i) {
-    const SynthScene scene(synth_drive_seed(o.seed, 1, i), 40, o.turns);
+    const SynthScene scene(synth_drive_seed(o.seed, 1, i), 40, o.turns, o.traffic);
     const int64_t f = 5 + (i * 7) % 30;
     const std::string name = zero_padded(i, 6);
     const auto before = render_frame(scene, f - 1, o);  // KITTI 2015's multi-view frame 09
@@ -135,7 +136,7 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
   const std::string seq = root + "/odometry/sequences/09";
   fs::create_directories(seq + "/image_2");
   fs::create_directories(root + "/odometry/poses");
-  const SynthScene odo(synth_drive_seed(o.seed, 2, 9), o.odometry_frames, o.turns);
+  const SynthScene odo(synth_drive_seed(o.seed, 2, 9), o.odometry_frames, o.turns, o.traffic);
   std::ostringstream times;
   for (int64_t f = 0; f < o.odometry_frames; ++f) {
     write_image(seq + "/image_2/" + zero_padded(f, 6) + ".png", render_frame(odo, f, o).image);
@@ -154,9 +155,10 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
   write_file_atomic(root + "/README.txt",
                     kReadmeStart + " (preset " + o.preset +
                         ", seed " + std::to_string(o.seed) + ", " + std::to_string(o.width) + "x" +
-                        std::to_string(o.height) + ").\nraw/ = KITTI raw layout with Eigen-style "
-                        "splits in raw/splits; kitti2015/ = KITTI 2015 flow layout (obj_map: the moving cars); odometry/ = "
-                        "KITTI odometry layout.\nDense ground-truth depth: raw/<drive>/proj_depth/"
+                        std::to_string(o.height) + (o.traffic ? ", stop-and-go traffic" : "") +
+                        ").\nraw/ = KITTI raw layout with Eigen-style "
+                        "splits in raw/splits; kitti2015/ = KITTI 2015 flow layout (obj_map: the moving objects); odometry/ = "
+                        "KITTI odometry layout.\nMoving objects per raw frame: raw/<drive>/obj_map/image_02 (uint8, 0 static).\nDense ground-truth depth: raw/<drive>/proj_depth/"
                         "groundtruth/image_02 and kitti2015/training/depth (uint16, depth x 256).\ncamera_height.txt = "
                         "the camera's height above the road in metres (geo_eval --scaling camera-height).\n");
   std::ostringstream height;
@@ -167,7 +169,7 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
 double synth_world_bytes(const SynthOptions& o) {
   const double image = 3.0 * o.height * o.width, scan = 16.0 * o.lidar_beams * (360.0 / o.lidar_azimuth_step_deg);
   const double frames = static_cast<double>(o.train_drives + o.test_drives) * static_cast<double>(o.frames_per_drive);
-  return frames * (image + 2.0 * o.height * o.width + scan) + o.flow_pairs * (3 * image + 4 * 6.0 * o.height * o.width) +
+  return frames * (image + 3.0 * o.height * o.width + scan) + o.flow_pairs * (3 * image + 4 * 6.0 * o.height * o.width) +
          static_cast<double>(o.odometry_frames) * image;
 }
 

@@ -2,8 +2,9 @@
 // one root, so every reader, the trainer and the evaluator run on it unchanged:
 //   raw/<date>/calib_cam_to_cam.txt, calib_velo_to_cam.txt
 //   raw/<date>/<date>_drive_NNNN_sync/image_02/data/%010d.png, velodyne_points/data/%010d.bin,
-//       proj_depth/groundtruth/image_02/%010d.png (dense depth x 256), poses.txt (camera 02 to
-//       world, KITTI pose format, frame 0 = identity)
+//       proj_depth/groundtruth/image_02/%010d.png (dense depth x 256), obj_map/image_02/%010d.png
+//       (independently moving objects, as KITTI 2015's obj_map), poses.txt (camera 02 to world,
+//       KITTI pose format, frame 0 = identity)
 //   raw/splits/eigen_zhou/{train,val}_files.txt ("folder frame l"), raw/splits/eigen/test_files.txt
 //       (image paths), raw/splits/eigen/test_scenes.txt
 //   kitti2015/training/image_2/%06d_10.png, %06d_11.png, flow_occ/, flow_noc/ (16-bit flow PNG),

@@ -27,7 +27,7 @@ double changed_fraction(const torch::Tensor& a, const torch::Tensor& b) {
 FrameSelector::FrameSelector(int64_t stride, double static_threshold)
     : stride_(std::max<int64_t>(1, stride)), threshold_(static_threshold) {}
 
-bool FrameSelector::offer(int64_t index, const torch::Tensor& thumbnail) {
+bool FrameSelector::offer(int64_t index, const torch::Tensor& thumbnail, const std::function<bool()>& camera_moved) {
   ++decoded_;
   if (!wants(index)) {
     ++by_rate_;
@@ -40,10 +40,19 @@ bool FrameSelector::offer(int64_t index, const torch::Tensor& thumbnail) {
       ++static_;
       return false;
     }
+    if (camera_moved && !camera_moved()) {
+      ++standing_;
+      return false;
+    }
   }
   last_kept_ = thumbnail;
   kept_.push_back(index);
   return true;
+}
+
+double FrameSelector::moving_share() const {
+  const int64_t after_first = looked_at() - 1;
+  return after_first > 0 ? static_cast<double>(static_cast<int64_t>(kept_.size()) - 1) / static_cast<double>(after_first) : 1.0;
 }
 
 ClipRuns split_clip(int64_t n, double val_fraction, int64_t val_block, int64_t seq_length) {

@@ -7,6 +7,7 @@
 #include <torch/torch.h>
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -28,29 +29,40 @@ double changed_fraction(const torch::Tensor& a, const torch::Tensor& b);
 
 // Decides frame by frame, in decoding order, which frames are kept: every `stride`-th frame is looked
 // at, and kept unless less than `static_threshold` of its pixels changed since the last kept frame
-// (so after a stop the next kept frame is the next one that moved, as GeoNet's static-frame removal).
+// or, where enough changed, the camera stood while other things moved (`camera_moved`, for example
+// camera_motion.h's test against the last kept frame). So after a stop the next kept frame is the
+// next one where the camera moved, as GeoNet's static-frame removal.
 class FrameSelector {
  public:
   FrameSelector(int64_t stride, double static_threshold);
   // Frame `index` (decoding order, from 0) with its thumbnail (undefined for frames skipped by the
-  // rate: wants() says whether one is needed). True when the frame is kept.
+  // rate: wants() says whether one is needed). `camera_moved`, where given, is asked when enough
+  // pixels changed: whether the camera moved since the last kept frame. True when the frame is kept.
   bool wants(int64_t index) const { return index % stride_ == 0; }
-  bool offer(int64_t index, const torch::Tensor& thumbnail);
+  bool offer(int64_t index, const torch::Tensor& thumbnail, const std::function<bool()>& camera_moved = {});
 
   const std::vector<int64_t>& kept() const { return kept_; }
   int64_t decoded() const { return decoded_; }
+  int64_t looked_at() const { return decoded_ - by_rate_; }
   int64_t skipped_by_rate() const { return by_rate_; }
-  int64_t skipped_static() const { return static_; }
+  int64_t skipped_static() const { return static_; }      // under static_threshold of the pixels changed
+  int64_t skipped_standing() const { return standing_; }  // pixels changed, the camera stood
   double largest_change() const { return largest_change_; }  // over the frames looked at
+  // The share of the frames looked at after the first where the camera had moved since the last
+  // kept frame (1 when only one was looked at).
+  double moving_share() const;
 
  private:
   int64_t stride_;
   double threshold_;
   torch::Tensor last_kept_;
   std::vector<int64_t> kept_;
-  int64_t decoded_ = 0, by_rate_ = 0, static_ = 0;
+  int64_t decoded_ = 0, by_rate_ = 0, static_ = 0, standing_ = 0;
   double largest_change_ = 0;
 };
+
+// The camera moved in fewer than this share of a clip's frames: it is unlikely to teach depth.
+constexpr double kFewMovingFrames = 1.0 / 3.0;
 
 // Kept frames 0..n-1 of one clip split into contiguous runs: validation blocks of at most
 // `val_block` frames, val_fraction of the clip in all, spread over it (block j ends at (j+1)/B of the

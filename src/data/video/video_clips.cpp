@@ -3,6 +3,7 @@
 #include "data/image_io.h"
 #include "data/visual_outputs.h"
 
+#include "data/video/camera_motion.h"
 #include "data/video/clip_camera.h"
 #include "data/video/frame_selection.h"
 #include "data/video/frame_stream.h"
@@ -16,6 +17,8 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <functional>
+#include <optional>
 #include <stdexcept>
 
 namespace fs = std::filesystem;
@@ -108,7 +111,7 @@ std::string fixed(double v, int digits) {
 }
 
 // Decodes one clip in a stream and chooses its frames.
-Clip read_clip(const std::string& path, const DataConfig& d, std::string* report) {
+Clip read_clip(const std::string& path, const DataConfig& d, std::string* report, std::string* warning) {
   Clip c;
   c.path = path;
   c.height = d.height;
@@ -117,6 +120,11 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
   FrameStream stream(path, "clip");
   const double source_fps = stream.is_video() && v.source_fps == 0 ? stream.fps() : v.source_fps;
   FrameSelector selector(frame_rate_stride(source_fps, v.fps), v.static_threshold);
+  const CameraMotionOptions standing{v.standing_parallax, v.standing_share};
+  // The standing-camera test sees the crop window at up to kMotionWidth columns: at least the
+  // training size's detail, and the same test whatever size the networks train at.
+  int64_t motion_h = 0, motion_w = 0;
+  std::optional<StandingCameraTest> standing_test;
   std::string name;
   cv::Mat m;
   while (true) {
@@ -133,11 +141,20 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
       // for such data); the snippets carry a nominal one.
       const int64_t W0 = stream.width(), H0 = stream.height();
       c.window = v.crop ? crop_to_aspect(W0, H0, d.width, d.height, v.crop_y) : CropWindow{0, 0, W0, H0};
-      c.K = cropped_resized_intrinsics(clip_camera(d.camera, W0, H0, path, !d.camera.given()), c.window, d.height, d.width)
-                .to(torch::kFloat32);
+      const auto camera = clip_camera(d.camera, W0, H0, path, !d.camera.given());
+      c.K = cropped_resized_intrinsics(camera, c.window, d.height, d.width).to(torch::kFloat32);
+      motion_w = std::min<int64_t>(c.window.width, kMotionWidth);
+      motion_h = std::max<int64_t>(8, (c.window.height * motion_w + c.window.width / 2) / c.window.width);
+      standing_test.emplace(cropped_resized_intrinsics(camera, c.window, motion_h, motion_w), standing);
     }
     const cv::Mat small = crop_resize(m, c.window, d.height, d.width);
-    if (!selector.offer(idx, motion_thumbnail(mat_to_tensor(small, path)))) continue;
+    cv::Mat grey;
+    if (v.standing_parallax > 0) grey = motion_grey(crop_resize(m, c.window, motion_h, motion_w));
+    std::function<bool()> camera_moved;
+    if (v.standing_parallax > 0) camera_moved = [&] { return standing_test->moved(grey); };
+    const bool kept = selector.offer(idx, motion_thumbnail(mat_to_tensor(small, path)), camera_moved);
+    if (v.standing_parallax > 0) standing_test->looked_at(grey, kept);
+    if (!kept) continue;
     c.index.push_back(idx);
     if (stream.is_video()) {  // kept in memory as JPEG; a folder's frames are read again from disk
       c.jpeg.emplace_back();
@@ -164,8 +181,16 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
   const int64_t stride = frame_rate_stride(source_fps, v.fps);
   *report = "clip '" + path + "': " + std::to_string(total) + " frames (" + std::to_string(W0) + "x" + std::to_string(H0) +
             ", " + rate + "); " + ordinal(stride) + (stride > 1 ? " for " + fixed(v.fps, 0) + " fps" : "") + ", " +
-            std::to_string(selector.skipped_static()) + " static frames left out (under " +
-            fixed(100 * v.static_threshold, 1) + "% of the pixels changed): " + std::to_string(kept) + " kept";
+            std::to_string(selector.skipped_static() + selector.skipped_standing()) + " static frames left out (" +
+            std::to_string(selector.skipped_static()) + " with under " + fixed(100 * v.static_threshold, 1) +
+            "% of the pixels changed, " + std::to_string(selector.skipped_standing()) +
+            " with the camera standing while other things moved): " + std::to_string(kept) + " kept; the camera moved in " +
+            fixed(100 * selector.moving_share(), 0) + "% of the frames looked at";
+  if (selector.moving_share() < kFewMovingFrames)
+    *warning = "clip '" + path + "': the camera moved in only " + fixed(100 * selector.moving_share(), 0) + "% of its " +
+               std::to_string(selector.looked_at()) + " frames looked at (it stood while other things moved): such a " +
+               "clip is unlikely to teach depth. A longer clip with more driving helps, or start from a model trained " +
+               "on forward driving (geo_train --init RUN)";
   if (c.window.width != W0 || c.window.height != H0)
     *report += "; cropped to " + std::to_string(c.window.width) + "x" + std::to_string(c.window.height) + " at (" +
                std::to_string(c.window.x0) + ", " + std::to_string(c.window.y0) + ")";
@@ -195,8 +220,9 @@ VideoData open_video_clips(const DataConfig& d) {
   std::vector<ClipSnippets::Item> train, val;
   VideoData out;
   for (const auto& path : d.videos) {
-    std::string line;
-    clips->push_back(read_clip(path, d, &line));
+    std::string line, warning;
+    clips->push_back(read_clip(path, d, &line, &warning));
+    if (!warning.empty()) out.warnings.push_back(warning);
     const size_t ci = clips->size() - 1;
     const auto n = static_cast<int64_t>(clips->back().index.size());
     const auto runs = split_clip(n, d.video.val_fraction, d.video.val_block, d.seq_length);

@@ -19,6 +19,7 @@ namespace geo {
 struct VideoData {
   std::shared_ptr<SnippetSource> train, val;  // val null when no clip holds a validation block
   std::vector<std::string> report;            // a line per clip: what was kept and why
+  std::vector<std::string> warnings;          // clips unlikely to teach depth, with what helps
 };
 
 // Opens data.videos with data.camera and data.video. Throws (ConfigError or std::runtime_error)
