@@ -404,8 +404,9 @@ int bench(Options& o, const std::string& command_line) {
   const std::string config_file = o.config_path.empty() ? "" : geo::resolve_config_path(o.config_path);
   const geo::Config config = config_file.empty() ? geo::parse_config("", "<defaults>", o.overrides)
                                                  : geo::load_config(config_file, o.overrides);
-  geo::check_outputs({{"--json", o.json_path}, {"--markdown", o.markdown_path}},
-                     {config_file, o.data_root, config.data.root});
+  auto reads = geo::config_reads(config);
+  reads.insert(reads.end(), {config_file, o.data_root});
+  geo::check_outputs({{"--json", o.json_path}, {"--markdown", o.markdown_path}}, reads);
   const torch::Device device = geo::select_device(o.device_name);
   if (o.int8 && !device.is_cpu()) throw std::runtime_error("--int8: int8 inference runs on the CPU, not on " + device.str());
   if (o.int8 && geo::select_int8_engine().empty())

@@ -109,8 +109,10 @@ int evaluate(EvalCommand& c) {
   choice.need_model = c.export_gt.empty();
   const auto chosen = geo::choose_source(choice);
   // Before minutes of evaluation: the outputs replace nothing this command reads (the model, the
-  // predictions, the data root's ground truth) and not each other.
-  geo::check_outputs({{"--output", c.output}, {"--output-poses", o.output_poses}}, {chosen.reads, c.checkpoint, o.data_root});
+  // predictions, the split file, the calibration frames, the data root's ground truth) and not each other.
+  auto reads = geo::evaluation_reads(choice, chosen, o.split_file);
+  reads.push_back(o.data_root);
+  geo::check_outputs({{"--output", c.output}, {"--output-poses", o.output_poses}, {"--export-gt", c.export_gt}}, reads);
   geo::EvalResult r;
   if (!c.export_gt.empty()) {
     if (o.split != "eigen") throw std::runtime_error("--export-gt is for --split eigen (got " + o.split + ")");

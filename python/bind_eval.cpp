@@ -38,7 +38,9 @@ py::object evaluate_split(const std::string& split, const std::string& data_root
     choice.checkpoint = checkpoint, choice.predictions = predictions, choice.trivial = trivial, choice.device = device;
     choice.precision = precision, choice.calibration = calibration, choice.calibration_frames = calibration_frames;
     const auto chosen = choose_source(choice);
-    check_outputs({{"output", output}}, {chosen.reads, checkpoint, o.data_root});
+    auto reads = evaluation_reads(choice, chosen, o.split_file);
+    reads.push_back(o.data_root);
+    check_outputs({{"output", output}}, reads);
     const EvalResult r = evaluate(o, *chosen.source);
     json = r.json();
     if (!output.empty()) write_file_atomic(output, json);

@@ -474,6 +474,15 @@ std::vector<std::string> config_differences(const std::string& yaml_a, const std
   return out;
 }
 
+std::vector<std::string> config_reads(const Config& c) {
+  const auto& d = c.data;
+  std::vector<std::string> reads = {d.root, d.train_list, d.val_list, d.camera.calib_file};
+  if (!c.source.empty() && c.source.front() != '<') reads.push_back(c.source);
+  reads.insert(reads.end(), d.videos.begin(), d.videos.end());
+  for (const auto& s : c.stages) reads.push_back(s.init);
+  return reads;
+}
+
 std::string to_yaml(const Config& config) {
   YAML::Emitter out;
   EmitVisitor visitor{out};

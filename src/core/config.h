@@ -488,6 +488,11 @@ std::string resolve_config_path(const std::string& name);
 // tool (cmake --install), else the source tree's configs/.
 std::string shipped_config_dir();
 
+// Every file and folder a config makes a command read: the config file itself, data.root, the
+// training and validation lists, the clips, the camera's calibration file and each stage's init.
+// What a command's outputs must not replace (core/files.h check_outputs).
+std::vector<std::string> config_reads(const Config& config);
+
 // The resolved config as YAML (every key, defaults included). parse_config(to_yaml(c)) == c.
 std::string to_yaml(const Config& config);
 

@@ -295,4 +295,9 @@ std::string eval_data_root(const std::string& given) {
   return root;
 }
 
+std::vector<std::string> evaluation_reads(const SourceChoice& choice, const ChosenSource& chosen,
+                                          const std::string& split_file) {
+  return {chosen.reads, choice.checkpoint, choice.predictions, choice.untrained_config, choice.calibration, split_file};
+}
+
 }  // namespace geo

@@ -92,6 +92,11 @@ struct ChosenSource {
   std::string reads;                     // the file or folder it reads ("" for baselines)
 };
 ChosenSource choose_source(const SourceChoice& choice);
+// Every file and folder an evaluation of `chosen` reads besides the data root: the source's files,
+// the model, the untrained network's config, the calibration frames and `split_file`. What its
+// outputs must not replace (core/files.h check_outputs).
+std::vector<std::string> evaluation_reads(const SourceChoice& choice, const ChosenSource& chosen,
+                                          const std::string& split_file);
 
 // geo_eval's data root: `given`, else $GEO_KITTI_ROOT, else ./data/kitti; an error when that is no folder.
 std::string eval_data_root(const std::string& given);
