@@ -5,6 +5,9 @@
 #include <torch/version.h>
 
 #include <algorithm>
+#if defined(__GNUC__) && defined(__x86_64__)
+#include <cpuid.h>
+#endif
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -36,6 +39,20 @@ std::string select_int8_engine() {
       return name;
     }
   return "";
+}
+
+bool int8_reduced_range() {
+#if defined(__GNUC__) && defined(__x86_64__)
+  static const bool reduced = [] {
+    // AVX-VNNI (which __builtin_cpu_supports does not know in every GCC): CPUID leaf 7, sub-leaf 1, EAX bit 4.
+    unsigned eax = 0, ebx = 0, ecx = 0, edx = 0;
+    const bool avx_vnni = __get_cpuid_count(7, 1, &eax, &ebx, &ecx, &edx) && (eax & (1u << 4));
+    return !avx_vnni && !__builtin_cpu_supports("avx512vnni");
+  }();
+  return reduced;
+#else
+  return false;
+#endif
 }
 
 namespace {
@@ -318,9 +335,10 @@ struct Int8Graph::State {
       double h = std::max(0.0, static_cast<double>(hi));
       // A point that stayed (nearly) constant at 0 during calibration (a dead ReLU): any scale
       // represents it, but a tiny one makes oneDNN's requantization factors overflow.
-      if (h - l < 1e-4) h = l + 1e-4 * 255;
-      scale = (h - l) / 255.0;
-      zero_point = std::clamp<int64_t>(std::llround(-l / scale), 0, 255);
+      const double top = int8_reduced_range() ? 127.0 : 255.0;
+      if (h - l < 1e-4) h = l + 1e-4 * top;
+      scale = (h - l) / top;
+      zero_point = std::clamp<int64_t>(std::llround(-l / scale), 0, static_cast<int64_t>(top));
     }
   };
 

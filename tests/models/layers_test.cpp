@@ -6,6 +6,7 @@
 #include <mutex>
 #include <thread>
 
+#include "core/runtime.h"
 #include "models/depth_net.h"
 #include "models/fr.h"
 #include "models/conv_bn.h"
@@ -68,7 +69,9 @@ TEST(Layers, Conv2dIsExactForEveryChannelCount) {
                      b64 = b.detach().to(torch::kFloat64).requires_grad_();
           const auto ref = torch::conv2d(x64, w64, b64, 1, k / 2);
           const auto ref_grads = torch::autograd::grad({ref}, {x64, w64, b64}, {g.to(torch::kFloat64)});
-          const double tol = dtype == torch::kFloat32 ? 1e-4 : 0.1;  // relative to the largest value
+          // Relative to the largest value. Without native bfloat16 (cpu_has_fast_bf16) LibTorch sums bfloat16
+          // products in bfloat16: up to 16% off at 129 channels x 7x7 there; garbage still fails.
+          const double tol = dtype == torch::kFloat32 ? 1e-4 : cpu_has_fast_bf16() ? 0.1 : 0.25;
           const std::string what = c10::str(dtype, " k=", k, " in=", ci, " out=", co);
           ASSERT_EQ(y.sizes(), ref.sizes()) << what;
           for (const auto& out : {y, y_inference})
