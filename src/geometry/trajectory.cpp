@@ -29,9 +29,26 @@ torch::Tensor TrajectoryChain::poses(const std::vector<double>& scales) const {
 
 std::vector<double> metric_scales(const std::vector<double>& per_frame, const std::function<std::string(size_t)>& no_road) {
   auto scales = smooth_scales(per_frame, 5);
-  for (size_t i = 0; i < scales.size(); ++i)
-    if (!(scales[i] > 0)) throw std::runtime_error(no_road(i));
-  return scales;
+  // A longer stretch without a road (the car ahead hiding it, a turn) takes the scale of the nearest
+  // frame that has one (the earlier on a tie): the scene's scale does not jump there.
+  const auto n = static_cast<int64_t>(scales.size());
+  const auto found = [&](int64_t j) { return j >= 0 && j < n && scales[static_cast<size_t>(j)] > 0; };
+  auto out = scales;
+  for (int64_t i = 0; i < n; ++i) {
+    if (found(i)) continue;
+    for (int64_t d = 1; d < n; ++d) {
+      if (found(i - d)) {
+        out[static_cast<size_t>(i)] = scales[static_cast<size_t>(i - d)];
+        break;
+      }
+      if (found(i + d)) {
+        out[static_cast<size_t>(i)] = scales[static_cast<size_t>(i + d)];
+        break;
+      }
+    }
+    if (!(out[static_cast<size_t>(i)] > 0)) throw std::runtime_error(no_road(static_cast<size_t>(i)));
+  }
+  return out;
 }
 
 }  // namespace geo

@@ -27,8 +27,9 @@ class TrajectoryChain {
 };
 
 // Per-frame metric scales from per-frame estimates (camera_height_scale: 0 where the road was not
-// found), smoothed over 11 frames (smooth_scales). Throws std::runtime_error with
-// `no_road(i)` when frame i has no estimate within 5 frames.
+// found), smoothed over 11 frames (smooth_scales); a frame with no estimate within 5 frames takes the
+// smoothed scale of the nearest frame that has one. Throws std::runtime_error with `no_road(0)` when
+// no frame has an estimate.
 std::vector<double> metric_scales(const std::vector<double>& per_frame, const std::function<std::string(size_t)>& no_road);
 
 }  // namespace geo

@@ -40,13 +40,20 @@ TEST(Trajectory, StepsChainIntoCameraToWorldPoses) {
   EXPECT_THROW(chain.poses({1.0}), c10::Error);  // fewer scales than steps
 }
 
-TEST(Trajectory, MetricScalesAreSmoothedAndAFrameWithoutRoadNearbyIsNamed) {
+TEST(Trajectory, MetricScalesAreSmoothedBridgedAndASequenceWithoutRoadIsNamed) {
+  const auto none = [](size_t i) { return "frame " + std::to_string(i) + " has no road"; };
   // Frames without a road (0) take the median of their neighbours within 5 frames.
-  EXPECT_EQ(metric_scales({2, 0, 4}, [](size_t) { return std::string("none"); }), (std::vector<double>{3, 3, 3}));
-  std::vector<double> far(13, 0.0);
+  EXPECT_EQ(metric_scales({2, 0, 4}, none), (std::vector<double>{3, 3, 3}));
+  // Farther from any road, the nearest frame's smoothed scale (the earlier one on a tie): frames 0-5
+  // see frame 0's 1.5 within 5 frames, 13-18 frame 18's 2.5; 6-9 are nearer frame 5 (9 a tie), 10-12
+  // frame 13.
+  std::vector<double> far(19, 0.0);
   far[0] = 1.5;
-  GEO_EXPECT_THROW_WITH(metric_scales(far, [](size_t i) { return "frame " + std::to_string(i) + " has no road"; }),
-                        "frame 6 has no road");
+  far[18] = 2.5;
+  std::vector<double> want(19, 1.5);
+  for (size_t i = 10; i < 19; ++i) want[i] = 2.5;
+  EXPECT_EQ(metric_scales(far, none), want);
+  GEO_EXPECT_THROW_WITH(metric_scales(std::vector<double>(4, 0.0), none), "frame 0 has no road");
 }
 
 }  // namespace

@@ -132,6 +132,12 @@ def test_evaluate_equals_geo_eval_byte_for_byte(split, source, model_file, world
         geo.eval.evaluate("kitti2015", data_root=str(world_dir), trivial=True, scaling="camera-height")
     with pytest.raises(geo.Error, match="one source of predictions"):
         geo.eval.evaluate(split, data_root=str(world_dir))
+    # The split file it reads is never its output.
+    split_file = tmp_path / "split.txt"
+    split_file.write_text("keep\n")
+    with pytest.raises(geo.Error, match="which this command reads"):
+        geo.eval.evaluate(split, data_root=str(world_dir), trivial=True, split_file=str(split_file), output=str(split_file))
+    assert split_file.read_text() == "keep\n"
     if source == "int8":
         with pytest.raises(geo.Error, match="needs --calibration FRAMES"):
             geo.eval.evaluate(split, data_root=str(world_dir), checkpoint=str(model_file), precision="int8")

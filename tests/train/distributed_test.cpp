@@ -318,7 +318,9 @@ TEST_F(Distributed, SyncBatchNormOnTheSameBatchesTrainsAsOne) {
   expect_all_exit(two, 0);
   EXPECT_NE(test::read_file(dir + "/rank0.log").find("BatchNorm synchronised across the 2 processes"), std::string::npos)
       << test::read_file(dir + "/rank0.log");
-  expect_close_metrics(losses(dir + "/two"), losses(dir + "/single"), 1e-5);
+  // Rounding: up to 2.3e-5 seen on an AVX2-only EPYC by step 3 (under 1e-5 with AVX-512); a wrong
+  // count or statistic in the synchronised BatchNorm moves the losses by far more.
+  expect_close_metrics(losses(dir + "/two"), losses(dir + "/single"), 1e-4);
 }
 
 TEST_F(Distributed, ShardedProcessesStayIdenticalAndAKillOfBothResumesExactly) {
