@@ -18,16 +18,16 @@
 namespace geo {
 namespace {
 
-SynthOptions tiny() {
+SynthOptions motion_world() {
   auto o = SynthOptions::preset_named("tiny");
   o.threads = 2;
   return o;
 }
 
-torch::Tensor tiny_K() { return tiny().intrinsics.K().to(torch::kFloat32); }
+torch::Tensor motion_K() { return motion_world().intrinsics.K().to(torch::kFloat32); }
 
 TEST(CameraMotion, ARotationAloneIsNoMotionAndATranslationIs) {
-  const auto o = tiny();
+  const auto o = motion_world();
   const SynthScene scene(3, 20);
   const cv::Mat a = motion_grey(render_frame(scene, 10, o).image);
   // The camera turns by 1.5 degrees of yaw and 0.5 of pitch where it stands: x_b = K R K^-1 x_a.
@@ -39,25 +39,25 @@ TEST(CameraMotion, ARotationAloneIsNoMotionAndATranslationIs) {
   const cv::Matx33d Rx(1, 0, 0, 0, std::cos(pitch), -std::sin(pitch), 0, std::sin(pitch), std::cos(pitch));
   cv::Mat turned;
   cv::warpPerspective(a, turned, cv::Mat(Kc * Ry * Rx * Kc.inv()), a.size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);
-  const auto same = camera_motion(a, a, tiny_K(), {});
+  const auto same = camera_motion(a, a, motion_K(), {});
   EXPECT_GE(same.tracked, 50);
   EXPECT_DOUBLE_EQ(same.still_share, 1.0);
   EXPECT_FALSE(same.moved);
-  const auto rotation = camera_motion(a, turned, tiny_K(), {});
+  const auto rotation = camera_motion(a, turned, motion_K(), {});
   EXPECT_GE(rotation.tracked, 50);
   EXPECT_GT(rotation.still_share, 0.9);
   EXPECT_FALSE(rotation.moved);
   // The next frame, a metre further: the static world's parallax is no rotation.
-  const auto forward = camera_motion(a, motion_grey(render_frame(scene, 11, o).image), tiny_K(), {});
+  const auto forward = camera_motion(a, motion_grey(render_frame(scene, 11, o).image), motion_K(), {});
   EXPECT_GE(forward.tracked, 50);
   EXPECT_LT(forward.still_share, 0.5) << forward.still_share;
   EXPECT_TRUE(forward.moved);
   // A flat image has nothing to track: it cannot tell, and counts as moved.
   const cv::Mat flat(64, 208, CV_8UC1, cv::Scalar(90));
-  const auto blank = camera_motion(flat, flat, tiny_K(), {});
+  const auto blank = camera_motion(flat, flat, motion_K(), {});
   EXPECT_LT(blank.tracked, kMinTrackedFeatures);
   EXPECT_TRUE(blank.moved);
-  EXPECT_THROW(camera_motion(a, flat(cv::Rect(0, 0, 100, 64)), tiny_K(), {}), c10::Error);
+  EXPECT_THROW(camera_motion(a, flat(cv::Rect(0, 0, 100, 64)), motion_K(), {}), c10::Error);
 }
 
 // Frame selection as geo_train's clips do it (the pixel-change rule, then the camera's motion against
@@ -65,12 +65,12 @@ TEST(CameraMotion, ARotationAloneIsNoMotionAndATranslationIs) {
 // the camera stands are left out, at most 5% of those where it moves (the ramps at half speed
 // included). Over seeds 21-32 (12 drives) it left out 314 of 320 standing frames and 2 of 388 moving.
 TEST(CameraMotion, TrafficFramesWhereTheCameraStandsAreLeftOut) {
-  const auto o = tiny();
+  const auto o = motion_world();
   int64_t standing = 0, standing_out = 0, moving = 0, moving_out = 0;
   for (uint64_t seed : {21, 22, 23}) {
     const SynthScene scene(seed, 60, 1.0, true);
     FrameSelector selector(1, 0.05);
-    StandingCameraTest standing_test(tiny_K(), {});
+    StandingCameraTest standing_test(motion_K(), {});
     for (int64_t f = 0; f < 60; ++f) {
       const auto image = render_frame(scene, f, o).image;
       const cv::Mat grey = motion_grey(image);
@@ -102,7 +102,7 @@ DataConfig clip_config(const std::vector<std::string>& clips, const std::vector<
 // A clip that mostly waits in traffic while a truck passes: the clip line counts the frames where the
 // camera stood, and a warning says the clip is unlikely to teach depth and what helps.
 TEST(CameraMotion, AClipStandingInTrafficIsWarnedAbout) {
-  const auto o = tiny();
+  const auto o = motion_world();
   const SynthScene scene(21, 80, 1.0, true);
   // The longest stretch where the camera stands, the frame before it and 3 frames of driving after.
   int64_t best_first = 0, best_len = 0;
