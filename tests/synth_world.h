@@ -7,6 +7,13 @@
 
 namespace geo::test {
 
+// The tiny preset (64x208) rendered on 2 threads.
+inline SynthOptions tiny_options() {
+  auto o = SynthOptions::preset_named("tiny");
+  o.threads = 2;
+  return o;
+}
+
 inline std::string write_small_world(const std::string& name, int64_t frames, int flow_pairs,
                                      int64_t odometry_frames) {
   auto o = SynthOptions::preset_named("tiny");

@@ -13,21 +13,16 @@
 
 #include <filesystem>
 
+#include "synth_world.h"
 #include "test_util.h"
 
 namespace geo {
 namespace {
 
-SynthOptions motion_world() {
-  auto o = SynthOptions::preset_named("tiny");
-  o.threads = 2;
-  return o;
-}
-
-torch::Tensor motion_K() { return motion_world().intrinsics.K().to(torch::kFloat32); }
+torch::Tensor motion_K() { return test::tiny_options().intrinsics.K().to(torch::kFloat32); }
 
 TEST(CameraMotion, ARotationAloneIsNoMotionAndATranslationIs) {
-  const auto o = motion_world();
+  const auto o = test::tiny_options();
   const SynthScene scene(3, 20);
   const cv::Mat a = motion_grey(render_frame(scene, 10, o).image);
   // The camera turns by 1.5 degrees of yaw and 0.5 of pitch where it stands: x_b = K R K^-1 x_a.
@@ -65,7 +60,7 @@ TEST(CameraMotion, ARotationAloneIsNoMotionAndATranslationIs) {
 // the camera stands are left out, at most 5% of those where it moves (the ramps at half speed
 // included). Over seeds 21-32 (12 drives) it left out 314 of 320 standing frames and 2 of 388 moving.
 TEST(CameraMotion, TrafficFramesWhereTheCameraStandsAreLeftOut) {
-  const auto o = motion_world();
+  const auto o = test::tiny_options();
   int64_t standing = 0, standing_out = 0, moving = 0, moving_out = 0;
   for (uint64_t seed : {21, 22, 23}) {
     const SynthScene scene(seed, 60, 1.0, true);
@@ -102,7 +97,7 @@ DataConfig clip_config(const std::vector<std::string>& clips, const std::vector<
 // A clip that mostly waits in traffic while a truck passes: the clip line counts the frames where the
 // camera stood, and a warning says the clip is unlikely to teach depth and what helps.
 TEST(CameraMotion, AClipStandingInTrafficIsWarnedAbout) {
-  const auto o = motion_world();
+  const auto o = test::tiny_options();
   const SynthScene scene(21, 80, 1.0, true);
   // The longest stretch where the camera stands, the frame before it and 3 frames of driving after.
   int64_t best_first = 0, best_len = 0;

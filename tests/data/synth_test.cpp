@@ -19,12 +19,6 @@
 namespace geo {
 namespace {
 
-SynthOptions tiny() {
-  auto o = SynthOptions::preset_named("tiny");
-  o.threads = 2;
-  return o;
-}
-
 torch::Tensor border_mask(int64_t H, int64_t W, int64_t m) {
   auto mask = torch::zeros({1, 1, H, W});
   mask.slice(2, m, H - m).slice(3, m, W - m).fill_(1);
@@ -32,7 +26,7 @@ torch::Tensor border_mask(int64_t H, int64_t W, int64_t m) {
 }
 
 TEST(Synth, SameSeedSameImages) {
-  const auto o = tiny();
+  const auto o = test::tiny_options();
   const SynthScene a(7, 20), b(7, 20), c(8, 20);
   EXPECT_TRUE(torch::equal(render_frame(a, 3, o).image, render_frame(b, 3, o).image));
   EXPECT_FALSE(torch::equal(render_frame(a, 3, o).image, render_frame(c, 3, o).image));
@@ -56,7 +50,7 @@ TEST(Synth, TurnsScaleTheHeadingAndLeaveTheWorld) {
 // gap (its depth the same whether the camera moves or stands), a truck passes on the right while the
 // camera stands, and every moving object is in the object map. Deterministic from the seed.
 TEST(Synth, TrafficStandsStartsAndKeepsTheCarAhead) {
-  const auto o = tiny();
+  const auto o = test::tiny_options();
   const SynthScene scene(11, 80, 1.0, true), again(11, 80, 1.0, true);
   int64_t standing = 0, moving = 0, truck_seen = 0;
   int leader = -1;
@@ -100,7 +94,7 @@ TEST(Synth, TrafficStandsStartsAndKeepsTheCarAhead) {
 // The exact flow holds for objects that move with the camera as for the others: it warps the next
 // frame onto this one in traffic, whether the camera moves or stands.
 TEST(Synth, TrafficFlowWarpsNextFrameOntoThisOne) {
-  const auto o = tiny();
+  const auto o = test::tiny_options();
   const SynthScene scene(11, 80, 1.0, true);
   int64_t checked_standing = 0;
   for (int64_t f : {10, 20, 30, 40, 50}) {
@@ -118,7 +112,7 @@ TEST(Synth, TrafficFlowWarpsNextFrameOntoThisOne) {
 }
 
 TEST(Synth, GroundTruthFlowWarpsNextFrameOntoThisOne) {
-  const auto o = tiny();
+  const auto o = test::tiny_options();
   for (uint64_t seed : {1, 2, 3}) {
     const SynthScene scene(seed, 30);
     const auto f0 = render_frame(scene, 10, o), f1 = render_frame(scene, 11, o);
@@ -137,7 +131,7 @@ TEST(Synth, GroundTruthFlowWarpsNextFrameOntoThisOne) {
 }
 
 TEST(Synth, RigidFlowFromDepthAndPosesMatchesStaticFlow) {
-  const auto o = tiny();
+  const auto o = test::tiny_options();
   const SynthScene scene(4, 60);
   bool saw_mover = false;
   for (int64_t f : {5, 20, 35}) {
@@ -164,7 +158,7 @@ TEST(Synth, RigidFlowFromDepthAndPosesMatchesStaticFlow) {
 }
 
 TEST(Synth, LidarLandsWhereTheDepthSaysThroughTheCalibration) {
-  const auto o = tiny();
+  const auto o = test::tiny_options();
   const SynthScene scene(5, 20);
   const auto frame = render_frame(scene, 8, o);
   const auto pts = render_lidar(scene, 8, o);
@@ -182,7 +176,7 @@ TEST(Synth, LidarLandsWhereTheDepthSaysThroughTheCalibration) {
 }
 
 TEST(Synth, WrittenWorldReadsBack) {
-  const auto o = tiny();
+  const auto o = test::tiny_options();
   const auto root = test::write_small_world("world", 6, 1, 5);
   const SynthScene scene(synth_drive_seed(1, 0, 0), 6);  // drive 1
   const auto f2 = render_frame(scene, 2, o);

@@ -145,15 +145,18 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
       c.K = cropped_resized_intrinsics(camera, c.window, d.height, d.width).to(torch::kFloat32);
       motion_w = std::min<int64_t>(c.window.width, kMotionWidth);
       motion_h = std::max<int64_t>(8, (c.window.height * motion_w + c.window.width / 2) / c.window.width);
-      standing_test.emplace(cropped_resized_intrinsics(camera, c.window, motion_h, motion_w), standing);
+      if (v.standing_parallax > 0)
+        standing_test.emplace(cropped_resized_intrinsics(camera, c.window, motion_h, motion_w), standing);
     }
     const cv::Mat small = crop_resize(m, c.window, d.height, d.width);
     cv::Mat grey;
-    if (v.standing_parallax > 0) grey = motion_grey(crop_resize(m, c.window, motion_h, motion_w));
     std::function<bool()> camera_moved;
-    if (v.standing_parallax > 0) camera_moved = [&] { return standing_test->moved(grey); };
+    if (standing_test) {
+      grey = motion_grey(crop_resize(m, c.window, motion_h, motion_w));
+      camera_moved = [&] { return standing_test->moved(grey); };
+    }
     const bool kept = selector.offer(idx, motion_thumbnail(mat_to_tensor(small, path)), camera_moved);
-    if (v.standing_parallax > 0) standing_test->looked_at(grey, kept);
+    if (standing_test) standing_test->looked_at(grey, kept);
     if (!kept) continue;
     c.index.push_back(idx);
     if (stream.is_video()) {  // kept in memory as JPEG; a folder's frames are read again from disk
@@ -188,7 +191,7 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
             fixed(100 * selector.moving_share(), 0) + "% of the frames looked at";
   if (selector.moving_share() < kFewMovingFrames)
     *warning = "clip '" + path + "': the camera moved in only " + fixed(100 * selector.moving_share(), 0) + "% of its " +
-               std::to_string(selector.looked_at()) + " frames looked at (it stood while other things moved): such a " +
+               std::to_string(selector.looked_at()) + " frames looked at (it stood in the others): such a " +
                "clip is unlikely to teach depth. A longer clip with more driving helps, or start from a model trained " +
                "on forward driving (geo_train --init RUN)";
   if (c.window.width != W0 || c.window.height != H0)
