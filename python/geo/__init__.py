@@ -20,12 +20,18 @@ import os as _os
 import pathlib as _pathlib
 import sys as _sys
 
-# Installed (cmake --install): the shipped configs are <prefix>/share/geo/configs, beside this
-# package's <prefix>/lib/python3.X/...; geo.train("stage1.yaml") finds them there.
-_configs = _pathlib.Path(__file__).resolve().parents[4] / "share" / "geo" / "configs"
-if "GEO_CONFIG_DIR" not in _os.environ and _configs.is_dir():
-    _os.environ["GEO_CONFIG_DIR"] = str(_configs)
-del _configs
+# Installed (cmake --install): the shipped configs are <prefix>/share/geo/configs, above this
+# package's <prefix>/lib/python3.X/... (GEO_PYTHON_INSTALL_DIR may put it at any depth); the nearest
+# folder above that holds them is used, so geo.train("stage1.yaml") finds them. A package copied
+# where no such folder is above it still imports (bare config names then mean the build's configs).
+if "GEO_CONFIG_DIR" not in _os.environ:
+    for _above in _pathlib.Path(__file__).resolve().parents:
+        if (_above / "share" / "geo" / "configs").is_dir():
+            _os.environ["GEO_CONFIG_DIR"] = str(_above / "share" / "geo" / "configs")
+            break
+    else:
+        _above = None
+    del _above
 
 import torch as _torch  # noqa: F401  (registers torch's types before geo's module loads)
 

@@ -1,5 +1,11 @@
 """geo.Model from Python: the same results as the C++ tools, numpy and torch inputs without copies,
 errors as geo.Error, and one Model called from several threads."""
+import os
+import pathlib
+import shutil
+import subprocess
+import sys
+import tempfile
 import threading
 
 import numpy as np
@@ -185,3 +191,30 @@ def test_int8_is_calibrated_on_frames_and_follows_fp32(model_file, frames):
     assert torch.equal(later.depth(frames), d8)
     with pytest.raises(geo.Error, match="at least 2"):
         geo.Model.load(str(model_file)).quantize_int8([frames[0]])
+
+
+def test_the_package_imports_from_wherever_it_is_copied():
+    # A package folder copied (or installed with GEO_PYTHON_INSTALL_DIR) two levels below the root,
+    # where no <prefix>/share/geo/configs lies above it: it imports, and bare config names keep
+    # meaning the shipped configs. Then the same folder with a share/geo/configs above it uses those.
+    package = pathlib.Path(geo.__file__).resolve().parent
+    shallow = pathlib.Path(tempfile.mkdtemp(prefix="geo-py-", dir="/tmp"))
+    try:
+        shutil.copytree(package, shallow / "geo")
+        env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "GEO_CONFIG_DIR")}
+        env["PYTHONPATH"] = str(shallow)
+        probe = "import geo, os; print(geo.__file__); print(os.environ.get('GEO_CONFIG_DIR', ''))"
+        out = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+        where, configs = out.stdout.splitlines()
+        assert where == str(shallow / "geo" / "__init__.py") and configs == ""
+        prefix = shallow / "lib" / "python3" / "site-packages"
+        prefix.mkdir(parents=True)
+        shutil.move(str(shallow / "geo"), str(prefix / "geo"))
+        (shallow / "share" / "geo" / "configs").mkdir(parents=True)
+        env["PYTHONPATH"] = str(prefix)
+        out = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+        assert out.stdout.splitlines()[1] == str(shallow / "share" / "geo" / "configs")
+    finally:
+        shutil.rmtree(shallow)
