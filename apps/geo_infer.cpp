@@ -20,6 +20,7 @@
 #include <optional>
 
 #include "core/logging.h"
+#include "core/output_folder.h"
 #include "core/progress.h"
 #include "core/runtime.h"
 #include "data/kitti/calib.h"
@@ -75,7 +76,7 @@ struct InferOptions {
                    "depth: the sky)")->check(geo::app::above_zero());
     app.add_option("--threads", threads, "LibTorch's intra-op threads (0 = all cores)")->check(geo::app::non_negative());
     app.add_flag("--timing", timing, "print the time of each step (reading, networks, colour maps, encoding, ...) per frame");
-    app.add_flag("--force", force, "write into a non-empty --output: geo_infer's earlier outputs there are removed first");
+    app.add_flag("--force", force, "write into a non-empty --output: the files geo_infer wrote there before (geo_infer-outputs.txt lists them) are removed first, nothing else");
   }
 };
 
@@ -114,32 +115,36 @@ Frames read_frames(const InferOptions& o, int64_t h, int64_t w) {
   return frames;
 }
 
-// --output: created; refused when it is the input folder or holds something (unless --force, which
-// removes geo_infer's own earlier outputs there: an earlier, longer run's frames must not mix in).
-void prepare_output(const InferOptions& o) {
-  const std::string& out = o.output;
-  if (fs::exists(out)) {
-    std::error_code ec;
-    if (fs::is_directory(o.input) && fs::equivalent(o.input, out, ec))
-      throw std::runtime_error("--output '" + out + "' is the input folder: its outputs would be read as frames next time");
-    if (!fs::is_directory(out)) throw std::runtime_error("--output '" + out + "' exists and is not a folder");
-    if (!fs::is_empty(out)) {
-      if (!o.force) throw std::runtime_error("--output '" + out + "' is not empty (--force replaces geo_infer's earlier outputs there)");
-      int64_t removed = 0;
-      for (const auto& e : fs::directory_iterator(out)) {
-        const auto name = e.path().filename().string();
-        auto ends = [&](const std::string& tail) {
-          return name.size() >= tail.size() && name.compare(name.size() - tail.size(), tail.size(), tail) == 0;
-        };
-        if (e.is_regular_file() && (ends("-disp.png") || ends("-depth.png") || ends("-flow.png") || ends(".ply") ||
-                                    name == "trajectory.txt" || name == "trajectory.png" || name == "disp.avi" ||
-                                    name == "flow.avi"))
-          removed += fs::remove(e.path()) ? 1 : 0;
-      }
-      spdlog::info("--force: {} earlier output file(s) removed from {}", removed, out);
-    }
+// The files write_outputs writes, by name: recorded in --output before any is written, so that
+// --force later removes exactly these (geo_infer-outputs.txt) and never a file of the user's.
+std::vector<std::string> planned_outputs(const InferOptions& o, const geo::Model& model, const Frames& frames) {
+  const bool sequence = frames.size() > 1, three = model.spec().seq_length == 3;
+  std::vector<std::string> names;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const auto& name = frames.list[i].first;
+    names.insert(names.end(), {name + "-disp.png", name + "-depth.png"});
+    if (i + 1 < frames.size() && three) names.push_back(name + "-flow.png");
+    if (std::find(o.ply_frames.begin(), o.ply_frames.end(), static_cast<int64_t>(i)) != o.ply_frames.end())
+      names.push_back(name + ".ply");
   }
-  fs::create_directories(out);
+  if (sequence && three) names.insert(names.end(), {"trajectory.txt", "trajectory.png"});
+  if ((o.videos || frames.video) && sequence) {
+    names.push_back("disp.avi");
+    if (three) names.push_back("flow.avi");
+  }
+  return names;
+}
+
+// --output: created; refused when it is the folder the frames come from (a frame folder, or the
+// folder of a single image), or when it holds something (unless --force, which removes what
+// geo_infer's manifest there says it wrote: an earlier, longer run's frames must not mix in).
+void prepare_output(const InferOptions& o, const geo::Model& model, const Frames& frames) {
+  std::vector<std::string> frame_folders;
+  if (fs::is_directory(o.input)) frame_folders.push_back(o.input);
+  else if (!frames.video) frame_folders.push_back(fs::absolute(o.input).parent_path().string());
+  const int64_t removed = geo::prepare_output_folder(o.output, "--output", "geo_infer-outputs.txt",
+                                                     planned_outputs(o, model, frames), o.force, frame_folders);
+  if (o.force) spdlog::info("--force: {} earlier output file(s) of geo_infer removed from {}", removed, o.output);
 }
 
 // The camera [3,3] at the model's size: --intrinsics (pixels of the input) scaled, else the camera
@@ -293,7 +298,7 @@ int infer(const InferOptions& o) {
     if (f >= static_cast<int64_t>(frames.size()))
       throw std::runtime_error("--ply " + std::to_string(f) + ": the input has " + std::to_string(frames.size()) +
                                " frames (numbered from 0)");
-  prepare_output(o);
+  prepare_output(o, model, frames);
   spdlog::info("{} frame(s) from {} at {}x{} -> {}", frames.size(), o.input, w, h, o.output);
   if (frames.size() > 1 && model.spec().seq_length != 3)
     spdlog::warn("this model's PoseNet takes {}-frame snippets: geo_infer writes flow and trajectory.txt for "

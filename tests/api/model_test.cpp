@@ -311,14 +311,31 @@ TEST(GeoInfer, WritesDepthFlowAndTrajectoryAndRefusesMixedFrameSizes) {
   EXPECT_NE(run("--input " + dir + "/frames/000000.png --output " + dir + "/out3"), 0);
   EXPECT_NE(test::read_file(dir + "/log").find("--output '" + dir + "/out3' is not empty (--force"), std::string::npos)
       << test::read_file(dir + "/log");
-  test::write_text(dir + "/out3/notes.txt", "mine");
+  // Files of the user's named like geo_infer's outputs stay: --force removes what geo_infer's
+  // manifest (geo_infer-outputs.txt) says it wrote, and nothing else.
+  for (const char* mine : {"notes.txt", "lidar.ply", "notes-depth.png"}) test::write_text(dir + "/out3/" + mine, "mine");
   ASSERT_EQ(run("--input " + dir + "/frames/000000.png --output " + dir + "/out3 --force"), 0) << test::read_file(dir + "/log");
   for (const char* gone : {"trajectory.txt", "trajectory.png", "disp.avi", "000001.ply", "000001-disp.png"})
     EXPECT_FALSE(std::filesystem::exists(dir + "/out3/" + std::string(gone))) << gone;
   EXPECT_TRUE(std::filesystem::exists(dir + "/out3/000000-disp.png"));
-  EXPECT_EQ(test::read_file(dir + "/out3/notes.txt"), "mine");
+  for (const char* mine : {"notes.txt", "lidar.ply", "notes-depth.png"})
+    EXPECT_EQ(test::read_file(dir + "/out3/" + mine), "mine") << mine;
+  EXPECT_EQ(test::read_file(dir + "/out3/geo_infer-outputs.txt"), "000000-disp.png\n000000-depth.png\n");
+  // An output name that is a file of the user's: refused before anything is removed or written.
+  test::write_text(dir + "/mine/trajectory.txt", "my poses");
+  EXPECT_NE(run("--input " + dir + "/frames --output " + dir + "/mine --force"), 0);
+  EXPECT_NE(test::read_file(dir + "/log").find("holds 'trajectory.txt', which this tool did not write"), std::string::npos)
+      << test::read_file(dir + "/log");
+  EXPECT_EQ(test::read_file(dir + "/mine/trajectory.txt"), "my poses");
+  EXPECT_FALSE(std::filesystem::exists(dir + "/mine/000000-disp.png"));
+  // Never among the frames: the input folder, or the folder of a single image.
   EXPECT_NE(run("--input " + dir + "/frames --output " + dir + "/frames/ --force"), 0);
-  EXPECT_NE(test::read_file(dir + "/log").find("is the input folder"), std::string::npos) << test::read_file(dir + "/log");
+  EXPECT_NE(test::read_file(dir + "/log").find("is the folder the input's frames are read from"), std::string::npos)
+      << test::read_file(dir + "/log");
+  EXPECT_NE(run("--input " + dir + "/frames/000000.png --output " + dir + "/frames/../frames --force"), 0);
+  EXPECT_NE(test::read_file(dir + "/log").find("is the folder the input's frames are read from"), std::string::npos)
+      << test::read_file(dir + "/log");
+  EXPECT_FALSE(std::filesystem::exists(dir + "/frames/000000-disp.png"));
   std::filesystem::create_directories(dir + "/twins");
   write_image(dir + "/twins/000001.png", image(64, 208, 0.1));
   write_image(dir + "/twins/000001.jpg", image(64, 208, 0.1));
