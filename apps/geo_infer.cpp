@@ -19,6 +19,7 @@
 #include <map>
 #include <optional>
 
+#include "core/camera_rule.h"
 #include "core/logging.h"
 #include "core/output_folder.h"
 #include "core/progress.h"
@@ -153,9 +154,8 @@ torch::Tensor camera(const InferOptions& o, const geo::Model& model, const Frame
   const double W0 = static_cast<double>(frames.width), H0 = static_cast<double>(frames.height);
   if (o.intrinsics.size() == 4) {
     const auto& in = o.intrinsics;
-    geo::check_focal_lengths(in[0], in[1], "--intrinsics");
-    if (!std::isfinite(in[2]) || !std::isfinite(in[3]))
-      throw std::runtime_error("--intrinsics: cx, cy must be finite, got " + std::to_string(in[2]) + ", " + std::to_string(in[3]));
+    const auto problem = geo::camera_problem(in[0], in[1], in[2], in[3], frames.width, frames.height);
+    if (!problem.empty()) throw std::runtime_error("--intrinsics: " + problem + " ('" + o.input + "')");
     const double sx = w / W0, sy = h / H0;
     return torch::tensor({in[0] * sx, 0.0, in[2] * sx, 0.0, in[1] * sy, in[3] * sy, 0.0, 0.0, 1.0}).view({3, 3}).to(torch::kFloat32);
   }

@@ -3,6 +3,7 @@
 // checkpoint format), as training and evaluation are, so inference is the computation geo_eval scores.
 #include "geo/geo.h"
 
+#include "core/camera_rule.h"
 #include "core/runtime.h"
 #include "geometry/pose.h"
 #include "geometry/road_plane.h"
@@ -114,6 +115,24 @@ PreparedPair prepare_pair(const Model::Impl& m, const torch::Tensor& from, const
   return p;
 }
 
+// Given intrinsics [3,3] or [B,3,3] of H x W images as float64 on the CPU: finite, and each a
+// plausible camera of such an image (camera_problem: the rule of every tool); throws Error.
+torch::Tensor checked_intrinsics(const torch::Tensor& K, int64_t H, int64_t W, bool batch_allowed) {
+  const bool ok = (K.dim() == 2 && K.size(0) == 3 && K.size(1) == 3) ||
+                  (batch_allowed && K.dim() == 3 && K.size(1) == 3 && K.size(2) == 3);
+  if (!ok) throw Error(std::string("intrinsics must be [3,3]") + (batch_allowed ? " or [B,3,3]" : "") +
+                       " (pixels of the given image), got " + c10::str(K.sizes()));
+  const auto k = K.to(torch::kCPU, torch::kFloat64).clone();
+  if (!torch::isfinite(k).all().item<bool>()) throw Error("intrinsics hold NaN or infinity");
+  const auto each = k.reshape({-1, 3, 3});
+  for (int64_t b = 0; b < each.size(0); ++b) {
+    const auto problem = camera_problem(each[b][0][0].item<double>(), each[b][1][1].item<double>(),
+                                        each[b][0][2].item<double>(), each[b][1][2].item<double>(), W, H);
+    if (!problem.empty()) throw Error("intrinsics: " + problem);
+  }
+  return k;
+}
+
 // [B,3,3] intrinsics at the network's size from ones at H x W (or KITTI's proportions); undefined
 // when none are given to a model that learns them (predict_pair then uses the learned ones).
 torch::Tensor network_K(const Model::Impl& m, const torch::Tensor& K, int64_t B, int64_t H, int64_t W) {
@@ -123,12 +142,7 @@ torch::Tensor network_K(const Model::Impl& m, const torch::Tensor& K, int64_t B,
   if (!K.defined()) {
     k = kitti_like_intrinsics(m.spec.height, m.spec.width);
   } else {
-    if (!((K.dim() == 2 && K.size(0) == 3 && K.size(1) == 3) || (K.dim() == 3 && K.size(1) == 3 && K.size(2) == 3)))
-      throw Error("intrinsics must be [3,3] or [B,3,3], got " + c10::str(K.sizes()));
-    k = K.to(torch::kCPU, torch::kFloat64).clone();
-    if (!torch::isfinite(k).all().item<bool>()) throw Error("intrinsics hold NaN or infinity");
-    auto fx = k.select(-2, 0).select(-1, 0), fy = k.select(-2, 1).select(-1, 1);
-    if ((fx <= 0).any().item<bool>() || (fy <= 0).any().item<bool>()) throw Error("intrinsics: fx and fy must be > 0");
+    k = checked_intrinsics(K, H, W, true);
     k.select(-2, 0).mul_(w / static_cast<double>(W));
     k.select(-2, 1).mul_(h / static_cast<double>(H));
   }
@@ -298,10 +312,8 @@ torch::Tensor Model::metric_depth(const torch::Tensor& image, double camera_heig
       throw Error("camera_height must be a positive number of metres, got " + std::to_string(camera_height));
     const bool batched = depth.dim() == 3;
     const int64_t B = batched ? depth.size(0) : 1, H = depth.size(-2), W = depth.size(-1);
-    if (intrinsics.defined() && intrinsics.sizes() != torch::IntArrayRef{3, 3})
-      throw Error("intrinsics must be [3,3] (pixels of the given image), got " + c10::str(intrinsics.sizes()));
     // Not given: the learned camera (a batch's mean), else KITTI's proportions.
-    const auto K = intrinsics.defined()         ? intrinsics.to(torch::kCPU, torch::kFloat64)
+    const auto K = intrinsics.defined()         ? checked_intrinsics(intrinsics, H, W, false)
                    : spec().learns_intrinsics ? (batched ? this->intrinsics(image, image).mean(0) : this->intrinsics(image, image))
                                               : kitti_like_intrinsics(H, W);
     auto out = depth.clone();
@@ -325,14 +337,12 @@ std::vector<double> Model::sequence_scales(const std::vector<torch::Tensor>& fra
   return guarded("geo::Model::sequence_scales", [&] {
     if (!(camera_height > 0) || !std::isfinite(camera_height))
       throw Error("camera_height must be a positive number of metres, got " + std::to_string(camera_height));
-    if (intrinsics.defined() && intrinsics.sizes() != torch::IntArrayRef{3, 3})
-      throw Error("intrinsics must be [3,3] (pixels of the given images), got " + c10::str(intrinsics.sizes()));
     if (without_road) without_road->clear();
     std::vector<double> per_frame;
     for (size_t i = 0; i < frames.size(); ++i) {
       const auto d = depth(frames[i]);
       if (d.dim() != 2) throw Error("sequence_scales takes one image per frame ([3,H,W]), frame " + std::to_string(i) + " is a batch");
-      const auto K = intrinsics.defined()         ? intrinsics.to(torch::kCPU, torch::kFloat64)
+      const auto K = intrinsics.defined()         ? checked_intrinsics(intrinsics, d.size(0), d.size(1), false)
                      : spec().learns_intrinsics ? this->intrinsics(frames[i], frames[i])
                                                 : kitti_like_intrinsics(d.size(0), d.size(1));
       const auto plane = fit_road_plane(d.cpu(), K);

@@ -1,5 +1,6 @@
 // Validation of a parsed config: every key's rule, with the key's path and YAML line in the message
 // (part of core/config; parsing and the entry points are config.cpp).
+#include "core/camera_rule.h"
 #include "core/config.h"
 #include "core/config_text.h"
 
@@ -128,11 +129,9 @@ void CameraConfig::validate(Checker& c) const {
   if (!intrinsics.empty()) {
     c.require(intrinsics.size() == 4, "intrinsics", intrinsics, "must be [fx, fy, cx, cy] in pixels of the original frames");
     if (intrinsics.size() == 4) {
-      c.require(std::isfinite(intrinsics[0]) && std::isfinite(intrinsics[1]) && intrinsics[0] > 0 && intrinsics[1] > 0 &&
-                    intrinsics[0] < 1e5 && intrinsics[1] < 1e5,
-                "intrinsics", intrinsics, "fx and fy must be in (0, 1e5) pixels");
-      c.require(std::isfinite(intrinsics[2]) && std::isfinite(intrinsics[3]) && intrinsics[2] >= 0 && intrinsics[3] >= 0,
-                "intrinsics", intrinsics, "cx and cy must be finite and >= 0 (pixels of the original frames)");
+      // The frames' size is known once a clip is opened (data/video/clip_camera.cpp checks again).
+      const auto problem = camera_problem(intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]);
+      c.require(problem.empty(), "intrinsics", intrinsics, problem);
     }
   }
   c.require(std::isfinite(fov_deg) && fov_deg >= 0 && fov_deg < 180, "fov_deg", fov_deg,

@@ -224,7 +224,12 @@ TEST(Api, MisuseIsAGeoErrorThatSaysWhat) {
   expect_error([&] { m.depth(torch::zeros({3, 64, 208}, torch::kInt32)); }, "uint8 or floating point");
   expect_error([&] { m.pose({image(64, 208)}); }, "takes 3 frames, got 1");
   expect_error([&] { m.flow(image(64, 208), image(32, 208)); }, "differ in size");
-  expect_error([&] { m.flow(image(64, 208), image(64, 208), torch::zeros({3, 3})); }, "fx and fy must be > 0");
+  expect_error([&] { m.flow(image(64, 208), image(64, 208), torch::zeros({3, 3})); },
+               "intrinsics: focal lengths fx = 0, fy = 0 are not plausible");
+  const auto outside = torch::tensor({100.0, 0.0, -500.0, 0.0, 100.0, 9000.0, 0.0, 0.0, 1.0}).view({3, 3});
+  expect_error([&] { m.flow(image(64, 208), image(64, 208), outside); },
+               "intrinsics: principal point (-500, 9000) lies outside the 208x64 frame");
+  expect_error([&] { m.metric_depth(image(64, 208), 1.65, outside); }, "principal point (-500, 9000) lies outside");
   expect_error([] { Model::load("/nonexistent/model.pt"); }, "/nonexistent/model.pt: no such file");
   const auto dir = test::fresh_dir("api_bad");
   test::write_text(dir + "/x.pt", "not a model");
@@ -328,6 +333,11 @@ TEST(GeoInfer, WritesDepthFlowAndTrajectoryAndRefusesMixedFrameSizes) {
       << test::read_file(dir + "/log");
   EXPECT_EQ(test::read_file(dir + "/mine/trajectory.txt"), "my poses");
   EXPECT_FALSE(std::filesystem::exists(dir + "/mine/000000-disp.png"));
+  // The camera rule of every tool: a principal point far outside the frames is refused.
+  EXPECT_NE(run("--input " + dir + "/frames --output " + dir + "/out7 --intrinsics 100 100 -500 9000"), 0);
+  EXPECT_NE(test::read_file(dir + "/log").find("--intrinsics: principal point (-500, 9000) lies outside the 208x64 frame"),
+            std::string::npos)
+      << test::read_file(dir + "/log");
   // Never among the frames: the input folder, or the folder of a single image.
   EXPECT_NE(run("--input " + dir + "/frames --output " + dir + "/frames/ --force"), 0);
   EXPECT_NE(test::read_file(dir + "/log").find("is the folder the input's frames are read from"), std::string::npos)

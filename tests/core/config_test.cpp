@@ -333,7 +333,7 @@ TEST(Config, VideoConfigNeedsClipsAndTakesOneCamera) {
     msg = e.what();
   }
   for (const char* want : {"key 'data.camera.intrinsics' = [0, 700, 640, 360] (from --set): give one of",
-                           "key 'data.camera.intrinsics' = [0, 700, 640, 360] (from --set): fx and fy must be in (0, 1e5)",
+                           "key 'data.camera.intrinsics' = [0, 700, 640, 360] (from --set): focal lengths fx = 0, fy = 700 are not plausible",
                            "key 'data.video.static_threshold' = 1.5 (from --set): must be in [0, 1)",
                            "key 'data.video.crop_y' = -1 (from --set): must be in [0, 1]"})
     EXPECT_NE(msg.find(want), std::string::npos) << want << "\n" << msg;

@@ -171,11 +171,14 @@ TEST(ClipCamera, FromIntrinsicsFieldOfViewOrCalibrationFile) {
 }
 
 TEST(ClipCamera, AbsurdOrMissingCamerasNameTheKeyAndValue) {
-  EXPECT_NE(error_of(camera_with({0, 700, 640, 360}), 1280, 720).find("data.camera.intrinsics: focal lengths fx 0"),
+  EXPECT_NE(error_of(camera_with({0, 700, 640, 360}), 1280, 720).find("data.camera.intrinsics: focal lengths fx = 0"),
             std::string::npos);
-  EXPECT_NE(error_of(camera_with({-5, 700, 640, 360}), 1280, 720).find("fx -5"), std::string::npos);
+  EXPECT_NE(error_of(camera_with({-5, 700, 640, 360}), 1280, 720).find("fx = -5"), std::string::npos);
   const auto outside = error_of(camera_with({700, 700, 5000, 360}), 1280, 720);
-  EXPECT_NE(outside.find("principal point (5000, 360) lies outside 'clip.mp4''s 1280x720"), std::string::npos) << outside;
+  EXPECT_NE(outside.find("principal point (5000, 360) lies outside the 1280x720 frame (give it in pixels of the "
+                         "original frames) ('clip.mp4')"),
+            std::string::npos)
+      << outside;
   const auto none = error_of(geo::CameraConfig{}, 1280, 720);
   EXPECT_NE(none.find("data.camera: no camera given for 'clip.mp4'"), std::string::npos) << none;
   const auto dir = geo::test::fresh_dir("clip_camera_bad");

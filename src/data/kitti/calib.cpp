@@ -1,7 +1,6 @@
 #include "data/kitti/calib.h"
 
-#include <cstdio>
-
+#include "core/camera_rule.h"
 #include "data/text_io.h"
 
 #include <cmath>
@@ -32,13 +31,9 @@ torch::Tensor KeyValues::matrix(const std::string& key, int64_t rows, int64_t co
 
 torch::Tensor KeyValues::projection(const std::string& key) const {
   const auto P = matrix(key, 3, 4);
-  const double fx = P[0][0].item<double>(), fy = P[1][1].item<double>();
-  check_focal_lengths(fx, fy, source + ": calibration entry '" + key + "'");
-  // The principal point lies near the image: within 1e5 pixels of its corner (KITTI: ~600, ~180).
-  const double cx = P[0][2].item<double>(), cy = P[1][2].item<double>();
-  if (!(std::abs(cx) < 1e5) || !(std::abs(cy) < 1e5))
-    throw std::runtime_error(source + ": calibration entry '" + key + "': principal point cx = " + std::to_string(cx) +
-                             ", cy = " + std::to_string(cy) + " is not plausible (must be within 1e5 pixels)");
+  const auto problem = camera_problem(P[0][0].item<double>(), P[1][1].item<double>(), P[0][2].item<double>(),
+                                      P[1][2].item<double>());
+  if (!problem.empty()) throw std::runtime_error(source + ": calibration entry '" + key + "': " + problem);
   return P;
 }
 
@@ -50,18 +45,6 @@ torch::Tensor KeyValues::rotation(const std::string& key) const {
     throw std::runtime_error(source + ": calibration entry '" + key + "' is not a rotation (R R^T differs from I by " +
                              std::to_string(off) + ", det " + std::to_string(det) + ")");
   return R;
-}
-
-void check_focal_lengths(double fx, double fy, const std::string& what) {
-  // From 1 to 1e5 px (KITTI: ~720 px; below 1 px the field of view passes 180 degrees, a 1e5 px
-  // focal length is 0.4 degrees): normalised intrinsics (fx ~ 0.6) are the mistake this catches.
-  auto ok = [](double f) { return std::isfinite(f) && f >= 1 && f < 1e5; };
-  if (!ok(fx) || !ok(fy)) {
-    char text[200];
-    std::snprintf(text, sizeof text, ": focal lengths fx = %.6g, fy = %.6g are not plausible", fx, fy);
-    throw std::runtime_error(what + text + " (in pixels: must be finite, >= 1 and < 1e5; intrinsics normalised by the "
-                                           "image size must be multiplied by it)");
-  }
 }
 
 KeyValues parse_key_values(const std::string& text, const std::string& source) {

@@ -21,14 +21,11 @@ struct KeyValues {
   const std::vector<double>& get(const std::string& key, size_t count) const;
   // get() as a [rows, cols] float64 tensor (row-major); non-finite values are an error.
   torch::Tensor matrix(const std::string& key, int64_t rows, int64_t cols) const;
-  // A 3x4 projection matrix whose focal lengths are plausible (check_focal_lengths).
+  // A 3x4 projection matrix of a plausible camera (geometry/camera.h: camera_problem).
   torch::Tensor projection(const std::string& key) const;
   // A 3x3 rotation: orthonormal within 1e-2 and of determinant +1 (a zero or scaled matrix is not).
   torch::Tensor rotation(const std::string& key) const;
 };
-
-// Throws std::runtime_error naming `what` unless fx and fy are finite, > 0 and < 1e5 pixels.
-void check_focal_lengths(double fx, double fy, const std::string& what);
 
 // Parses "KEY: numbers" (or "KEY numbers") lines. Lines whose key is in `text_keys` (default:
 // calib_time) are skipped; any other non-numeric value is an error naming source, line and key.

@@ -1,5 +1,6 @@
 #include "data/video/clip_camera.h"
 
+#include "core/camera_rule.h"
 #include "data/kitti/calib.h"
 #include "geometry/camera.h"
 
@@ -82,15 +83,9 @@ torch::Tensor clip_camera(const CameraConfig& camera, int64_t width, int64_t hei
                       "frames), data.camera.calib_file=<KITTI calib file> or data.camera.fov_deg=<horizontal field of view>, "
                       "or learn it: model.learn_intrinsics=true");
   }
-  const double fx = K[0][0].item<double>(), fy = K[1][1].item<double>();
-  const double cx = K[0][2].item<double>(), cy = K[1][2].item<double>();
-  if (!(std::isfinite(fx) && std::isfinite(fy) && fx > 0 && fy > 0 && fx < 1e5 && fy < 1e5))
-    throw ConfigError(key + ": focal lengths fx " + number(fx) + ", fy " + number(fy) + " for '" + clip +
-                      "' must be in (0, 1e5) pixels");
-  if (!(std::isfinite(cx) && std::isfinite(cy) && cx >= 0 && cy >= 0 && cx <= width && cy <= height))
-    throw ConfigError(key + ": principal point (" + number(cx) + ", " + number(cy) + ") lies outside '" + clip +
-                      "''s " + std::to_string(width) + "x" + std::to_string(height) +
-                      " frames (give it in pixels of the original frames)");
+  const auto problem = camera_problem(K[0][0].item<double>(), K[1][1].item<double>(), K[0][2].item<double>(),
+                                      K[1][2].item<double>(), width, height);
+  if (!problem.empty()) throw ConfigError(key + ": " + problem + " ('" + clip + "')");
   return K;
 }
 
