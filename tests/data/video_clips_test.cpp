@@ -145,7 +145,7 @@ TEST(VideoClips, BadClipsNameTheFileAndTheValue) {
   // Absurd intrinsics name the key.
   auto d = video_config({dir + "/sizes"});
   d.camera.intrinsics = {0, 100, 104, 32};
-  EXPECT_NE(error_of(d).find("data.camera.intrinsics: focal lengths fx 0"), std::string::npos);
+  EXPECT_NE(error_of(d).find("data.camera.intrinsics: focal lengths fx = 0"), std::string::npos) << error_of(d);
 }
 
 }  // namespace
