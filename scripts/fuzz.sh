@@ -7,6 +7,7 @@
 #   GEO_FUZZ_SEED        mutation seed (default fixed, so a failure reproduces)
 #   GEO_FUZZ_BUILD_DIR   build folder (default build-asan)
 #   GEO_JOBS             parallel compile jobs (default: number of cores)
+#   GEO_FUZZ_BUILD_ONLY  1: build the sanitized fuzz tests and stop (CI builds them beside the suite)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 GEO_SETUP_PACKAGES_ONLY=1 scripts/setup.sh
@@ -19,6 +20,7 @@ if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
 fi
 echo "geo fuzz: building the sanitized fuzz tests in $BUILD_DIR with $JOBS jobs"
 cmake --build "$BUILD_DIR" -j "$JOBS" --target fuzz_tests
+[ "${GEO_FUZZ_BUILD_ONLY:-0}" = 1 ] && exit 0
 # LibTorch allocates for the process lifetime: leak reports would be its, not geo's.
 export ASAN_OPTIONS="detect_leaks=0:abort_on_error=1:${ASAN_OPTIONS:-}"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1:${UBSAN_OPTIONS:-}"
