@@ -55,9 +55,11 @@ struct InferOptions {
     geo::app::add_device_option(app, device, "default: auto");
     geo::app::add_precision_option(app, precision, {"fp32", "bf16", "auto", "int8"},
                                    "fp32, bf16 (faster on CPUs with AVX512-BF16/AMX, depth within ~1%), auto (bf16 on such a "
-                                   "CPU) or int8 (CPU: the networks in int8 calibrated on the input's first frames)");
+                                   "CPU) or int8 (CPU: the networks in int8, with the calibration a geo_export --int8 file keeps, else "
+                                   "calibrated on the input's first frames)");
     app.add_option("--calibration-frames", calibration_frames,
-                   "with --precision int8: how many of the input's first frames calibrate it, 1..1000 (default: 8)")
+                   "with --precision int8: calibrate on this many of the input's first frames, 1..1000 (default: 8, "
+                   "and none for a model file that keeps its calibration)")
         ->check(CLI::Range(1, 1000));
     app.add_option("--intrinsics", intrinsics,
                    "fx fy cx cy of the input images in pixels (default: KITTI-like 0.58 W, 1.92 H, W/2, H/2)")
@@ -284,7 +286,11 @@ int infer(const InferOptions& o) {
   const auto reading = std::chrono::steady_clock::now();
   const Frames frames = read_frames(o, h, w);
   times.add("read, decode, resize frames", std::chrono::duration<double>(std::chrono::steady_clock::now() - reading).count());
-  if (int8) {
+  if (int8 && o.calibration_frames == 0 && model.has_int8_calibration()) {
+    times.time("int8 (the file's calibration)", [&] { model.quantize_int8({}); });
+    spdlog::info("int8: with the calibration {} keeps (--calibration-frames N calibrates on the input instead)",
+                 o.checkpoint);
+  } else if (int8) {
     std::vector<torch::Tensor> calibration;
     for (size_t i = 0; i < frames.size() && static_cast<int64_t>(i) < calibration_frames; ++i)
       calibration.push_back(frames.image(i));
@@ -292,7 +298,10 @@ int infer(const InferOptions& o) {
       throw std::runtime_error("--precision int8: this model's FlowNet calibrates on pairs: give at least 2 frames "
                                "(--calibration-frames, and an input of 2 or more frames)");
     times.time("int8 calibration", [&] { model.quantize_int8(calibration); });
-    spdlog::info("int8: calibrated on the first {} frame(s) of the input", calibration.size());
+    spdlog::info("int8: calibrated on the first {} frame(s) of the input{}", calibration.size(),
+                 model.has_int8_calibration() || o.calibration_frames > 0
+                     ? ""
+                     : " (on every run: geo_export --int8 --calibration FRAMES writes a model that keeps its calibration)");
   }
   for (const auto f : o.ply_frames)
     if (f >= static_cast<int64_t>(frames.size()))

@@ -124,10 +124,14 @@ void bind_model(py::module_& m) {
             py::gil_scoped_release release;
             model.quantize_int8(xs);
           },
-          "frames"_a,
+          "frames"_a = py::list(),
           "Switches this fp32 CPU model to int8: the DepthNet, PoseNet and FlowNet calibrated on frames (like\n"
-          "those the model will see, in order; consecutive pairs calibrate the FlowNet and PoseNet). Not while\n"
-          "another thread uses the model.")
+          "those the model will see, in order; consecutive pairs calibrate the FlowNet and PoseNet); without\n"
+          "frames, with the calibration its file keeps (has_int8_calibration). Not while another thread uses\n"
+          "the model.")
+      .def_property_readonly("has_int8_calibration", &Model::has_int8_calibration,
+                             "Whether the file keeps an int8 calibration (geo_export --int8, or save() after\n"
+                             "quantize_int8): quantize_int8() then needs no frames.")
       .def_property_readonly("spec", &Model::spec)
       .def_property_readonly("device", &Model::device)
       .def_property_readonly("training_configs", &Model::training_configs,

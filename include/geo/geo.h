@@ -96,8 +96,12 @@ class Model {
   // with a FlowNet); a few frames suffice (8 is plenty). [3,H,W] uint8 or
   // float images, any size. Copies of this Model share the switch; not to be called while another
   // thread uses the model. Throws geo::Error on a bf16 or CUDA model, or too few frames. save()
-  // then writes the calibration with the weights.
+  // then writes the calibration with the weights. No frames: the calibration a file written in int8
+  // keeps (has_int8_calibration), without running the networks; else an Error.
   void quantize_int8(const std::vector<torch::Tensor>& frames);
+  // Whether the file this model was loaded from keeps an int8 calibration (geo_export --int8, or
+  // save() after quantize_int8): quantize_int8({}) then needs no frames.
+  bool has_int8_calibration() const;
   // What the weights were trained with, as geo config YAML texts: the training checkpoint's own
   // config first, then those of the checkpoints its training started from (geo_train --init),
   // nearest first; a link that carried none reads "unknown: <why>". Empty for geo_export model

@@ -27,6 +27,8 @@ struct Model::Impl {
   torch::Device device = torch::kCPU;
   ModelSpec spec;
   std::vector<std::string> training_configs;  // CheckpointFile::lineage() of a training checkpoint
+  // The int8 calibration the file keeps, per network (a file written in int8), else nullopt.
+  std::optional<torch::Tensor> depth_ranges, pose_ranges, flow_ranges;
 };
 
 namespace {
@@ -87,9 +89,23 @@ torch::Tensor prepare(const Model::Impl& m, const torch::Tensor& image, int64_t*
   auto x = *batched ? image : image.unsqueeze(0);
   *H = x.size(2);
   *W = x.size(3);
-  if (x.scalar_type() == torch::kUInt8) x = x.to(m.device, torch::kFloat32).div_(255);
-  else if (x.is_floating_point()) x = x.to(m.device, torch::kFloat32);
-  else throw Error(std::string(what) + ": pixels must be uint8 or floating point, got " + c10::toString(x.scalar_type()));
+  if (x.scalar_type() == torch::kUInt8) {
+    x = x.to(m.device, torch::kFloat32).div_(255);
+  } else if (x.is_floating_point()) {
+    x = x.to(m.device, torch::kFloat32);
+    // One NaN pixel would make every depth NaN; 0..255 values in a float image would give depth of
+    // another scale: both are refused by name rather than computed.
+    const auto finite = torch::isfinite(x);
+    if (!finite.all().item<bool>())
+      throw Error(std::string(what) + ": " + std::to_string((~finite).sum().item<int64_t>()) +
+                  " pixel value(s) are NaN or infinite");
+    const double lo = x.min().item<double>(), hi = x.max().item<double>();
+    if (lo < -1 || hi > 2)
+      throw Error(std::string(what) + ": floating-point pixels must lie in [0, 1], this image spans [" +
+                  c10::str(lo) + ", " + c10::str(hi) + "] (divide 0..255 values by 255, or pass uint8)");
+  } else {
+    throw Error(std::string(what) + ": pixels must be uint8 or floating point, got " + c10::toString(x.scalar_type()));
+  }
   if (*H != m.spec.height || *W != m.spec.width)
     x = F::interpolate(x, F::InterpolateFuncOptions()
                               .size(std::vector<int64_t>{m.spec.height, m.spec.width})
@@ -213,27 +229,18 @@ Model Model::load(const std::string& path, const LoadOptions& options) {
     checkpoint.load_networks(impl->nets, false);
     make_ready(*impl, options, checkpoint.has_flow(), file);
     if (checkpoint.config()) impl->training_configs = checkpoint.lineage();
+    impl->depth_ranges = checkpoint.int8_ranges("depth");
+    impl->pose_ranges = checkpoint.int8_ranges("pose");
+    impl->flow_ranges = checkpoint.int8_ranges("flow");
     Model model(impl);
-    if (options.precision != "int8") return model;
-    if (!options.calibration.empty()) {  // frames given: a calibration of their own
-      model.quantize_int8(options.calibration);
-      return model;
-    }
-    const auto depth_ranges = checkpoint.int8_ranges("depth");  // else the file's
-    if (!depth_ranges) throw needs_calibration();
-    model.check_int8_possible();
-    const auto flow_ranges = checkpoint.int8_ranges("flow"), pose_ranges = checkpoint.int8_ranges("pose");
-    if (impl->nets.flow && !flow_ranges) throw Error(file + " keeps int8 ranges of its DepthNet but not of its FlowNet");
-    if (!pose_ranges)
-      throw Error(file + " keeps int8 ranges of its DepthNet but not of its PoseNet (an int8 file of an earlier geo): "
-                  "calibrate it again (geo_export --int8, or LoadOptions::calibration)");
-    const int64_t H = impl->spec.height, W = impl->spec.width;
-    geo::quantize_int8(*impl->nets.depth->net, *depth_ranges, H, W);
-    geo::quantize_int8(*impl->nets.pose, *pose_ranges, H, W);
-    if (impl->nets.flow) geo::quantize_int8(*impl->nets.flow->net, *flow_ranges, H, W);
-    impl->spec.precision = "int8";
+    // int8: calibrated on the frames given, else with the file's own calibration.
+    if (options.precision == "int8") model.quantize_int8(options.calibration);
     return model;
   });
+}
+
+bool Model::has_int8_calibration() const {
+  return impl_->depth_ranges && impl_->pose_ranges && (impl_->flow_ranges || !impl_->nets.flow);
 }
 
 const ModelSpec& Model::spec() const { return impl_->spec; }
@@ -248,6 +255,21 @@ void Model::check_int8_possible() const {
 void Model::quantize_int8(const std::vector<torch::Tensor>& frames) {
   guarded("geo::Model::quantize_int8", [&] {
     auto& nets = impl_->nets;
+    if (frames.empty()) {  // the calibration the file keeps
+      const std::string& file = impl_->spec.source;
+      if (!impl_->depth_ranges) throw needs_calibration();
+      if (nets.flow && !impl_->flow_ranges) throw Error(file + " keeps int8 ranges of its DepthNet but not of its FlowNet");
+      if (!impl_->pose_ranges)
+        throw Error(file + " keeps int8 ranges of its DepthNet but not of its PoseNet (an int8 file of an earlier geo): "
+                    "calibrate it again (geo_export --int8, or LoadOptions::calibration)");
+      check_int8_possible();
+      const int64_t H = impl_->spec.height, W = impl_->spec.width;
+      geo::quantize_int8(*nets.depth->net, *impl_->depth_ranges, H, W);
+      geo::quantize_int8(*nets.pose, *impl_->pose_ranges, H, W);
+      if (nets.flow) geo::quantize_int8(*nets.flow->net, *impl_->flow_ranges, H, W);
+      impl_->spec.precision = "int8";
+      return;
+    }
     check_int8_possible();
     const size_t needed = nets.flow ? 2 : 1;
     if (frames.size() < needed)

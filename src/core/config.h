@@ -246,6 +246,8 @@ struct DataConfig {
     v("camera", camera);
     v("video", video);
   }
+  // The data are data.videos: data.format video, or auto with clips given (else data.root's).
+  bool uses_videos() const { return format == DataFormat::kVideo || (format == DataFormat::kAuto && !videos.empty()); }
   void validate(Checker& c) const;
 };
 

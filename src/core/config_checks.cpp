@@ -7,12 +7,20 @@
 #include <initializer_list>
 #include <set>
 #include <string>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 namespace geo {
 using namespace config_text;
 
 // ---------------------------------------------------------------- validation
+
+// A value already written as the configuration shows it.
+struct Shown {
+  std::string text;
+};
+inline std::string to_text(const Shown& v) { return v.text; }
 
 class Checker {
  public:
@@ -63,6 +71,26 @@ namespace {
 // any run can make.
 constexpr int64_t kMaxCount = 1000000000000;
 constexpr const char* kCountRange = "must be in 1..1000000000000";
+
+// The keys of a section (camera, video) whose values differ from the section's defaults, with
+// their values as the configuration shows them.
+template <class Section> std::vector<std::pair<std::string, std::string>> non_defaults(const Section& section) {
+  Section given = section, plain;
+  std::vector<std::pair<std::string, std::string>> a, b, out;
+  auto into = [](std::vector<std::pair<std::string, std::string>>& list) {
+    return [&list](const char* name, const auto& value) {
+      if constexpr (std::is_same_v<std::decay_t<decltype(value)>, bool>) list.emplace_back(name, value ? "true" : "false");
+      else list.emplace_back(name, to_text(value));
+    };
+  };
+  auto collect_a = into(a);
+  auto collect_b = into(b);
+  given.fields(collect_a);
+  plain.fields(collect_b);
+  for (size_t i = 0; i < a.size(); ++i)
+    if (a[i].second != b[i].second) out.push_back(a[i]);
+  return out;
+}
 
 bool one_of(const std::string& v, std::initializer_list<const char*> options) {
   for (const char* o : options)
@@ -115,12 +143,25 @@ void DataConfig::validate(Checker& c) const {
   }
   c.require(format != DataFormat::kVideo || !videos.empty(), "videos", videos,
             "must name at least one video file or frame folder when data.format is video");
+  // The clips' settings apply to data.videos only: given to other data they would go unused.
+  const bool clips = uses_videos();
+  c.require(clips || videos.empty(), "videos", videos,
+            "data.format is " + to_text(format) + ", which trains on data.root, not on clips: set data.format=video " +
+                "(or auto) to train on them, or leave data.videos empty");
+  const std::string unused = "applies to data.videos only (data.format " + to_text(format) +
+                             (format == DataFormat::kAuto ? " without clips" : "") + " reads " +
+                             (format == DataFormat::kSynthetic ? "the in-memory world" : "data.root") +
+                             ", whose camera comes with the data): remove it or train on clips";
   {
     Checker::Scope s(c, "camera");
     camera.validate(c);
+    if (!clips)
+      for (const auto& [key, value] : non_defaults(camera)) c.require(false, key.c_str(), Shown{value}, unused);
   }
   Checker::Scope s(c, "video");
   video.validate(c);
+  if (!clips)
+    for (const auto& [key, value] : non_defaults(video)) c.require(false, key.c_str(), Shown{value}, unused);
 }
 
 void CameraConfig::validate(Checker& c) const {

@@ -180,7 +180,7 @@ TrainingData open_videos(const DataConfig& d) {
 
 TrainingData open_training_data(const DataConfig& d) {
   if (d.format == DataFormat::kSynthetic) return open_synthetic(d);
-  if (d.format == DataFormat::kVideo || (d.format == DataFormat::kAuto && !d.videos.empty())) {
+  if (d.uses_videos()) {
     if (!d.root.empty())
       throw ConfigError("data.root '" + d.root + "' and data.videos are both set: train from one of them");
     return open_videos(d);

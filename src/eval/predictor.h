@@ -25,6 +25,8 @@ class Predictor {
   int64_t height() const { return model_->spec().height; }
   int64_t width() const { return model_->spec().width; }
   bool has_flow() const { return model_->spec().has_flow; }
+  // fp32, bf16 or int8: what the networks compute in (after quantize_int8: int8).
+  const std::string& precision() const { return model_->spec().precision; }
   torch::Device device() const { return model_->device(); }
   // The config a training checkpoint carries: what the model was trained on. nullopt for model
   // files (geo_export) and untrained models.

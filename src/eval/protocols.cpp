@@ -565,6 +565,7 @@ EvalResult evaluate(const EvalOptions& o, PredictionSource& source) {
                 : o.scaling == DepthScaling::kNone ? "none"
                                                    : "camera-height " + std::to_string(camera_height_of(o, root)) + " m";
   r.source = source.name();
+  if (pred) r.precision = pred->precision();
   r.data_root = root;
   if (o.split == "odometry") r.subset = "sequence " + o.sequence;
   if (!o.split_file.empty()) r.subset += (r.subset.empty() ? "list " : ", list ") + o.split_file;
@@ -593,6 +594,7 @@ std::string EvalResult::json() const {
   };
   s << "{\n  \"split\": " << q(split) << ",\n  \"source\": " << q(source) << ",\n  \"data_root\": " << q(data_root);
   if (!scaling.empty()) s << ",\n  \"scaling\": " << q(scaling);
+  if (!precision.empty()) s << ",\n  \"precision\": " << q(precision);
   if (!subset.empty()) s << ",\n  \"subset\": " << q(subset);
   s << ",\n  \"metrics\": {";
   for (size_t i = 0; i < metrics.size(); ++i) {  // JSON has no NaN/Inf: a non-finite metric is null
@@ -634,6 +636,7 @@ EvalResult read_result(const std::string& path) {
     r.source = n["source"].as<std::string>("");
     r.data_root = n["data_root"].as<std::string>("");
     r.scaling = n["scaling"].as<std::string>("");
+    r.precision = n["precision"].as<std::string>("");
     r.subset = n["subset"].as<std::string>("");
     if (!n["metrics"].IsMap() || !n["counts"].IsMap()) throw std::runtime_error("'metrics' and 'counts' must be objects");
     for (const auto& kv : n["metrics"])
@@ -701,6 +704,7 @@ std::string format_results(const std::vector<EvalResult>& results, const std::ve
   differ("split", [](const EvalResult& r) { return r.split; });
   differ("data root", [](const EvalResult& r) { return r.data_root; });
   differ("scaling", [](const EvalResult& r) { return r.scaling; });
+  differ("precision", [](const EvalResult& r) { return r.precision; });
   differ("subset", [](const EvalResult& r) { return r.subset; });
   std::vector<std::string> count_keys;
   for (const auto& r : results)

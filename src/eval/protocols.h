@@ -42,6 +42,7 @@ struct EvalOptions {
 struct EvalResult {
   std::string split, source, data_root;
   std::string scaling;  // eigen: median, camera-height (at camera_height m) or none
+  std::string precision;  // of a model's predictions: fp32, bf16 or int8 (none for files and baselines)
   // What of the split was scored when not all of it: "sequence 09" (odometry), "list FILE" (a
   // split file other than the standard one).
   std::string subset;
@@ -80,7 +81,7 @@ std::string split_root(const std::string& split, const std::string& root);
 
 // One table, one column per result, with the number each column scored (images, pairs, snippets),
 // and a note for every way the columns differ other than the model (split, data root, scaling,
-// subset, counts, training-drive leaks): results side by side are compared, unlike ones must say so.
+// subset, precision, counts, training-drive leaks): results side by side are compared, unlike ones must say so.
 std::string format_results(const std::vector<EvalResult>& results, const std::vector<std::string>& names);
 
 // Reads a results JSON written by EvalResult::json(); any other file (JSON or not) is an error naming it.

@@ -15,6 +15,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <iostream>
 #include <thread>
 
@@ -162,6 +163,17 @@ TEST(Api, Int8FilesKeepTheirCalibration) {
   EXPECT_TRUE(torch::equal(Model::load(dir + "/int8.pt").pose({a, b, c}), fp32.pose({a, b, c})));
   GEO_EXPECT_THROW_WITH(Model::load(checkpoint(), o), "precision 'int8' needs calibration frames");
   GEO_EXPECT_THROW_WITH(int8.quantize_int8({a, b}), "int8 already");
+  // Loaded in fp32, a file written in int8 says it keeps its calibration and turns int8 without frames
+  // (geo_infer --precision int8 then calibrates nothing); a training checkpoint keeps none.
+  Model later = Model::load(dir + "/int8.pt");
+  EXPECT_TRUE(later.has_int8_calibration());
+  later.quantize_int8({});
+  EXPECT_EQ(later.spec().precision, "int8");
+  EXPECT_TRUE(torch::equal(later.depth(a), int8.depth(a)));
+  EXPECT_TRUE(torch::equal(later.pose({a, b, c}), int8.pose({a, b, c})));
+  Model plain = Model::load(checkpoint());
+  EXPECT_FALSE(plain.has_int8_calibration());
+  GEO_EXPECT_THROW_WITH(plain.quantize_int8({}), "precision 'int8' needs calibration frames");
   o.calibration = {a};
   GEO_EXPECT_THROW_WITH(Model::load(checkpoint(), o), "at least 2");
 }
@@ -222,6 +234,10 @@ TEST(Api, MisuseIsAGeoErrorThatSaysWhat) {
   };
   expect_error([&] { m.depth(torch::zeros({1, 64, 208})); }, "expected an RGB image [3,H,W]");
   expect_error([&] { m.depth(torch::zeros({3, 64, 208}, torch::kInt32)); }, "uint8 or floating point");
+  auto nan_pixel = image(64, 208);
+  nan_pixel[1][10][20] = std::nan("");
+  expect_error([&] { m.depth(nan_pixel); }, "1 pixel value(s) are NaN or infinite");
+  expect_error([&] { m.depth(image(64, 208) * 255); }, "floating-point pixels must lie in [0, 1]");
   expect_error([&] { m.pose({image(64, 208)}); }, "takes 3 frames, got 1");
   expect_error([&] { m.flow(image(64, 208), image(32, 208)); }, "differ in size");
   expect_error([&] { m.flow(image(64, 208), image(64, 208), torch::zeros({3, 3})); },

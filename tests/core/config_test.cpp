@@ -339,6 +339,38 @@ TEST(Config, VideoConfigNeedsClipsAndTakesOneCamera) {
     EXPECT_NE(msg.find(want), std::string::npos) << want << "\n" << msg;
 }
 
+TEST(Config, ClipSettingsForOtherDataAreRefusedByKey) {
+  // data.videos with another format, data.camera and data.video with KITTI data or the in-memory
+  // world: they would go unused, so each is refused by its key.
+  auto error_of = [](const std::vector<std::string>& sets) {
+    try {
+      geo::load_config(geo::resolve_config_path("stage1.yaml"), sets);
+    } catch (const ConfigError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  const auto kitti = error_of({"data.format=kitti_raw", "data.videos=[a.mp4]"});
+  EXPECT_NE(kitti.find("key 'data.videos' = [a.mp4] (from --set): data.format is 'kitti_raw', which trains on "
+                       "data.root, not on clips"),
+            std::string::npos)
+      << kitti;
+  const auto camera = error_of({"data.camera.fov_deg=90"});
+  EXPECT_NE(camera.find("key 'data.camera.fov_deg' = 90 (from --set): applies to data.videos only (data.format 'auto' "
+                        "without clips reads data.root"),
+            std::string::npos)
+      << camera;
+  const auto video = error_of({"data.format=synthetic", "data.video.fps=5", "data.video.crop=false"});
+  for (const char* want : {"key 'data.video.fps' = 5 (from --set): applies to data.videos only (data.format "
+                           "'synthetic' reads the in-memory world",
+                           "key 'data.video.crop' = false (from --set): applies to data.videos only"})
+    EXPECT_NE(video.find(want), std::string::npos) << want << "\n" << video;
+  // With clips they are used; a resolved config (every key, defaults included) loads as before.
+  EXPECT_EQ(error_of({"data.videos=[a.mp4]", "data.camera.fov_deg=90", "data.video.fps=5"}), "");
+  const auto resolved = geo::to_yaml(geo::load_config(geo::resolve_config_path("stage1.yaml"), {}));
+  EXPECT_NO_THROW(geo::parse_config(resolved));
+}
+
 TEST(Config, ResolveNamesEveryPlaceTried) {
   std::string msg;
   try {

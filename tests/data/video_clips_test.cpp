@@ -126,6 +126,11 @@ TEST(VideoClips, BadClipsNameTheFileAndTheValue) {
   EXPECT_NE(error_of(video_config({dir + "/nothing"})).find("holds no image files"), std::string::npos);
   write_drive(dir + "/one", 1);
   EXPECT_NE(error_of(video_config({dir + "/one"})).find("has 1 frame: a training snippet needs 3"), std::string::npos);
+  // One clip twice, under two spellings: its snippets would count double.
+  const std::string again = dir + "/../" + std::filesystem::path(dir).filename().string() + "/one/";
+  const auto twice = error_of(video_config({dir + "/one", dir + "/nothing", again}));
+  EXPECT_NE(twice.find("data.videos: '" + dir + "/one' and '" + dir + "/../"), std::string::npos) << twice;
+  EXPECT_NE(twice.find("are the same clip (entries 1 and 3): give each clip once"), std::string::npos) << twice;
   // A clip without motion: the same frame five times.
   write_drive(dir + "/still", 5, {2, 2, 2, 2, 2});
   const auto still = error_of(video_config({dir + "/still"}));

@@ -354,7 +354,16 @@ TEST(Protocols, ComparisonsSayHowTheColumnsDiffer) {
             std::string::npos);
   EXPECT_EQ(unlike.find("differ in 'pixels'"), std::string::npos);
   EXPECT_NE(unlike.find("whether it trained on test drives is unknown: no training config"), std::string::npos);
+  // One model in fp32 and in int8: the precision is recorded in the results file and noted.
+  EvalResult fp32 = a, int8 = a;
+  fp32.precision = "fp32";
+  int8.precision = "int8";
   const std::string root = test::fresh_dir("compare_files");
+  test::write_text(root + "/int8.json", int8.json());
+  EXPECT_EQ(read_result(root + "/int8.json").precision, "int8");
+  const auto precisions = format_results({fp32, read_result(root + "/int8.json")}, {"fp32", "int8"});
+  EXPECT_NE(precisions.find("note: the columns differ in precision: fp32 fp32, int8 int8\n"), std::string::npos)
+      << precisions;
   for (const auto& [name, text, why] :
        std::vector<std::tuple<std::string, std::string, std::string>>{
            {"list.json", "[1, 2]", "not a JSON object"},

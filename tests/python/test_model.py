@@ -174,8 +174,9 @@ def test_trajectories_chain_motions_at_their_scales(model, frames):
         model.sequence_scales(list(frames))
 
 
-def test_int8_is_calibrated_on_frames_and_follows_fp32(model_file, frames):
+def test_int8_is_calibrated_on_frames_and_follows_fp32(model_file, frames, tmp_path):
     fp32 = geo.Model.load(str(model_file))
+    assert not fp32.has_int8_calibration
     with pytest.raises(geo.Error, match="calibration frames"):
         geo.Model.load(str(model_file), precision="int8")
     int8 = geo.Model.load(str(model_file), precision="int8", calibration=[frames[0], frames[1], frames[2]])
@@ -191,6 +192,12 @@ def test_int8_is_calibrated_on_frames_and_follows_fp32(model_file, frames):
     assert torch.equal(later.depth(frames), d8)
     with pytest.raises(geo.Error, match="at least 2"):
         geo.Model.load(str(model_file)).quantize_int8([frames[0]])
+    # A file saved in int8 keeps its calibration: loaded in fp32, quantize_int8() needs no frames.
+    int8.save(str(tmp_path / "int8.pt"))
+    kept = geo.Model.load(str(tmp_path / "int8.pt"))
+    assert kept.has_int8_calibration
+    kept.quantize_int8()
+    assert kept.spec.precision == "int8" and torch.equal(kept.depth(frames), d8)
 
 
 def test_the_package_imports_from_wherever_it_is_copied():

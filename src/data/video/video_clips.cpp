@@ -222,6 +222,14 @@ VideoData open_video_clips(const DataConfig& d) {
   auto clips = std::make_shared<std::vector<Clip>>();
   std::vector<ClipSnippets::Item> train, val;
   VideoData out;
+  // One clip given twice (under any spelling of its path) would count its snippets twice.
+  for (size_t i = 0; i < d.videos.size(); ++i)
+    for (size_t j = 0; j < i; ++j) {
+      std::error_code ec;
+      if (d.videos[i] == d.videos[j] || fs::equivalent(d.videos[i], d.videos[j], ec))
+        throw ConfigError("data.videos: '" + d.videos[j] + "' and '" + d.videos[i] + "' are the same clip (entries " +
+                          std::to_string(j + 1) + " and " + std::to_string(i + 1) + "): give each clip once");
+    }
   for (const auto& path : d.videos) {
     std::string line, warning;
     clips->push_back(read_clip(path, d, &line, &warning));
