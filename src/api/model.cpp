@@ -95,11 +95,13 @@ torch::Tensor prepare(const Model::Impl& m, const torch::Tensor& image, int64_t*
     x = x.to(m.device, torch::kFloat32);
     // One NaN pixel would make every depth NaN; 0..255 values in a float image would give depth of
     // another scale: both are refused by name rather than computed.
-    const auto finite = torch::isfinite(x);
-    if (!finite.all().item<bool>())
-      throw Error(std::string(what) + ": " + std::to_string((~finite).sum().item<int64_t>()) +
+    // One pass and one device sync per image: NaN and infinity propagate into the range.
+    const auto range = at::aminmax(x);
+    const auto ends = torch::stack({std::get<0>(range), std::get<1>(range)}).to(torch::kCPU, torch::kFloat64);
+    const double lo = ends[0].item<double>(), hi = ends[1].item<double>();
+    if (!std::isfinite(lo) || !std::isfinite(hi))
+      throw Error(std::string(what) + ": " + std::to_string((~torch::isfinite(x)).sum().item<int64_t>()) +
                   " pixel value(s) are NaN or infinite");
-    const double lo = x.min().item<double>(), hi = x.max().item<double>();
     if (lo < -1 || hi > 2)
       throw Error(std::string(what) + ": floating-point pixels must lie in [0, 1], this image spans [" +
                   c10::str(lo) + ", " + c10::str(hi) + "] (divide 0..255 values by 255, or pass uint8)");
