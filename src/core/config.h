@@ -306,6 +306,9 @@ struct LossWeights {
   double disp_smooth = 0.5;        // l_ds, disparity smoothness
   double flow_smooth = 0.2;        // l_fs, flow smoothness
   double flow_consistency = 0.2;   // l_fg, geometric consistency
+  // Nothing standing on the road lies beyond it (losses/ground_prior.h): 0 in the paper's recipe;
+  // configs/video.yaml turns it on for traffic (cars moving with the camera).
+  double ground = 0.0;
 
   template <class V> void fields(V& v) {
     v("rigid", rigid);
@@ -313,6 +316,7 @@ struct LossWeights {
     v("disp_smooth", disp_smooth);
     v("flow_smooth", flow_smooth);
     v("flow_consistency", flow_consistency);
+    v("ground", ground);
   }
   void validate(Checker& c) const;
 };

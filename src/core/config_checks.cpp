@@ -221,6 +221,7 @@ void LossWeights::validate(Checker& c) const {
   c.require(disp_smooth >= 0, "disp_smooth", disp_smooth, "must be >= 0");
   c.require(flow_smooth >= 0, "flow_smooth", flow_smooth, "must be >= 0");
   c.require(flow_consistency >= 0, "flow_consistency", flow_consistency, "must be >= 0");
+  c.require(ground >= 0, "ground", ground, "must be >= 0");
 }
 
 std::vector<std::string> NetworkSet::names() const {

@@ -198,4 +198,10 @@ std::pair<torch::Tensor, torch::Tensor> align_trajectory_scale(const torch::Tens
   return {gt, pred};
 }
 
+bool trajectory_moves(const torch::Tensor& poses) {
+  check_shape(poses, "poses", {-1, 4, 4});
+  const auto p = poses.to(torch::kFloat64).slice(1, 0, 3).select(2, 3);  // [N,3]
+  return p.size(0) > 0 && (p - p[0]).norm(2, 1).max().item<double>() > 1e-9;
+}
+
 }  // namespace geo

@@ -97,4 +97,8 @@ OdometryErrors kitti_odometry_errors(const torch::Tensor& gt, const torch::Tenso
 // {gt, pred} so aligned, [N,4,4] float64.
 std::pair<torch::Tensor, torch::Tensor> align_trajectory_scale(const torch::Tensor& gt, const torch::Tensor& pred);
 
+// Whether camera-to-world poses [N,4,4] move at all: some position more than 1e-9 from the first.
+// A trajectory without motion has nothing to align a scale to or score against.
+bool trajectory_moves(const torch::Tensor& poses);
+
 }  // namespace geo

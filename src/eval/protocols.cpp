@@ -86,6 +86,10 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, PredictionS
   bool from_files = false;        // predictions from files, meant at the image's size
   int64_t predictions_resized = 0;  // of them, those of another size (resized bilinearly)
   std::string first_resized;
+  // Where the data root marks moving objects (geo_synth's raw/<drive>/obj_map/image_0X/<frame>.png,
+  // 0 = static), their pixels are also scored apart, at the whole image's scale, pooled over pixels.
+  double moving_abs_rel_sum = 0, moving_a1_sum = 0;
+  int64_t moving_pixels = 0, images_with_object_maps = 0;
   Progress progress("eigen", static_cast<int64_t>(entries.size()), 0, "images");
   for (size_t i = 0; i < entries.size(); ++i) {
     const auto test = eigen_test_image(root, entries[i], i, list);
@@ -150,6 +154,23 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, PredictionS
       for (int k = 0; k < 7; ++k) sums[k] += v[k];
       ++images;
       pixels += err.pixels;
+      const std::string objects = root + "/" + entries[i].folder + "/obj_map/image_0" +
+                                  std::to_string(entries[i].camera()) + "/" + zero_padded(entries[i].frame, 10) + ".png";
+      if (fs::exists(objects)) {
+        const auto moving = read_object_map(objects) > 0;
+        if (moving.size(0) != gt.size(0) || moving.size(1) != gt.size(1))
+          throw std::runtime_error("object map '" + objects + "' is " + std::to_string(moving.size(0)) + "x" +
+                                   std::to_string(moving.size(1)) + ", its image " + std::to_string(gt.size(0)) + "x" +
+                                   std::to_string(gt.size(1)));
+        ++images_with_object_maps;
+        EigenOptions at_scale = eo;
+        at_scale.median_scaling = false;
+        at_scale.fixed_scale = applied;
+        const auto m = eigen_image_errors(gt * moving.to(gt.dtype()), depth.clamp_min(1e-3), at_scale);
+        moving_abs_rel_sum += m.abs_rel * static_cast<double>(m.pixels);
+        moving_a1_sum += m.a1 * static_cast<double>(m.pixels);
+        moving_pixels += m.pixels;
+      }
     } else {
       without_gt.push_back(velo);
     }
@@ -188,11 +209,19 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, PredictionS
   };
   spread("scale_ratio", median_ratios);
   spread("scale_agreement", agreements);
+  if (moving_pixels > 0) {
+    r.metrics.emplace_back("moving_abs_rel", moving_abs_rel_sum / static_cast<double>(moving_pixels));
+    r.metrics.emplace_back("moving_a1", moving_a1_sum / static_cast<double>(moving_pixels));
+  }
   r.counts = {{"images", images}, {"pixels", pixels}, {"listed", static_cast<int64_t>(entries.size())},
               {"images_without_ground_truth", static_cast<int64_t>(without_gt.size())},
               {"velodyne_points_non_finite", non_finite_points},
               {"predictions_with_nonpositive_depth", images_nonpositive},
               {"images_without_road_plane", static_cast<int64_t>(without_plane.size())}};
+  if (images_with_object_maps > 0) {
+    r.counts.emplace_back("images_with_object_maps", images_with_object_maps);
+    r.counts.emplace_back("moving_pixels", moving_pixels);
+  }
   if (from_files) r.counts.emplace_back("predictions_resized", predictions_resized);
   if (predictions_resized > 0)
     spdlog::warn("{} of {} depth predictions differ in size from their image and were resized bilinearly; first: "
@@ -362,7 +391,7 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicti
   const int64_t n = gt.size(0);
   // Ground truth without motion: the whole sequence is refused; a static snippet (a stopped car)
   // scores ATE 0 whatever the prediction (the scale alignment scales it to nothing): counted, warned.
-  if (positions(gt).sub(positions(gt)[0]).norm(2, 1).max().item<double>() < 1e-9)
+  if (!trajectory_moves(gt))
     throw std::runtime_error(gt_path + ": the ground truth has no motion (every position is the first): a trajectory "
                              "error means nothing; nothing was scored");
   const bool metric = source.model() && o.scaling == DepthScaling::kCameraHeight;

@@ -1,7 +1,8 @@
 // The published evaluation protocols (Eigen depth, KITTI 2015 flow, SfMLearner's snippet ATE) over
 // KITTI-format folders (real KITTI or a geo_synth world), of the predictions of a source
 // (eval/sources.h: a model, prediction files, the trivial baseline):
-//   eigen      depth on the Eigen test images, Velodyne ground truth, Garg crop, median scaling, 80 m
+//   eigen      depth on the Eigen test images, Velodyne ground truth, Garg crop, median scaling, 80 m;
+//              where <drive>/obj_map/image_0X/ exists (geo_synth), AbsRel and a1 on the moving objects
 //   kitti2015  flow EPE on flow_noc and flow_occ, Fl-all, over the image_2/%06d_10.png pairs; where
 //              obj_map/ exists, EPE and Fl of the background and the foreground (moving objects)
 //              as KITTI's devkit; for a model with a FlowNet, the same for its rigid flow alone

@@ -21,16 +21,23 @@ torch::Tensor loss_mask(const torch::Tensor& error, const torch::Tensor& valid,
   return mask;
 }
 
-// Photometric term of one direction at one scale over all sources.
+// Photometric term of one direction at one scale over all sources. With auto-masking, `masked`
+// (when given) receives the share of pixels a still frame explained better (no gradient).
 torch::Tensor direction_loss(const std::vector<torch::Tensor>& errors,
                              const std::vector<torch::Tensor>& valids,
-                             const std::vector<torch::Tensor>& identity, const LossConfig& cfg) {
+                             const std::vector<torch::Tensor>& identity, const LossConfig& cfg,
+                             torch::Tensor* masked = nullptr) {
+  const auto share = [&](const torch::Tensor& err, const torch::Tensor& ident) {
+    if (masked && cfg.automask) *masked = (err.detach() >= ident).to(torch::kFloat32).mean();
+  };
   if (cfg.min_reprojection) {
     const auto err = std::get<0>(torch::stack(errors).min(0));
     auto valid = torch::stack(valids).amax(0);
     torch::Tensor ident = cfg.automask ? std::get<0>(torch::stack(identity).min(0)) : err;
+    share(err, ident);
     return masked_mean(err, loss_mask(err, valid, ident, cfg));
   }
+  if (cfg.automask) share(torch::stack(errors), torch::stack(identity));
   std::vector<torch::Tensor> per_source;
   for (size_t i = 0; i < errors.size(); ++i)
     per_source.push_back(masked_mean(
@@ -109,7 +116,10 @@ RigidTerms rigid_terms(const LossInputs& in, const LossConfig& cfg) {
         bi.push_back(photometric_error(tgt, src, cfg.ssim_alpha));
       }
     }
-    const auto term = direction_loss(fe, fv, fi, cfg) + direction_loss(be, bv, bi, cfg);
+    torch::Tensor fwd_masked, bwd_masked;
+    const auto term = direction_loss(fe, fv, fi, cfg, s == 0 ? &fwd_masked : nullptr) +
+                      direction_loss(be, bv, bi, cfg, s == 0 ? &bwd_masked : nullptr);
+    if (fwd_masked.defined()) out.automasked = 0.5 * (fwd_masked + bwd_masked);
     rigid = rigid.defined() ? rigid + term : term;
 
     std::vector<torch::Tensor> disps{in.tgt_disp[s]}, images{out.tgt_pyr[s]};
@@ -201,11 +211,17 @@ FlowTerms flow_terms(const RigidTerms& rigid, const PerSourceScale<torch::Tensor
   return out;
 }
 
-LossTerms total_loss(const RigidTerms& rigid, const FlowTerms* flow, const LossWeights& w) {
+LossTerms total_loss(const RigidTerms& rigid, const FlowTerms* flow, const LossWeights& w,
+                     const torch::Tensor& ground) {
   LossTerms t;
   t.rigid = rigid.rigid;
   t.disp_smooth = rigid.disp_smooth;
+  t.automasked = rigid.automasked;
   t.total = w.rigid * t.rigid + w.disp_smooth * t.disp_smooth;
+  if (ground.defined()) {
+    t.ground = ground;
+    t.total = t.total + w.ground * t.ground;
+  }
   if (flow) {
     t.flow = flow->flow;
     t.flow_smooth = flow->flow_smooth;
@@ -221,7 +237,8 @@ std::vector<std::pair<std::string, double>> LossTerms::values() const {
   std::vector<torch::Tensor> scalars;
   for (const auto& [name, v] : {std::pair<const char*, const torch::Tensor&>{"rigid", rigid}, {"flow", flow},
                                 {"disp_smooth", disp_smooth}, {"flow_smooth", flow_smooth},
-                                {"flow_consistency", flow_consistency}, {"total", total}})
+                                {"flow_consistency", flow_consistency}, {"ground", ground},
+                                {"automasked", automasked}, {"total", total}})
     if (v.defined()) {
       names.push_back(name);
       scalars.push_back(v.detach().reshape({}).to(torch::kFloat64));

@@ -42,6 +42,8 @@ struct RigidTerms {
   std::vector<torch::Tensor> bwd_error_norm;  //    per-channel error [B,1,H,W] (FlowNet input; no gradient)
   torch::Tensor rigid;        // L_br: sum over scales of (fwd + bwd) masked means, mean over sources
   torch::Tensor disp_smooth;  // L_ds: sum over scales of smoothness / 2^s over all frames
+  torch::Tensor automasked;   // loss.automask: the share of full-scale pixels a still frame explains
+                              // better (left out; mean of both directions; no gradient), else undefined
 };
 
 
@@ -65,14 +67,18 @@ FlowTerms flow_terms(const RigidTerms& rigid, const PerSourceScale<torch::Tensor
 
 struct LossTerms {
   // Unweighted terms; undefined when the stage does not compute them (never zero-filled).
-  torch::Tensor rigid, flow, disp_smooth, flow_smooth, flow_consistency;
+  torch::Tensor rigid, flow, disp_smooth, flow_smooth, flow_consistency, ground;
   torch::Tensor total;  // eq. 16: the weighted sum of the defined terms
+  torch::Tensor automasked;  // not a loss: RigidTerms::automasked, reported beside the terms
 
-  // (name, value) of every defined term and the total, for logging (one device-to-host copy).
+  // (name, value) of every defined term, the auto-masked share when defined, and the total last, for
+  // logging (one device-to-host copy).
   std::vector<std::pair<std::string, double>> values() const;
 };
 
 // Eq. 16. `flow` may be null (stages that do not train flow): flow terms are then left undefined.
-LossTerms total_loss(const RigidTerms& rigid, const FlowTerms* flow, const LossWeights& weights);
+// `ground`: the road-plane prior (ground_prior.h), added with weights.ground when defined.
+LossTerms total_loss(const RigidTerms& rigid, const FlowTerms* flow, const LossWeights& weights,
+                     const torch::Tensor& ground = {});
 
 }  // namespace geo

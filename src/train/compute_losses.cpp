@@ -1,6 +1,7 @@
 #include "train/compute_losses.h"
 
 #include "core/runtime.h"
+#include "losses/ground_prior.h"
 #include "losses/photometric.h"
 
 namespace geo {
@@ -53,8 +54,9 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
   if (nets.pose->options.learn_intrinsics) out.K = in.K;
   out.tgt_disp = in.tgt_disp;
   out.rigid = rigid_terms(in, config.loss);
+  const torch::Tensor ground = stage.weights.ground > 0 ? ground_prior(in.tgt_disp[0], in.K) : torch::Tensor();
   if (!stage.uses_flow()) {
-    out.losses = total_loss(out.rigid, nullptr, stage.weights);
+    out.losses = total_loss(out.rigid, nullptr, stage.weights, ground);
     return out;
   }
   TORCH_CHECK(nets.flow, "the stage trains flow but no FlowNet was created");
@@ -81,7 +83,7 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
   }
   frozen.reset();
   out.flow = flow_terms(out.rigid, out.fwd_full, bwd_full, config.loss, stage.weights.flow_consistency);
-  out.losses = total_loss(out.rigid, &*out.flow, stage.weights);
+  out.losses = total_loss(out.rigid, &*out.flow, stage.weights, ground);
   return out;
 }
 

@@ -13,7 +13,7 @@ namespace fs = std::filesystem;
 namespace geo {
 namespace {
 
-const char* kTermColumns[] = {"rigid", "disp_smooth", "flow", "flow_smooth", "flow_consistency"};
+const char* kTermColumns[] = {"rigid", "disp_smooth", "flow", "flow_smooth", "flow_consistency", "ground"};
 
 std::optional<double> term(const StepRecord& r, const std::string& name) {
   for (const auto& [n, v] : r.losses)
@@ -85,7 +85,8 @@ TensorBoardSink::TensorBoardSink(const RunFolder& folder, int64_t resumed_at) : 
 }
 
 void TensorBoardSink::on_step(const StepRecord& r) {
-  for (const auto& [name, value] : r.losses) writer_.add_scalar("loss/" + name, r.global_step, value);
+  for (const auto& [name, value] : r.losses)
+    writer_.add_scalar((name == "automasked" ? "train/" : "loss/") + name, r.global_step, value);
   writer_.add_scalar("lr", r.global_step, r.lr);
   writer_.add_scalar("grad_norm", r.global_step, r.grad_norm);
   static const char* camera_tags[] = {"camera/fx", "camera/fy", "camera/cx", "camera/cy"};
@@ -127,7 +128,13 @@ void ProgressSink::on_step(const StepRecord& r) {
     progress_.emplace(r.stage, r.stage_iterations, interval_);
   }
   std::string details;
-  for (const auto& [name, value] : r.losses) details += fmt::format("{}{} {:.4f}", details.empty() ? "" : " ", name, value);
+  std::string masked;
+  for (const auto& [name, value] : r.losses)
+    if (name == "automasked")
+      masked = fmt::format(" | {:.0f}% of pixels auto-masked", 100 * value);
+    else
+      details += fmt::format("{}{} {:.4f}", details.empty() ? "" : " ", name, value);
+  details += masked;
   if (r.skipped_steps) details += fmt::format(" ({} NaN/Inf steps skipped)", r.skipped_steps);
   if (r.camera.size() == 4)
     details += fmt::format(" | camera fx {:.1f} fy {:.1f} cx {:.1f} cy {:.1f}", r.camera[0], r.camera[1], r.camera[2], r.camera[3]);

@@ -78,12 +78,18 @@ TEST(TotalLoss, AutomaskLeavesOutPixelsThatTheMotionDoesNotExplain) {
   cfg.ssim_alpha = 0.0;
   cfg.mask_out_of_view = true;
   EXPECT_GT(geo::rigid_terms(sc.in, cfg).rigid.item<double>(), 0.05);
+  EXPECT_FALSE(geo::rigid_terms(sc.in, cfg).automasked.defined());  // reported only when masking
   cfg.automask = true;
-  EXPECT_EQ(geo::rigid_terms(sc.in, cfg).rigid.item<double>(), 0.0);
+  const auto still = geo::rigid_terms(sc.in, cfg);
+  EXPECT_EQ(still.rigid.item<double>(), 0.0);
+  EXPECT_EQ(still.automasked.item<double>(), 1.0);  // every pixel left out, and reported so
   // The shifted view with its true motion: warping explains every visible pixel better than the
   // still source does, nothing is left out and the loss stays that of the true motion (~0).
   auto shifted = shifted_plane(1, -0.5);
-  EXPECT_LT(geo::rigid_terms(shifted.in, cfg).rigid.item<double>(), 1e-8);
+  const auto moved = geo::rigid_terms(shifted.in, cfg);
+  EXPECT_LT(moved.rigid.item<double>(), 1e-8);
+  // Left out: the two columns the source cannot see (of 24) and pixels of equal colour at both.
+  EXPECT_LT(moved.automasked.item<double>(), 0.2);
 }
 
 TEST(TotalLoss, ImageRangeScalesL1AndTheEdgeWeights) {
@@ -259,7 +265,9 @@ TEST(TotalLoss, EveryTermBackPropagatesIntoDepthPoseAndFlow) {
     }
   const auto flow = geo::flow_terms(rigid, fwd, bwd, cfg);
   const auto t = geo::total_loss(rigid, &flow, geo::LossWeights{});
-  EXPECT_EQ(t.values().size(), 6u);
+  EXPECT_EQ(t.values().size(), 7u);  // five terms, the auto-masked share and the total
+  EXPECT_EQ(t.values()[5].first, "automasked");
+  EXPECT_EQ(t.values()[6].first, "total");
   for (const auto& term : {t.rigid, t.flow, t.disp_smooth, t.flow_smooth, t.flow_consistency}) {
     for (auto& l : leaves)
       if (l.grad().defined()) l.grad().zero_();
