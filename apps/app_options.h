@@ -34,6 +34,19 @@ template <class Body> int run_tool(Body&& body) {
   }
 }
 
+// An option given an empty value (--output '', a variable that was not set): named, rather than
+// taken as the current folder, no file or a default.
+inline void refuse_empty_values(const CLI::App& app) {
+  for (const CLI::Option* opt : app.get_options())
+    if (opt->count() > 0 && opt->get_expected_min() > 0)
+      for (const auto& value : opt->results())
+        if (value.empty())
+          throw std::runtime_error(opt->get_name() + " '': an empty value (" +
+                                   (opt->get_type_name() == "TEXT" || opt->get_type_name().empty()
+                                        ? std::string("a path or name")
+                                        : "a " + opt->get_type_name()) + " was expected)");
+}
+
 // A whole tool: its command line described by `add(app, command)` into a `Command`, parsed (--help
 // and parse errors as CLI11 reports them), then `run(command)` inside run_tool.
 template <class Command, class Add, class Run>
@@ -42,7 +55,10 @@ int run_command(int argc, char** argv, const std::string& description, Add&& add
   Command command;
   add(app, command);
   CLI11_PARSE(app, argc, argv);
-  return run_tool([&] { return run(command); });
+  return run_tool([&] {
+    refuse_empty_values(app);
+    return run(command);
+  });
 }
 
 // A number >= `min` (or > `min` when `strict`), integers and reals alike: "must be >= 1 (got 0)"

@@ -190,27 +190,36 @@ std::vector<double> metric_scales(const InferOptions& o, const geo::Model& model
   return scales;
 }
 
-// trajectory.txt (KITTI pose file) chained from the motions, and trajectory.png (with --ground-truth
-// beside it, scale-aligned).
-void write_trajectory(const InferOptions& o, const std::vector<torch::Tensor>& motions, std::vector<double> scales) {
+// --ground-truth's poses of the input's frames, read and checked before anything is computed or
+// written: a pose per frame, and motion to align the trajectory's scale to. Undefined without it.
+torch::Tensor ground_truth_of(const InferOptions& o, const Frames& frames) {
+  if (o.ground_truth.empty()) return {};
+  const auto truth = geo::read_poses(o.ground_truth);
+  const auto n = static_cast<int64_t>(frames.size());
+  if (truth.size(0) < n)
+    throw std::runtime_error("--ground-truth '" + o.ground_truth + "' has " + std::to_string(truth.size(0)) +
+                             " poses for " + std::to_string(n) + " frames");
+  if (n > 1 && !geo::trajectory_moves(truth.slice(0, 0, n)))
+    throw std::runtime_error("--ground-truth '" + o.ground_truth + "': no motion over the input's " + std::to_string(n) +
+                             " frames (every position is the first): nothing to align the trajectory's scale to");
+  return truth.slice(0, 0, n);
+}
+
+// trajectory.txt (KITTI pose file) chained from the motions, and trajectory.png (with the ground
+// truth, when given, beside it, scale-aligned).
+void write_trajectory(const InferOptions& o, const std::vector<torch::Tensor>& motions, std::vector<double> scales,
+                      torch::Tensor truth) {
   scales.resize(motions.size());  // one per step: each at its first frame's depth scale
   auto poses = geo::chain_poses(motions, scales);
   geo::write_poses(o.output + "/trajectory.txt", poses);
-  torch::Tensor truth;
-  if (!o.ground_truth.empty()) {
-    truth = geo::read_poses(o.ground_truth);
-    if (truth.size(0) < poses.size(0))
-      throw std::runtime_error("--ground-truth '" + o.ground_truth + "' has " + std::to_string(truth.size(0)) +
-                               " poses for " + std::to_string(poses.size(0)) + " frames");
-    std::tie(truth, poses) = geo::align_trajectory_scale(truth.slice(0, 0, poses.size(0)), poses);
-  }
+  if (truth.defined()) std::tie(truth, poses) = geo::align_trajectory_scale(truth, poses);
   geo::write_image(o.output + "/trajectory.png", geo::trajectory_plot(poses, truth));
 }
 
 // Per frame: depth (and with a next frame the flow and the motion, each network once per frame),
 // colour maps, PNGs, videos, point clouds; then the trajectory. Returns what was written.
 std::string write_outputs(const InferOptions& o, const geo::Model& model, const Frames& frames, const torch::Tensor& K,
-                          const std::vector<double>& scales, geo::StepTimes& times) {
+                          const std::vector<double>& scales, const torch::Tensor& truth, geo::StepTimes& times) {
   const int64_t h = model.spec().height, w = model.spec().width;
   const bool sequence = frames.size() > 1, three = model.spec().seq_length == 3;
   std::optional<geo::VideoWriter> disp_video, flow_video;
@@ -256,7 +265,7 @@ std::string write_outputs(const InferOptions& o, const geo::Model& model, const 
   std::string written = "*-disp.png, *-depth.png";
   const auto finishing = std::chrono::steady_clock::now();
   if (sequence && motions.size() + 1 == frames.size()) {
-    write_trajectory(o, motions, scales);
+    write_trajectory(o, motions, scales, truth);
     written += ", *-flow.png, trajectory.txt, trajectory.png";
   }
   for (const auto& [video, file] : {std::pair{&disp_video, ", disp.avi"}, std::pair{&flow_video, ", flow.avi"}})
@@ -307,6 +316,9 @@ int infer(const InferOptions& o) {
     if (f >= static_cast<int64_t>(frames.size()))
       throw std::runtime_error("--ply " + std::to_string(f) + ": the input has " + std::to_string(frames.size()) +
                                " frames (numbered from 0)");
+  const auto truth = ground_truth_of(o, frames);
+  if (o.videos && frames.size() < 2)
+    spdlog::warn("--videos: the input is a single frame; no video is written");
   prepare_output(o, model, frames);
   spdlog::info("{} frame(s) from {} at {}x{} -> {}", frames.size(), o.input, w, h, o.output);
   if (frames.size() > 1 && model.spec().seq_length != 3)
@@ -314,7 +326,7 @@ int infer(const InferOptions& o) {
                  "3-frame models only; depth is written for every frame", model.spec().seq_length);
   const auto K = camera(o, model, frames, h, w);
   const auto scales = metric_scales(o, model, frames, K, times);
-  const std::string written = write_outputs(o, model, frames, K, scales, times);
+  const std::string written = write_outputs(o, model, frames, K, scales, truth, times);
   spdlog::info("done: {}/{{{}}}", o.output, written);
   if (o.timing)
     std::printf("geo_infer --timing: %zu frame(s) at %lldx%lld, %s, %s\n%s", frames.size(), static_cast<long long>(w),

@@ -25,7 +25,7 @@ struct SynthCommand {
   geo::SynthOptions options() const {  // the preset with the options given
     auto o = geo::SynthOptions::preset_named(preset);
     o.seed = seed;
-    o.threads = threads;
+    o.threads = threads > 0 ? geo::thread_count(threads, "--threads") : 0;
     o.turns = turns;
     o.traffic = traffic;
     if (drives > 0) o.train_drives = drives;

@@ -190,7 +190,7 @@ namespace {
 // Networks created and loaded -> on the device, eval mode, BatchNorm folded, in the precision asked
 // (and LibTorch's threads set where the options ask).
 void make_ready(Model::Impl& impl, const LoadOptions& options, bool has_flow, const std::string& source) {
-  if (options.threads > 0) torch::set_num_threads(options.threads);
+  if (options.threads > 0) torch::set_num_threads(thread_count(options.threads, "threads"));
   impl.device = select_device(options.device);
   impl.nets.to(impl.device);
   const bool bf16 = use_bf16(options.precision, impl.device);
@@ -405,7 +405,13 @@ torch::Tensor Model::pose(const std::vector<torch::Tensor>& frames) const {
     std::vector<torch::Tensor> x;
     int64_t H = 0, W = 0;
     bool batched = false;
-    for (const auto& f : frames) x.push_back(prepare(*impl_, f, &H, &W, &batched, "pose"));
+    for (size_t i = 0; i < L; ++i) {
+      int64_t h = 0, w = 0;
+      x.push_back(prepare(*impl_, frames[i], i == 0 ? &H : &h, i == 0 ? &W : &w, &batched, "pose"));
+      if (i > 0 && (h != H || w != W || x[i].size(0) != x[0].size(0)))
+        throw Error("frame " + std::to_string(i) + " is " + c10::str(frames[i].sizes()) + " but frame 0 is " +
+                    c10::str(frames[0].sizes()) + ": the frames of a snippet (or pair) must have one size, from one camera");
+    }
     const size_t k = L / 2;
     std::vector<torch::Tensor> srcs;
     for (size_t i = 0; i < L; ++i)

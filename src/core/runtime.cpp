@@ -84,11 +84,14 @@ int use_all_cores() {
   return cores;
 }
 
-int apply_run_settings(const RunConfig& run, const torch::Device& device) {
+int thread_count(int asked, const std::string& what) {
   const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  if (run.threads > cores)
-    spdlog::warn("run.threads {} is more than this machine's {} cores: using {}", run.threads, cores, cores);
-  const int threads = run.threads > 0 ? std::min(run.threads, cores) : cores;
+  if (asked > cores) spdlog::warn("{} {} is more than this machine's {} cores: using {}", what, asked, cores, cores);
+  return asked > 0 ? std::min(asked, cores) : cores;
+}
+
+int apply_run_settings(const RunConfig& run, const torch::Device& device) {
+  const int threads = thread_count(run.threads, "run.threads");
   torch::set_num_threads(threads);
   torch::manual_seed(static_cast<uint64_t>(run.seed));
   apply_precision(run.precision);

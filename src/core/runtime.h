@@ -28,6 +28,11 @@ void keep_freed_memory();
 // 2-core machines); OMP_NUM_THREADS in the environment, where set, is kept. Returns the count.
 int use_all_cores();
 
+// The thread count to use for `asked` threads (0 = every core): more than the machine's cores is
+// said (naming `what`, e.g. "--threads" or "run.threads") and clamped to them; one rule for every
+// tool, the training run and the library.
+int thread_count(int asked, const std::string& what);
+
 // The memory this machine can give without swapping (MemAvailable of /proc/meminfo), in bytes; -1
 // where it cannot be told.
 int64_t available_memory_bytes();

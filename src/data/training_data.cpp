@@ -172,6 +172,7 @@ TrainingData open_videos(const DataConfig& d) {
   out.train = clips.train;
   out.val = clips.val;
   out.train_list = "data.videos [" + out.root + "]";
+  out.clip_records = clips.records;
   return out;
 #endif
 }

@@ -27,6 +27,7 @@ struct TrainingData {
   std::string format, train_list, val_list;
   size_t excluded = 0, dropped = 0;            // test-scene/static entries, entries without neighbours
   std::vector<std::string> exclusions;         // the lists that excluded entries (for the log)
+  std::vector<std::string> clip_records;       // data.videos: a line per clip (VideoData::records)
 };
 
 TrainingData open_training_data(const DataConfig& data);

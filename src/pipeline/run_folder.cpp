@@ -54,7 +54,7 @@ std::string RunFolder::resolve() const {
 
 std::vector<std::string> RunFolder::run_files() const {
   std::vector<std::string> found;
-  for (const std::string& path : {config(), metrics_csv(), validation_csv(), log(), checkpoints()})
+  for (const std::string& path : {config(), metrics_csv(), validation_csv(), clips(), log(), checkpoints()})
     if (fs::exists(path)) found.push_back(fs::path(path).filename().string());
   return found;
 }

@@ -30,6 +30,7 @@ class RunFolder {
   std::string log() const { return root_ + "/train.log"; }
   std::string metrics_csv() const { return root_ + "/metrics.csv"; }
   std::string validation_csv() const { return root_ + "/val.csv"; }
+  std::string clips() const { return root_ + "/clips.txt"; }  // data.videos: what each clip gave (resume checks it)
   std::string tensorboard() const { return root_ + "/tb"; }
   std::string summaries() const { return root_ + "/summaries"; }
   std::string summary(const std::string& stage, int64_t iteration, const std::string& tag) const;

@@ -7,6 +7,7 @@
 #include "data/image_io.h"
 #endif
 #include "data/loader.h"
+#include "data/text_io.h"
 #include "data/training_data.h"
 #include "train/distributed.h"
 #include "train/compute_losses.h"
@@ -20,6 +21,7 @@
 #include <filesystem>
 #include <functional>
 #include <optional>
+#include <sstream>
 
 namespace fs = std::filesystem;
 
@@ -58,6 +60,7 @@ class Run {
         checkpoints_(folder_, cfg_.logging.keep_last, !writer_) {
     apply_run_settings(cfg_.run, device_);
     data_ = open_training_data(cfg_.data);
+    if (writer_) keep_or_check_clips(resuming);
     bool with_flow = false;
     for (const auto& s : cfg_.stages) with_flow = with_flow || s.uses_flow();
     nets_ = Networks::create(NetworkSpec::of(cfg_), with_flow);
@@ -122,6 +125,31 @@ class Run {
                    stage().batch_size * group_.size(),
                    cfg_.run.distributed.shard_data ? "each reads its own shard of the data stream"
                                                    : "all read the same batches (run.distributed.shard_data false)");
+  }
+
+  // data.videos: what each clip gave (frames kept, a digest) is kept with the run (clips.txt); a
+  // resumed run refuses a clip that changed since, before anything is written: its snippets would
+  // not be those the run trained on (nor its validation blocks).
+  void keep_or_check_clips(bool resuming) const {
+    const auto& now = data_.clip_records;
+    const std::string file = folder_.clips();
+    if (!resuming) {
+      if (!now.empty()) write_file_atomic(file, join_list(now, "\n") + "\n");
+      return;
+    }
+    if (!fs::exists(file)) return;  // a run on other data
+    std::istringstream in(read_text_file(file));
+    std::vector<std::string> then;
+    for (std::string line; std::getline(in, line);)
+      if (!line.empty()) then.push_back(line);
+    for (size_t i = 0; i < std::max(then.size(), now.size()); ++i) {
+      const std::string was = i < then.size() ? then[i] : "(none)", is = i < now.size() ? now[i] : "(none)";
+      if (was == is) continue;
+      throw std::runtime_error("--resume " + folder_.root() + ": a clip changed since the run started: then " + was +
+                               "; now " + is + " (" + file + "). Resuming on other frames would train on snippets "
+                               "the run never had: restore the clip, or start a new run from this one's weights "
+                               "(geo_train --init " + folder_.root() + ")");
+    }
   }
 
   const StageConfig& stage() const { return cfg_.stages[state_.stage]; }

@@ -240,6 +240,9 @@ TEST(Api, MisuseIsAGeoErrorThatSaysWhat) {
   expect_error([&] { m.depth(image(64, 208) * 255); }, "floating-point pixels must lie in [0, 1]");
   expect_error([&] { m.pose({image(64, 208)}); }, "takes 3 frames, got 1");
   expect_error([&] { m.flow(image(64, 208), image(32, 208)); }, "differ in size");
+  expect_error([&] { m.relative_pose(image(64, 208), image(32, 208)); },
+               "frame 2 is [3, 32, 208] but frame 0 is [3, 64, 208]: the frames of a snippet (or pair) must have one size");
+  expect_error([&] { m.pose({image(64, 208), image(64, 208), image(64, 200)}); }, "frame 2 is [3, 64, 200]");
   expect_error([&] { m.flow(image(64, 208), image(64, 208), torch::zeros({3, 3})); },
                "intrinsics: focal lengths fx = 0, fy = 0 are not plausible");
   const auto outside = torch::tensor({100.0, 0.0, -500.0, 0.0, 100.0, 9000.0, 0.0, 0.0, 1.0}).view({3, 3});

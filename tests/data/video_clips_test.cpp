@@ -147,10 +147,38 @@ TEST(VideoClips, BadClipsNameTheFileAndTheValue) {
   test::write_text(dir + "/corrupt/frame2.png", "garbage");
   EXPECT_NE(error_of(video_config({dir + "/corrupt"})).find("cannot read image '" + dir + "/corrupt/frame2.png'"),
             std::string::npos);
+  // A link named like a frame that leads nowhere: not passed over (a frame would go missing).
+  write_drive(dir + "/linked", 4);
+  std::filesystem::remove(dir + "/linked/frame3.png");
+  std::filesystem::create_symlink(dir + "/elsewhere.png", dir + "/linked/frame3.png");
+  const auto linked = error_of(video_config({dir + "/linked"}));
+  EXPECT_NE(linked.find("frame '" + dir + "/linked/frame3.png' in '" + dir + "/linked' is a link to nothing"),
+            std::string::npos)
+      << linked;
   // Absurd intrinsics name the key.
   auto d = video_config({dir + "/sizes"});
   d.camera.intrinsics = {0, 100, 104, 32};
   EXPECT_NE(error_of(d).find("data.camera.intrinsics: focal lengths fx = 0"), std::string::npos) << error_of(d);
+}
+
+// A video damaged in its middle (a few kilobytes overwritten) or cut short: refused, naming the clip
+// and where it stops decoding, instead of training on the frames before the damage.
+TEST(VideoClips, ADamagedOrCutVideoIsRefused) {
+  const auto dir = test::fresh_dir("video_damaged");
+  const auto files = write_drive(dir + "/frames", 24);
+  write_video_file(files, dir + "/drive.avi", 10);
+  const auto bytes = test::read_file(dir + "/drive.avi");
+  auto damaged = bytes;
+  for (size_t i = bytes.size() / 2; i < bytes.size() / 2 + 4096; ++i) damaged[i] = '\0';
+  test::write_text(dir + "/damaged.avi", damaged);
+  const auto middle = error_of(video_config({dir + "/damaged.avi"}));
+  EXPECT_NE(middle.find("clip '" + dir + "/damaged.avi': "), std::string::npos) << middle;
+  EXPECT_NE(middle.find(" be decoded"), std::string::npos) << middle;  // "only 22 of its 24 frames can be decoded" here
+  test::write_text(dir + "/cut.avi", bytes.substr(0, bytes.size() / 2));
+  const auto cut = error_of(video_config({dir + "/cut.avi"}));
+  EXPECT_NE(cut.find("clip '" + dir + "/cut.avi': "), std::string::npos) << cut;
+  EXPECT_NE(cut.find("can be decoded"), std::string::npos) << cut;
+  EXPECT_EQ(error_of(video_config({dir + "/drive.avi"})), "");  // the whole file reads
 }
 
 }  // namespace

@@ -404,6 +404,38 @@ TEST(Trainer, AFailedCheckpointWriteNamesThePathAndResumeContinues) {
   EXPECT_EQ(state_of(resolve_checkpoint(o.run_dir)).iteration, 3);
 }
 
+// A run on a frame folder (data.videos) records what the clip gave (clips.txt); resuming after the
+// clip changed (frames deleted) is refused before anything is written, naming the clip, also for a
+// run that had finished; the unchanged clip resumes.
+TEST(Trainer, ResumeRefusesAClipThatChanged) {
+  const auto dir = test::fresh_dir("clip_resume");
+  const std::string clip = dir + "/clip";
+  std::filesystem::create_directories(clip);
+  for (const auto& e : std::filesystem::directory_iterator(world() + "/2011_01_01/2011_01_01_drive_0001_sync/image_02/data"))
+    std::filesystem::copy_file(e.path(), clip + "/" + e.path().filename().string());
+  auto cfg = tiny_config();
+  cfg.stages.resize(1);
+  cfg.stages[0].iterations = 2;
+  cfg.data.root.clear();
+  cfg.data.format = DataFormat::kVideo;
+  cfg.data.videos = {clip};
+  cfg.data.camera.intrinsics = {120.8, 123.1, 102.1, 29.5};
+  cfg.data.video.static_threshold = 0;
+  cfg.data.video.standing_parallax = 0;
+  cfg.data.augment.enabled = false;
+  TrainOptions o;
+  o.run_dir = dir + "/run";
+  ASSERT_EQ(train(cfg, o), 0);
+  const auto record = test::read_file(o.run_dir + "/clips.txt");
+  EXPECT_EQ(record.rfind("clip '" + clip + "': 10 frames, 10 kept, digest ", 0), 0u) << record;
+  ASSERT_EQ(resume(o.run_dir, {}), 0);  // unchanged: the finished run says so
+  std::filesystem::remove(clip + "/0000000009.png");
+  const auto csv = test::read_file(o.run_dir + "/metrics.csv");
+  GEO_EXPECT_THROW_WITH(resume(o.run_dir, {}), "a clip changed since the run started: then " + record.substr(0, record.size() - 1),
+                        "; now clip '" + clip + "': 9 frames, 9 kept, digest ", "geo_train --init " + o.run_dir);
+  EXPECT_EQ(test::read_file(o.run_dir + "/metrics.csv"), csv);
+}
+
 // One stage of one iteration with its checkpoint: a run folder to initialise others from.
 Config one_step_config() {
   auto cfg = tiny_config();

@@ -26,8 +26,16 @@ bool is_image_name(const std::string& path) {
 
 std::vector<std::string> frame_files(const std::string& folder) {
   std::vector<std::string> files;
-  for (const auto& e : fs::directory_iterator(folder))
-    if (e.is_regular_file() && is_image_name(e.path().string())) files.push_back(e.path().string());
+  for (const auto& e : fs::directory_iterator(folder)) {
+    if (!is_image_name(e.path().string())) continue;
+    if (e.is_regular_file()) {
+      files.push_back(e.path().string());
+    } else if (e.is_symlink() && !fs::exists(e.status())) {
+      // Passing over it would silently drop a frame from the middle of the sequence.
+      throw std::runtime_error("frame '" + e.path().string() + "' in '" + folder + "' is a link to nothing ('" +
+                               fs::read_symlink(e.path()).string() + "' does not exist): restore or remove it");
+    }
+  }
   std::sort(files.begin(), files.end(), [](const std::string& a, const std::string& b) {
     return natural_less(fs::path(a).filename().string(), fs::path(b).filename().string());
   });
@@ -56,6 +64,26 @@ FrameStream::FrameStream(const std::string& path, const std::string& label)
                              "lacks); a folder of its frames works too");
   const double fps = capture_.get(cv::CAP_PROP_FPS);
   if (std::isfinite(fps) && fps > 0 && fps < 1000) fps_ = fps;
+  const double count = capture_.get(cv::CAP_PROP_FRAME_COUNT);
+  if (std::isfinite(count) && count > 0 && count < 1e9) frame_count_ = static_cast<int64_t>(count);
+}
+
+// A video that stops decoding before its end: a frame that cannot be decoded in the middle (later
+// ones decode) or a file cut short. Both refuse the clip: a sequence with frames missing from its
+// middle would teach motions that never happened. The container's frame count may be off by one.
+void FrameStream::check_video_end() {
+  const int64_t decoded = index_ + 1;
+  int64_t later = 0;
+  for (int i = 0; i < 8; ++i)
+    if (capture_.grab()) ++later;
+  if (later > 0)
+    throw std::runtime_error(where_ + "frame " + std::to_string(decoded + 1) + (frame_count_ > 0 ? " of " + std::to_string(frame_count_) : "") +
+                             " cannot be decoded while later ones can (a damaged file): re-encode or cut the video "
+                             "(for example ffmpeg -i IN -c:v mjpeg -q:v 2 OUT.avi), or give a folder of its frames");
+  if (frame_count_ > 0 && decoded + 1 < frame_count_)
+    throw std::runtime_error(where_ + "only " + std::to_string(decoded) + " of its " + std::to_string(frame_count_) +
+                             " frames can be decoded (a damaged or cut file): re-encode or cut the video, or give a "
+                             "folder of its frames");
 }
 
 void FrameStream::check_size(const cv::Mat& m, const std::string& what) {
@@ -73,7 +101,10 @@ void FrameStream::check_size(const cv::Mat& m, const std::string& what) {
 bool FrameStream::next(std::string& name, cv::Mat* bgr) {
   if (video_) {
     cv::Mat m;
-    if (!capture_.read(m) || m.empty()) return false;
+    if (!capture_.read(m) || m.empty()) {
+      check_video_end();
+      return false;
+    }
     ++index_;
     char buf[32];
     std::snprintf(buf, sizeof buf, "%06lld", static_cast<long long>(index_));

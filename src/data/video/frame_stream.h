@@ -16,7 +16,8 @@ namespace geo {
 // True for the image files a frame folder is made of: png, jpg, jpeg, bmp, tif, tiff, webp (any case).
 bool is_image_name(const std::string& path);
 
-// The image files of a frame folder in natural order (frame2 before frame10).
+// The image files of a frame folder in natural order (frame2 before frame10). A link named like an
+// image that leads nowhere throws, naming it.
 std::vector<std::string> frame_files(const std::string& folder);
 
 class FrameStream {
@@ -31,7 +32,8 @@ class FrameStream {
   // 000042) and, with `bgr`, its pixels (BGR as OpenCV decodes it: a file's own depth and channels,
   // see mat_to_tensor; a video's 8-bit); false after the last. With `bgr` null a
   // folder's file is passed over unread (a video's frame is decoded all the same). A frame whose
-  // size differs from the first's throws, naming both.
+  // size differs from the first's throws, naming both; so does a video frame that cannot be
+  // decoded while later ones can, or a video that ends before the frame count its file states.
   bool next(std::string& name, cv::Mat* bgr);
 
   const std::string& path() const { return path_; }
@@ -44,6 +46,7 @@ class FrameStream {
 
  private:
   void check_size(const cv::Mat& m, const std::string& what);
+  void check_video_end();
 
   std::string path_, where_, first_;
   bool video_ = false;
@@ -51,6 +54,7 @@ class FrameStream {
   cv::VideoCapture capture_;
   double fps_ = 0;
   int64_t index_ = -1, width_ = 0, height_ = 0;
+  int64_t frame_count_ = 0;  // a video's, as its file states it; 0 when unknown
 };
 
 // The first `count` frames of an image, frame folder or video (fewer when it has fewer), each

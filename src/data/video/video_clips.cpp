@@ -17,6 +17,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <functional>
 #include <optional>
 #include <stdexcept>
@@ -38,6 +39,7 @@ struct Clip {
   CropWindow window;
   int64_t height = 0, width = 0;     // training size
   torch::Tensor K;                   // [3,3] float32 at the training size
+  int64_t total = 0;                 // frames decoded
 };
 
 // BGR frame -> the training frame [3,H,W] float32 in [0,1]: crop to `window`, resize to H x W.
@@ -199,7 +201,37 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
                std::to_string(c.window.x0) + ", " + std::to_string(c.window.y0) + ")";
   *report += d.camera.given() ? "; camera " + describe_camera(c.K.to(torch::kFloat64), d.width, d.height)
                               : "; camera not given: learned by the networks (model.learn_intrinsics)";
+  c.total = total;
   return c;
+}
+
+// FNV-1a, 64 bits: a digest that changes with any byte (not a cryptographic one).
+uint64_t fnv1a(uint64_t h, const void* data, size_t n) {
+  const auto* b = static_cast<const unsigned char*>(data);
+  for (size_t i = 0; i < n; ++i) h = (h ^ b[i]) * 1099511628211ull;
+  return h;
+}
+
+std::string clip_record(const Clip& c) {
+  uint64_t h = 14695981039346656037ull;
+  if (c.files.empty()) {  // a video: its file's bytes
+    std::ifstream in(c.path, std::ios::binary);
+    std::vector<char> buf(1 << 20);
+    while (in) {
+      in.read(buf.data(), static_cast<std::streamsize>(buf.size()));
+      h = fnv1a(h, buf.data(), static_cast<size_t>(in.gcount()));
+    }
+  }
+  for (const auto& file : c.files) {
+    const std::string name = fs::path(file).filename().string();
+    std::error_code ec;
+    const auto size = static_cast<uint64_t>(fs::file_size(file, ec));
+    h = fnv1a(fnv1a(h, name.data(), name.size()), &size, sizeof size);
+  }
+  char digest[17];
+  std::snprintf(digest, sizeof digest, "%016llx", static_cast<unsigned long long>(h));
+  return "clip '" + c.path + "': " + std::to_string(c.total) + " frames, " + std::to_string(c.index.size()) +
+         " kept, digest " + digest;
 }
 
 }  // namespace
@@ -254,6 +286,7 @@ VideoData open_video_clips(const DataConfig& d) {
     else
       line += ", no validation block (clip too short for data.video.val_fraction " + fixed(d.video.val_fraction, 2) + ")";
     out.report.push_back(line);
+    out.records.push_back(clip_record(clips->back()));
   }
   if (train.empty())
     throw ConfigError("data.videos: no training snippet of " + std::to_string(d.seq_length) + " frames in " +

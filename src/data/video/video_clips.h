@@ -20,6 +20,10 @@ struct VideoData {
   std::shared_ptr<SnippetSource> train, val;  // val null when no clip holds a validation block
   std::vector<std::string> report;            // a line per clip: what was kept and why
   std::vector<std::string> warnings;          // clips unlikely to teach depth, with what helps
+  // A line per clip saying which frames it gave: its path, frames decoded and kept, and a digest of
+  // the clip (a video's: its file's bytes; a folder's: its kept files' names and sizes).
+  // geo_train records them with a run and refuses to resume on a clip that changed.
+  std::vector<std::string> records;
 };
 
 // Opens data.videos with data.camera and data.video. Throws (ConfigError or std::runtime_error)
