@@ -39,6 +39,14 @@ test -f "$work/run_learned/checkpoints/stage1-00000002.pt"
 "$apps/geo_infer" --checkpoint "$work/run_learned" --input "$frames" --output "$work/infer_learned" --max-frames 3 \
   > "$work/infer_learned.log" 2>&1 || { cat "$work/infer_learned.log"; exit 1; }
 grep -q "learned camera" "$work/infer_learned.log" || { cat "$work/infer_learned.log"; exit 1; }
+# A ground truth without motion is refused before anything is computed or written.
+for i in 1 2 3 4; do echo "1 0 0 0 0 1 0 0 0 0 1 0"; done > "$work/still_poses.txt"
+if "$apps/geo_infer" --checkpoint "$work/run_video" --input "$work/drive.avi" --output "$work/infer_still" --max-frames 4 \
+  --ground-truth "$work/still_poses.txt" > "$work/infer_still.log" 2>&1; then
+  echo "a motionless --ground-truth was accepted"; exit 1
+fi
+grep -q "no motion over the input's 4 frames" "$work/infer_still.log" || { cat "$work/infer_still.log"; exit 1; }
+test ! -e "$work/infer_still"
 # geo_infer on the video.
 "$apps/geo_infer" --checkpoint "$work/run_video" --input "$work/drive.avi" --output "$work/infer" --max-frames 4 \
   > "$work/infer.log" 2>&1 || { cat "$work/infer.log"; exit 1; }
