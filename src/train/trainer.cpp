@@ -21,7 +21,6 @@
 #include <filesystem>
 #include <functional>
 #include <optional>
-#include <sstream>
 
 namespace fs = std::filesystem;
 
@@ -138,10 +137,7 @@ class Run {
       return;
     }
     if (!fs::exists(file)) return;  // a run on other data
-    std::istringstream in(read_text_file(file));
-    std::vector<std::string> then;
-    for (std::string line; std::getline(in, line);)
-      if (!line.empty()) then.push_back(line);
+    const auto then = read_lines(file);
     for (size_t i = 0; i < std::max(then.size(), now.size()); ++i) {
       const std::string was = i < then.size() ? then[i] : "(none)", is = i < now.size() ? now[i] : "(none)";
       if (was == is) continue;

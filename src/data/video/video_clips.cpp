@@ -1,4 +1,5 @@
 #include "data/video/video_clips.h"
+#include "core/zip_check.h"
 #include "data/cv_tensor.h"
 #include "data/image_io.h"
 #include "data/visual_outputs.h"
@@ -205,31 +206,26 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
   return c;
 }
 
-// FNV-1a, 64 bits: a digest that changes with any byte (not a cryptographic one).
-uint64_t fnv1a(uint64_t h, const void* data, size_t n) {
-  const auto* b = static_cast<const unsigned char*>(data);
-  for (size_t i = 0; i < n; ++i) h = (h ^ b[i]) * 1099511628211ull;
-  return h;
-}
-
+// The clip's record line: its CRC-32 (core/zip_check.h) over a video file's bytes, or over a folder's
+// kept files' names and sizes.
 std::string clip_record(const Clip& c) {
-  uint64_t h = 14695981039346656037ull;
+  uint32_t h = 0;
   if (c.files.empty()) {  // a video: its file's bytes
     std::ifstream in(c.path, std::ios::binary);
     std::vector<char> buf(1 << 20);
     while (in) {
       in.read(buf.data(), static_cast<std::streamsize>(buf.size()));
-      h = fnv1a(h, buf.data(), static_cast<size_t>(in.gcount()));
+      h = crc32(buf.data(), static_cast<size_t>(in.gcount()), h);
     }
   }
   for (const auto& file : c.files) {
     const std::string name = fs::path(file).filename().string();
     std::error_code ec;
     const auto size = static_cast<uint64_t>(fs::file_size(file, ec));
-    h = fnv1a(fnv1a(h, name.data(), name.size()), &size, sizeof size);
+    h = crc32(&size, sizeof size, crc32(name.data(), name.size(), h));
   }
-  char digest[17];
-  std::snprintf(digest, sizeof digest, "%016llx", static_cast<unsigned long long>(h));
+  char digest[9];
+  std::snprintf(digest, sizeof digest, "%08x", static_cast<unsigned>(h));
   return "clip '" + c.path + "': " + std::to_string(c.total) + " frames, " + std::to_string(c.index.size()) +
          " kept, digest " + digest;
 }
