@@ -9,6 +9,7 @@
 
 #include "app_options.h"
 #include "geo/geo.h"
+#include "core/files.h"
 #include "pipeline/checkpoint.h"
 #ifdef GEO_EXPORT_FRAMES
 #include "data/video/frame_stream.h"
@@ -52,13 +53,14 @@ int export_model(const ExportCommand& c) {
     throw std::runtime_error("--calibration calibrates int8: it needs --int8 (or it would be ignored)");
   geo::Model model = geo::Model::load(c.checkpoint);
   const auto& s = model.spec();
-  geo::check_model_file_target(c.out, s.source, c.force);
+  geo::check_model_file_target("--out", c.out, s.source, c.force);
+  geo::check_outputs({{"--out", c.out}}, {s.source, c.calibration}, true);  // the checkpoint file, not its run folder
   if (c.int8) {
     const auto frames = calibration_frames(c, s);
     model.quantize_int8(frames);
     spdlog::info("int8: calibrated on {} frame(s) of {}", frames.size(), c.calibration);
   }
-  model.save(c.out, c.half);
+  model.save(c.out, c.half, c.force);
   // Check what was written: the same depth from both on a fixed image.
   geo::LoadOptions as_written;
   as_written.precision = c.int8 ? "int8" : "fp32";

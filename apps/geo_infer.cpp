@@ -8,7 +8,8 @@
 // fitted to its depth, smoothed over 11 frames (frames without a road take their neighbours').
 // A sequence also gets trajectory.png (top view; with --ground-truth the KITTI pose file drawn
 // beside it, scale-aligned) and, from a video or with --videos, disp.avi and flow.avi; --ply writes
-// coloured point clouds of chosen frames.
+// coloured point clouds of chosen frames. Frames are read as they are needed (at most three at a
+// time, those of one snippet), so an hour of video takes the memory of a few frames.
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
@@ -16,6 +17,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <optional>
 
@@ -83,48 +85,70 @@ struct InferOptions {
   }
 };
 
-// The input's frames at the model's size, in order, and what the outputs need of the input.
-struct Frames {
-  // name, image [1,3,h,w]: uint8 for 8-bit input (a quarter of float's memory; geo::Model takes it
-  // as it is), float [0,1] for 16-bit frames
-  std::vector<std::pair<std::string, torch::Tensor>> list;
-  double fps = 10;                                          // a frame folder's (KITTI's); a video's own
-  int64_t height = 0, width = 0;                            // the original size (for the intrinsics)
+// The input as geo_infer names its frames, known before any output is written: each frame's name
+// (at most --max-frames) and the rate.
+struct Input {
+  std::vector<std::string> names;
+  double fps = 10;  // a frame folder's (KITTI's); a video's own
   bool video = false;
-  size_t size() const { return list.size(); }
-  const torch::Tensor& image(size_t i) const { return list[i].second; }
+  size_t size() const { return names.size(); }
 };
 
-Frames read_frames(const InferOptions& o, int64_t h, int64_t w) {
-  geo::FrameStream stream(o.input, "--input");  // one sequence, one camera: frames of another size are refused
+// The input's frames in order, one at a time, at the model's size: uint8 [3,h,w] for 8-bit input
+// (a quarter of float's memory; geo::Model takes it as it is), float [0,1] for 16-bit frames.
+class FrameReader {
+ public:
+  FrameReader(const InferOptions& o, int64_t h, int64_t w) : o_(o), stream_(o.input, "--input"), h_(h), w_(w) {}
+  // The next frame; false after the last (or --max-frames). With `image` null a frame folder's file
+  // is passed over unread (a video's frame is decoded all the same: nothing else counts them).
+  bool next(std::string& name, torch::Tensor* image) {
+    if (o_.max_frames > 0 && stream_.index() + 1 >= o_.max_frames) return false;
+    cv::Mat m;
+    if (!stream_.next(name, image ? &m : nullptr)) return false;
+    if (image) *image = geo::resized_mat_to_frame(m, h_, w_, o_.input + " [" + name + "]");
+    return true;
+  }
+  const geo::FrameStream& stream() const { return stream_; }
+
+ private:
+  const InferOptions& o_;
+  geo::FrameStream stream_;
+  int64_t h_, w_;
+};
+
+// The input surveyed: its frames' names and rate. `each`, when given, receives every frame
+// (at the model's size) as it is decoded; otherwise a frame folder's files are
+// not read (a video is decoded through: nothing else counts its frames).
+Input survey(const InferOptions& o, int64_t h, int64_t w, const std::function<void(const torch::Tensor&)>& each = {}) {
+  FrameReader reader(o, h, w);
   // Two files of one name (000001.png, 000001.jpg) would write the same outputs.
   std::map<std::string, std::string> by_name;
-  for (const auto& f : stream.files()) {
+  for (const auto& f : reader.stream().files()) {
     const auto [it, fresh] = by_name.emplace(fs::path(f).stem().string(), f);
     if (!fresh)
       throw std::runtime_error("'" + std::min(it->second, f) + "' and '" + std::max(it->second, f) +
                                "' would write the same outputs (" + it->first + "-*.png): keep one of them in '" + o.input + "'");
   }
-  Frames frames;
-  frames.video = stream.is_video();
-  if (stream.fps() > 0) frames.fps = stream.fps();
+  Input input;
+  input.video = reader.stream().is_video();
+  if (reader.stream().fps() > 0) input.fps = reader.stream().fps();
   std::string name;
-  cv::Mat m;
-  while ((o.max_frames <= 0 || static_cast<int64_t>(frames.size()) < o.max_frames) && stream.next(name, &m))
-    frames.list.emplace_back(name, geo::resized_mat_to_frame(m, h, w, o.input + " [" + name + "]").unsqueeze(0));
-  if (frames.list.empty()) throw std::runtime_error("--input '" + o.input + "': no frame could be decoded (an empty or damaged video)");
-  frames.height = stream.height();
-  frames.width = stream.width();
-  return frames;
+  torch::Tensor image;
+  while (reader.next(name, each ? &image : nullptr)) {
+    if (each) each(image);
+    input.names.push_back(name);
+  }
+  if (input.names.empty()) throw std::runtime_error("--input '" + o.input + "': no frame could be decoded (an empty or damaged video)");
+  return input;
 }
 
 // The files write_outputs writes, by name: recorded in --output before any is written, so that
 // --force later removes exactly these (geo_infer-outputs.txt) and never a file of the user's.
-std::vector<std::string> planned_outputs(const InferOptions& o, const geo::Model& model, const Frames& frames) {
+std::vector<std::string> planned_outputs(const InferOptions& o, const geo::Model& model, const Input& frames) {
   const bool sequence = frames.size() > 1, three = model.spec().seq_length == 3;
   std::vector<std::string> names;
   for (size_t i = 0; i < frames.size(); ++i) {
-    const auto& name = frames.list[i].first;
+    const auto& name = frames.names[i];
     names.insert(names.end(), {name + "-disp.png", name + "-depth.png"});
     if (i + 1 < frames.size() && three) names.push_back(name + "-flow.png");
     if (std::find(o.ply_frames.begin(), o.ply_frames.end(), static_cast<int64_t>(i)) != o.ply_frames.end())
@@ -141,7 +165,7 @@ std::vector<std::string> planned_outputs(const InferOptions& o, const geo::Model
 // --output: created; refused when it is the folder the frames come from (a frame folder, or the
 // folder of a single image), or when it holds something (unless --force, which removes what
 // geo_infer's manifest there says it wrote: an earlier, longer run's frames must not mix in).
-void prepare_output(const InferOptions& o, const geo::Model& model, const Frames& frames) {
+void prepare_output(const InferOptions& o, const geo::Model& model, const Input& frames) {
   std::vector<std::string> frame_folders;
   if (fs::is_directory(o.input)) frame_folders.push_back(o.input);
   else if (!frames.video) frame_folders.push_back(fs::absolute(o.input).parent_path().string());
@@ -152,47 +176,60 @@ void prepare_output(const InferOptions& o, const geo::Model& model, const Frames
 
 // The camera [3,3] at the model's size: --intrinsics (pixels of the input) scaled, else the camera
 // a model that learns it predicts (the mean over the first pairs), else a KITTI-like one.
-torch::Tensor camera(const InferOptions& o, const geo::Model& model, const Frames& frames, int64_t h, int64_t w) {
-  const double W0 = static_cast<double>(frames.width), H0 = static_cast<double>(frames.height);
+torch::Tensor camera(const InferOptions& o, const geo::Model& model, int64_t height, int64_t width, int64_t h, int64_t w) {
+  const double W0 = static_cast<double>(width), H0 = static_cast<double>(height);
   if (o.intrinsics.size() == 4) {
     const auto& in = o.intrinsics;
-    const auto problem = geo::camera_problem(in[0], in[1], in[2], in[3], frames.width, frames.height);
+    const auto problem = geo::camera_problem(in[0], in[1], in[2], in[3], width, height);
     if (!problem.empty()) throw std::runtime_error("--intrinsics: " + problem + " ('" + o.input + "')");
     const double sx = w / W0, sy = h / H0;
     return torch::tensor({in[0] * sx, 0.0, in[2] * sx, 0.0, in[1] * sy, in[3] * sy, 0.0, 0.0, 1.0}).view({3, 3}).to(torch::kFloat32);
   }
   if (!model.spec().learns_intrinsics) return geo::kitti_like_intrinsics(h, w).to(torch::kFloat32);
+  const auto first = geo::first_frames(o.input, o.max_frames > 0 ? std::min<int64_t>(o.max_frames, 11) : 11, h, w, "--input");
   std::vector<torch::Tensor> Ks;
-  for (size_t i = 0; i < std::min<size_t>(frames.size(), 10); ++i)
-    Ks.push_back(model.intrinsics(frames.image(i)[0], frames.image(std::min(i + 1, frames.size() - 1))[0]));
+  for (size_t i = 0; i < std::min<size_t>(first.size(), 10); ++i)
+    Ks.push_back(model.intrinsics(first[i], first[std::min(i + 1, first.size() - 1)]));
   const auto K = torch::stack(Ks).mean(0).to(torch::kFloat32);
   const double sx = W0 / w, sy = H0 / h;
   spdlog::info("learned camera: fx {:.1f} fy {:.1f} cx {:.1f} cy {:.1f} (pixels of the {}x{} input; give --intrinsics to "
                "use another)", K[0][0].item<double>() * sx, K[1][1].item<double>() * sy, K[0][2].item<double>() * sx,
-               K[1][2].item<double>() * sy, frames.width, frames.height);
+               K[1][2].item<double>() * sy, width, height);
   return K;
 }
 
-// Each frame's metric scale from the road plane (smoothed over the sequence), or 1 without --camera-height.
-std::vector<double> metric_scales(const InferOptions& o, const geo::Model& model, const Frames& frames,
-                                  const torch::Tensor& K, geo::StepTimes& times) {
-  if (o.camera_height <= 0) return std::vector<double>(frames.size(), 1.0);
-  std::vector<torch::Tensor> images;
-  for (const auto& f : frames.list) images.push_back(f.second[0]);
-  std::vector<size_t> without_road;
+// The input surveyed (see survey) and each frame's metric scale from the road plane, smoothed over
+// the sequence (all 1 without --camera-height): one pass of the DepthNet over the frames, holding
+// one frame at a time.
+std::pair<Input, std::vector<double>> survey_and_scales(const InferOptions& o, const geo::Model& model,
+                                                        const torch::Tensor& K, geo::StepTimes& times) {
+  const int64_t h = model.spec().height, w = model.spec().width;
+  if (o.camera_height <= 0) {
+    auto input = times.time("survey the input (frame names)", [&] { return survey(o, h, w); });
+    const std::vector<double> ones(input.size(), 1.0);
+    return {std::move(input), ones};
+  }
+  std::vector<double> per_frame;
   const bool own_camera = o.intrinsics.size() == 4 || model.spec().learns_intrinsics;
-  auto scales = times.time("road planes (metric scale)", [&] {
-    return model.sequence_scales(images, o.camera_height, own_camera ? K : torch::Tensor(), &without_road);
+  auto input = times.time("road planes (metric scale)", [&] {
+    return survey(o, h, w, [&](const torch::Tensor& image) {
+      per_frame.push_back(model.road_scale(image, o.camera_height, own_camera ? K : torch::Tensor()));
+    });
   });
-  for (const auto i : without_road) spdlog::warn("{}: no road plane; its scale comes from its neighbours", frames.list[i].first);
+  int64_t with_road = 0;
+  for (size_t i = 0; i < per_frame.size(); ++i) {
+    if (per_frame[i] > 0) ++with_road;
+    else spdlog::warn("{}: no road plane; its scale comes from its neighbours", input.names[i]);
+  }
   spdlog::info("metric scale from the camera height {} m: road plane found in {} of {} frames", o.camera_height,
-               frames.size() - without_road.size(), frames.size());
-  return scales;
+               with_road, input.size());
+  auto scales = geo::smooth_road_scales(per_frame);
+  return {std::move(input), std::move(scales)};
 }
 
 // --ground-truth's poses of the input's frames, read and checked before anything is computed or
 // written: a pose per frame, and motion to align the trajectory's scale to. Undefined without it.
-torch::Tensor ground_truth_of(const InferOptions& o, const Frames& frames) {
+torch::Tensor ground_truth_of(const InferOptions& o, const Input& frames) {
   if (o.ground_truth.empty()) return {};
   const auto truth = geo::read_poses(o.ground_truth);
   const auto n = static_cast<int64_t>(frames.size());
@@ -217,8 +254,9 @@ void write_trajectory(const InferOptions& o, const std::vector<torch::Tensor>& m
 }
 
 // Per frame: depth (and with a next frame the flow and the motion, each network once per frame),
-// colour maps, PNGs, videos, point clouds; then the trajectory. Returns what was written.
-std::string write_outputs(const InferOptions& o, const geo::Model& model, const Frames& frames, const torch::Tensor& K,
+// colour maps, PNGs, videos, point clouds; then the trajectory. The frames are read again, as they
+// are needed: the previous, the current and the next. Returns what was written.
+std::string write_outputs(const InferOptions& o, const geo::Model& model, const Input& frames, const torch::Tensor& K,
                           const std::vector<double>& scales, const torch::Tensor& truth, geo::StepTimes& times) {
   const int64_t h = model.spec().height, w = model.spec().width;
   const bool sequence = frames.size() > 1, three = model.spec().seq_length == 3;
@@ -227,17 +265,28 @@ std::string write_outputs(const InferOptions& o, const geo::Model& model, const 
     disp_video.emplace(o.output + "/disp.avi", frames.fps);
     if (three) flow_video.emplace(o.output + "/flow.avi", frames.fps);
   }
+  FrameReader reader(o, h, w);
+  // Frame i of the survey, read now: the input must not have changed since.
+  auto read = [&](size_t i) {
+    std::string name;
+    torch::Tensor image;
+    const bool got = times.time("read, decode, resize frames", [&] { return reader.next(name, &image); });
+    if (!got || name != frames.names[i])
+      throw std::runtime_error("--input '" + o.input + "' changed while geo_infer read it: frame " + std::to_string(i) +
+                               " was '" + frames.names[i] + "', now " + (got ? "'" + name + "'" : "none"));
+    return image;
+  };
+  torch::Tensor previous, current = read(0), next;
   std::vector<torch::Tensor> motions;  // frame i's camera -> frame i+1's
   int64_t beyond_png = 0;              // depths that KITTI's 16-bit PNG (depth x 256) cannot hold
   for (size_t i = 0; i < frames.size(); ++i) {
-    const auto& [name, img] = frames.list[i];
-    const bool pair = i + 1 < frames.size() && three;
+    const auto& name = frames.names[i];
+    next = i + 1 < frames.size() ? read(i + 1) : torch::Tensor();
+    const bool pair = next.defined() && three;
     geo::Model::FlowParts parts;
     if (pair)
-      parts = times.time("depth, pose, flow", [&] {
-        return model.flow_parts(img[0], frames.image(i + 1)[0], K, i > 0 ? frames.image(i - 1)[0] : torch::Tensor());
-      });
-    const auto depth = pair ? parts.depth.cpu() * scales[i] : times.time("depth", [&] { return model.depth(img[0]).cpu() * scales[i]; });
+      parts = times.time("depth, pose, flow", [&] { return model.flow_parts(current, next, K, previous); });
+    const auto depth = pair ? parts.depth.cpu() * scales[i] : times.time("depth", [&] { return model.depth(current).cpu() * scales[i]; });
     const auto disp_colour = times.time("colour maps", [&] { return geo::colorize_disparity(1.0 / depth); });
     times.time("PNG encode + write", [&] {
       geo::write_image(o.output + "/" + name + "-disp.png", disp_colour);
@@ -247,7 +296,7 @@ std::string write_outputs(const InferOptions& o, const geo::Model& model, const 
     if (disp_video) times.time("video encode", [&] { disp_video->write(disp_colour); });
     if (std::find(o.ply_frames.begin(), o.ply_frames.end(), static_cast<int64_t>(i)) != o.ply_frames.end()) {
       const double limit = o.ply_max_depth > 0 ? o.ply_max_depth : o.camera_height > 0 ? 80.0 : 20 * depth.median().item<double>();
-      const auto n = geo::write_point_cloud_ply(o.output + "/" + name + ".ply", depth, img[0].cpu(), K, limit);
+      const auto n = geo::write_point_cloud_ply(o.output + "/" + name + ".ply", depth, current.cpu(), K, limit);
       spdlog::info("{}/{}.ply: {} points (depth up to {:.3g})", o.output, name, n, limit);
     }
     if (pair) {
@@ -257,6 +306,8 @@ std::string write_outputs(const InferOptions& o, const geo::Model& model, const 
       motions.push_back(parts.motion);
     }
     if ((i + 1) % 10 == 0 || i + 1 == frames.size()) spdlog::info("  {}/{} frames", i + 1, frames.size());
+    previous = std::move(current);
+    current = std::move(next);
   }
   const double beyond = static_cast<double>(beyond_png) / (static_cast<double>(frames.size()) * h * w);
   if (beyond > 0.01)
@@ -292,17 +343,13 @@ int infer(const InferOptions& o) {
   load.threads = o.threads;
   geo::Model model = times.time("load the model", [&] { return geo::Model::load(o.checkpoint, load); });
   const int64_t h = model.spec().height, w = model.spec().width;
-  const auto reading = std::chrono::steady_clock::now();
-  const Frames frames = read_frames(o, h, w);
-  times.add("read, decode, resize frames", std::chrono::duration<double>(std::chrono::steady_clock::now() - reading).count());
   if (int8 && o.calibration_frames == 0 && model.has_int8_calibration()) {
     times.time("int8 (the file's calibration)", [&] { model.quantize_int8({}); });
     spdlog::info("int8: with the calibration {} keeps (--calibration-frames N calibrates on the input instead)",
                  o.checkpoint);
   } else if (int8) {
-    std::vector<torch::Tensor> calibration;
-    for (size_t i = 0; i < frames.size() && static_cast<int64_t>(i) < calibration_frames; ++i)
-      calibration.push_back(frames.image(i));
+    const int64_t n = o.max_frames > 0 ? std::min(o.max_frames, calibration_frames) : calibration_frames;
+    const auto calibration = times.time("read, decode, resize frames", [&] { return geo::first_frames(o.input, n, h, w, "--input"); });
     if (model.spec().has_flow && calibration.size() < 2)
       throw std::runtime_error("--precision int8: this model's FlowNet calibrates on pairs: give at least 2 frames "
                                "(--calibration-frames, and an input of 2 or more frames)");
@@ -312,6 +359,20 @@ int infer(const InferOptions& o) {
                      ? ""
                      : " (on every run: geo_export --int8 --calibration FRAMES writes a model that keeps its calibration)");
   }
+  // The input's size (its first frame), the camera, then its frames counted and named (with
+  // --camera-height, each frame's metric scale on the way), all before anything is written.
+  int64_t height = 0, width = 0;
+  {
+    FrameReader first(o, h, w);
+    std::string name;
+    torch::Tensor image;
+    if (!first.next(name, &image))
+      throw std::runtime_error("--input '" + o.input + "': no frame could be decoded (an empty or damaged video)");
+    height = first.stream().height();
+    width = first.stream().width();
+  }
+  const auto K = camera(o, model, height, width, h, w);
+  const auto [frames, scales] = survey_and_scales(o, model, K, times);
   for (const auto f : o.ply_frames)
     if (f >= static_cast<int64_t>(frames.size()))
       throw std::runtime_error("--ply " + std::to_string(f) + ": the input has " + std::to_string(frames.size()) +
@@ -324,8 +385,6 @@ int infer(const InferOptions& o) {
   if (frames.size() > 1 && model.spec().seq_length != 3)
     spdlog::warn("this model's PoseNet takes {}-frame snippets: geo_infer writes flow and trajectory.txt for "
                  "3-frame models only; depth is written for every frame", model.spec().seq_length);
-  const auto K = camera(o, model, frames, h, w);
-  const auto scales = metric_scales(o, model, frames, K, times);
   const std::string written = write_outputs(o, model, frames, K, scales, truth, times);
   spdlog::info("done: {}/{{{}}}", o.output, written);
   if (o.timing)

@@ -9,6 +9,7 @@
 #include <filesystem>
 
 #include "core/config.h"
+#include "core/files.h"
 #include "data/loader.h"
 #include "data/training_data.h"
 #include "app_options.h"
@@ -34,6 +35,8 @@ void add_options(CLI::App& app, PrepareCommand& c) {
 int prepare(const PrepareCommand& c) {
   const auto cfg = geo::load_config(geo::resolve_config_path(c.config), c.overrides);
   if (!c.throughput && c.out.empty()) throw std::runtime_error("give --out DIR (or --throughput)");
+  // The cache is never written over what the config reads (a packed data.root among them).
+  if (!c.throughput) geo::check_outputs({{"--out", c.out}}, geo::config_reads(cfg), true);
   const auto data = geo::open_training_data(cfg.data);
   spdlog::info("{} data: {} training snippets ({} excluded, {} without neighbours), {} validation",
                data.format, data.train->size(), data.excluded, data.dropped, data.val ? data.val->size() : 0);

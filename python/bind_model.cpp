@@ -60,6 +60,9 @@ void bind_model(py::module_& m) {
       "Camera-to-world poses [N+1,4,4] float64 (the first the identity, KITTI's pose files) from N motions [4,4]\n"
       "(frame i's camera -> frame i+1's: relative_pose(), FlowParts.motion), each step's translation times scales[i].");
 
+  m.def("smooth_road_scales", &smooth_road_scales, "road_scales"_a,
+        "Model.sequence_scales() from each frame's Model.road_scale() (0: no road), for a sequence read frame by frame.");
+
   py::class_<ModelSpec>(m, "ModelSpec", "What a model expects and has (read from its file).")
       .def_readonly("height", &ModelSpec::height)
       .def_readonly("width", &ModelSpec::width)
@@ -240,12 +243,25 @@ void bind_model(py::module_& m) {
           "Metres per unit of depth of each frame of a sequence: metric_depth()'s factor smoothed over 11 frames\n"
           "(frames without a road take their neighbours'); return_without_road: also those frames' indices.")
       .def(
-          "save",
-          [](const Model& model, const std::string& path, bool half) {
+          "road_scale",
+          [](const Model& model, py::handle frame, double camera_height, py::handle intrinsics) {
+            const auto x = image_arg(frame, "frame");
+            const auto K = optional_tensor_arg(intrinsics, "intrinsics");
             py::gil_scoped_release release;
-            model.save(path, half);
+            return model.road_scale(x, camera_height, K);
           },
-          "path"_a, "half"_a = false, "Writes the weights and spec (geo_export's file); half: stored as float16.")
+          "frame"_a, "camera_height"_a = 1.65, "intrinsics"_a = py::none(),
+          "One frame's own factor (metric_depth()'s), 0 where no road plane is found: for a sequence too long to\n"
+          "hold, frame by frame, then geo.smooth_road_scales() gives what sequence_scales() gives.")
+      .def(
+          "save",
+          [](const Model& model, const std::string& path, bool half, bool force) {
+            py::gil_scoped_release release;
+            model.save(path, half, force);
+          },
+          "path"_a, "half"_a = false, "force"_a = false,
+          "Writes the weights and spec (geo_export's file); half: stored as float16. Refuses the file the model\n"
+          "was loaded from and, unless force, an existing file that is not a model file (a training checkpoint).")
       .def("__repr__", [](const Model& model) { return "geo.Model('" + model.spec().source + "')"; });
 }
 

@@ -75,6 +75,11 @@ torch::Tensor kitti_like_intrinsics(int64_t height, int64_t width);
 // step's translation; empty: the network's own scale.
 torch::Tensor chain_poses(const std::vector<torch::Tensor>& motions, const std::vector<double>& scales = {});
 
+// Model::sequence_scales() from each frame's Model::road_scale() (0: no road): the median of the
+// frames found within 5 on each side, else the nearest frame's. Throws geo::Error naming a frame
+// with no road in any frame of the sequence.
+std::vector<double> smooth_road_scales(const std::vector<double>& road_scales);
+
 class Model {
  public:
   // A file written by geo_export, or a training checkpoint / run folder of geo_train.
@@ -158,11 +163,17 @@ class Model {
   std::vector<double> sequence_scales(const std::vector<torch::Tensor>& frames, double camera_height,
                                       const torch::Tensor& intrinsics = {},
                                       std::vector<size_t>* without_road = nullptr) const;
+  // One frame's own factor (metric_depth()'s, for one image [3,H,W]), 0 where no road plane is
+  // found: a sequence too long to hold takes it frame by frame, then smooth_road_scales() gives
+  // what sequence_scales() gives for the whole sequence.
+  double road_scale(const torch::Tensor& frame, double camera_height, const torch::Tensor& intrinsics = {}) const;
 
   // Writes the weights only (no optimiser, no training config) with the spec: geo_export.
   // `half`: weights stored as float16 (half the size; loaded back as float32). An int8 model's file
-  // keeps its calibration too: loaded with precision "int8" it needs no frames.
-  void save(const std::string& path, bool half = false) const;
+  // keeps its calibration too: loaded with precision "int8" it needs no frames. Refuses (geo::Error)
+  // the file this model was loaded from and, unless `force`, an existing file that is not a model
+  // file (a training checkpoint holds the optimiser's state and the run's config, which this drops).
+  void save(const std::string& path, bool half = false, bool force = false) const;
 
   struct Impl;
 

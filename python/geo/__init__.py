@@ -49,6 +49,7 @@ from ._geo import (  # noqa: F401
     kitti,
     kitti_like_intrinsics,
     resume,
+    smooth_road_scales,
     state_dicts,
     synth,
     train,
@@ -63,5 +64,5 @@ for _name in ("eval", "synth", "kitti", "io"):
         _sys.modules[__name__ + "." + _name] = globals()[_name]
 del _name
 
-__all__ = ["Model", "ModelSpec", "Networks", "FlowParts", "Error", "ConfigError", "chain_poses", "image", "kitti_like_intrinsics", "train",
-           "resume", "state_dicts", "eval", "synth", "kitti"] + (["io"] if has_opencv else [])
+__all__ = ["Model", "ModelSpec", "Networks", "FlowParts", "Error", "ConfigError", "chain_poses", "smooth_road_scales", "image",
+           "kitti_like_intrinsics", "train", "resume", "state_dicts", "eval", "synth", "kitti"] + (["io"] if has_opencv else [])

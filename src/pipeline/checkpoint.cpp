@@ -71,12 +71,12 @@ void write_model_file(const std::string& path, const Networks& nets, bool half) 
   save_archive(a, path);
 }
 
-void check_model_file_target(const std::string& out, const std::string& source, bool force) {
+void check_model_file_target(const std::string& label, const std::string& out, const std::string& source, bool force) {
   namespace fs = std::filesystem;
   std::error_code ec;
   if (!fs::exists(out)) return;
   if (fs::equivalent(out, source, ec))
-    throw std::runtime_error("--out '" + out + "' is the checkpoint being exported (" + source + "): refusing to replace it");
+    throw std::runtime_error(label + " '" + out + "' is the checkpoint being exported (" + source + "): refusing to replace it");
   if (force) return;
   bool model_file = false;
   try {
@@ -84,7 +84,7 @@ void check_model_file_target(const std::string& out, const std::string& source, 
   } catch (const std::exception&) {
   }
   if (!model_file)
-    throw std::runtime_error("--out '" + out + "' exists and is not a geo_export model file (a training "
+    throw std::runtime_error(label + " '" + out + "' exists and is not a geo_export model file (a training "
                              "checkpoint or another file): refusing to replace it; remove it or pass --force");
 }
 

@@ -59,8 +59,8 @@ void write_model_file(const std::string& path, const Networks& networks, bool ha
 // Before writing a model file at `out` from the checkpoint `source`: refuses `out` when it is that
 // checkpoint (a run folder's best-<stage>.pt is a hard link to one) or, unless `force`, when it is
 // an existing file that is not a geo_export model file (a training checkpoint holds Adam's state and
-// the run's config, which a model file does not). Throws naming --out and why.
-void check_model_file_target(const std::string& out, const std::string& source, bool force);
+// the run's config, which a model file does not). Throws naming `label` (e.g. "--out") and why.
+void check_model_file_target(const std::string& label, const std::string& out, const std::string& source, bool force);
 
 // A checkpoint or model file opened for reading. Every error names the file.
 class CheckpointFile {

@@ -438,6 +438,8 @@ int train(const Config& config, const TrainOptions& options, std::string* run_di
                                              : RunFolder(options.run_dir),
                      nullptr, created};
     const std::string& dir = p.folder.root();
+    // A folder the run reads (a clip's frames, the data root, an init run) is not where it writes.
+    check_outputs({{"--run-dir", dir}, {"--run-dir", p.folder.config()}}, config_reads(config), true);
     // The lock first: a folder where a run is training right now is said to be in use, never
     // called a stopped run to be removed.
     fs::create_directories(dir);

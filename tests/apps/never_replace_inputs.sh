@@ -1,5 +1,5 @@
 #!/bin/sh
-# geo_eval and geo_bench write results only where nothing they read is: --output naming the
+# geo_eval, geo_bench, geo_train and geo_prepare write only where nothing they read is: --output naming the
 # evaluated checkpoint or its split file, --export-gt naming the predictions, --json over a model or
 # a clip of the config, or two outputs on one path are refused before any work, and the files stay
 # byte for byte as they were.
@@ -43,6 +43,18 @@ if "$apps/geo_bench" --summary --config video.yaml --set "data.videos=[$g/clip.a
   fail "geo_bench --json over a clip of its config succeeded"
 fi
 grep -q -- "--json '$g/clip.avi' is '$g/clip.avi', which this command reads" "$run/never_replace.log" || fail "geo_bench data.videos: no clear error"
+# geo_train and geo_prepare too: a run folder that is a clip's frame folder, a cache written over
+# its data root, refused before anything is written there.
+work="$g"
+. "$(dirname "$0")/refused.sh"
+mkdir -p "$g/frames" "$g/world"
+cp "$(ls "$run"/summaries/*.png | head -n 1)" "$g/frames/000000.png"
+refused "\-\-run-dir '$g/frames' is '$g/frames', which this command reads" \
+  "$apps/geo_train" --config video.yaml --set "data.videos=[$g/frames]" --run-dir "$g/frames"
+test "$(ls "$g/frames")" = 000000.png || fail "geo_train wrote into the clip's frame folder"
+refused "\-\-out '$g/world' is '$g/world', which this command reads" \
+  "$apps/geo_prepare" --config smoke.yaml --set "data.root=$g/world" --out "$g/world"
+test -z "$(ls "$g/world")" || fail "geo_prepare wrote into its data root"
 test "$(cat "$g/preds/keep.txt")" = mine || fail "the predictions changed"
 test "$(cat "$g/split.txt")" = "2011_01_01/2011_01_01_drive_0001_sync 2 l" || fail "the split file changed"
 test "$(cat "$g/clip.avi")" = "not a video" || fail "the clip changed"

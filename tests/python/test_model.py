@@ -159,6 +159,26 @@ def test_save_and_load_round_trip(model, frames, tmp_path):
     assert half.stat().st_size < path.stat().st_size * 0.6
 
 
+def test_save_never_replaces_a_training_checkpoint_or_its_own_file(trained, model_file, tmp_path):
+    run = trained[0]
+    checkpoint = sorted((run / "checkpoints").glob("stage*-*.pt"))[0]
+    before = checkpoint.read_bytes()
+    model = geo.Model.load(str(run))
+    with pytest.raises(geo.Error, match="is not a geo_export model file .a training checkpoint"):
+        model.save(str(checkpoint))
+    assert checkpoint.read_bytes() == before
+    with pytest.raises(geo.Error, match="is the checkpoint being exported"):
+        geo.Model.load(str(model_file)).save(str(model_file), half=True)
+    # Over an earlier model file, or anything with force=True.
+    other = tmp_path / "other.pt"
+    other.write_bytes(b"mine")
+    with pytest.raises(geo.Error, match="exists and is not a geo_export model file"):
+        model.save(str(other))
+    model.save(str(other), force=True)
+    model.save(str(other))
+    assert geo.Model.load(str(other)).spec.height == model.spec.height
+
+
 def test_trajectories_chain_motions_at_their_scales(model, frames):
     forward = torch.eye(4, dtype=torch.float64)
     forward[2, 3] = -1  # the camera moves 1 unit along its z: points come 1 unit closer
@@ -172,6 +192,13 @@ def test_trajectories_chain_motions_at_their_scales(model, frames):
     # A two-step model sees no road: the error names the frame and the default camera.
     with pytest.raises(geo.Error, match="no road plane in any frame near frame 0 of 3 .with the default KITTI-like camera"):
         model.sequence_scales(list(frames))
+    # Frame by frame (a sequence too long to hold): each frame's own factor, then the smoothing:
+    # 0 where no road; the median of the road frames within 5 (2 and 4: 3), else the nearest's.
+    assert [model.road_scale(f) for f in frames] == [0.0, 0.0, 0.0]
+    assert geo.smooth_road_scales([2.0, 0.0, 4.0]) == [3.0, 3.0, 3.0]
+    assert geo.smooth_road_scales([2.0] + [0.0] * 12 + [8.0]) == [2.0] * 7 + [8.0] * 7
+    with pytest.raises(geo.Error, match="no road plane in any frame near frame 0 of 3"):
+        geo.smooth_road_scales([0.0, 0.0, 0.0])
 
 
 def test_int8_is_calibrated_on_frames_and_follows_fp32(model_file, frames, tmp_path):
