@@ -2,7 +2,9 @@
 # The parsers' fuzz job (CI runs it after the test suite): builds tests/fuzz with AddressSanitizer
 # and UBSan into build-asan/ and feeds every reader of outside data (calibration, split lists, pose
 # files, Velodyne scans, flow/depth/image PNGs, packed cache, .npy, YAML) mutated inputs for a set
-# time. Any out-of-bounds access, undefined behaviour, crash, hang or non-geo error fails it.
+# time. Any out-of-bounds access, undefined behaviour, crash, hang or non-geo error fails it. Then
+# the int8 tests (tests/models/int8_test.cpp: the byte kernels and the three int8 networks at every
+# kind of input size and calibration) under the same sanitizers: a memory error there fails the job.
 #   GEO_FUZZ_SECONDS     seconds per target (default 20; 13 targets)
 #   GEO_FUZZ_SEED        mutation seed (default fixed, so a failure reproduces)
 #   GEO_FUZZ_BUILD_DIR   build folder (default build-asan)
@@ -18,8 +20,8 @@ if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
   cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release -DGEO_SANITIZE=address,undefined \
     -DCMAKE_CXX_FLAGS_RELEASE="-O1 -g" -DGEO_WERROR=OFF -DGEO_UNITY_BUILD="$([ "${GEO_UNITY:-1}" = 1 ] && echo ON || echo OFF)"
 fi
-echo "geo fuzz: building the sanitized fuzz tests in $BUILD_DIR with $JOBS jobs"
-cmake --build "$BUILD_DIR" -j "$JOBS" --target fuzz_tests
+echo "geo fuzz: building the sanitized fuzz and int8 tests in $BUILD_DIR with $JOBS jobs"
+cmake --build "$BUILD_DIR" -j "$JOBS" --target fuzz_tests models_tests
 [ "${GEO_FUZZ_BUILD_ONLY:-0}" = 1 ] && exit 0
 # LibTorch allocates for the process lifetime: leak reports would be its, not geo's.
 export ASAN_OPTIONS="detect_leaks=0:abort_on_error=1:${ASAN_OPTIONS:-}"
@@ -29,3 +31,5 @@ echo "geo fuzz: $GEO_FUZZ_SECONDS s per target under ASan+UBSan"
 # A hang is a failure too: the whole job is bounded.
 # libpng reports every corrupt input on stderr (~200k lines): left out of the log.
 timeout --signal=KILL $((GEO_FUZZ_SECONDS * 13 + 300)) "$BUILD_DIR/tests/fuzz_tests" 2>&1 | grep -v "^libpng "
+echo "geo fuzz: the int8 tests under ASan+UBSan"
+timeout --signal=KILL 900 "$BUILD_DIR/tests/models_tests" --gtest_filter='Int8.*'

@@ -239,7 +239,7 @@ TEST(Int8, EverySizeAndCalibrationIsMemorySafe) {
     geo::fold_batchnorm(*m);
   }
   torch::NoGradGuard no_grad;
-  const std::vector<std::pair<int64_t, int64_t>> sizes = {{16, 16}, {24, 40}, {32, 96}, {40, 24}};
+  const std::vector<std::pair<int64_t, int64_t>> sizes = {{16, 16}, {24, 40}, {32, 96}, {40, 24}, {33, 97}};
   for (const auto& [H, W] : sizes) {
     const std::vector<torch::Tensor> calibrations = {torch::rand({1, 3, 3, H, W}), torch::zeros({2, 3, 3, H, W}),
                                                      torch::full({3, 3, 3, H, W}, 0.5)};
