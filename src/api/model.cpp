@@ -225,15 +225,19 @@ const std::vector<std::string>& Model::training_configs() const { return impl_->
 Model Model::load(const std::string& path, const LoadOptions& options) {
   return guarded("loading geo model '" + path + "'", [&] {
     const std::string file = fs::is_directory(path) ? resolve_checkpoint(path) : path;
-    CheckpointFile checkpoint(file);
     auto impl = std::make_shared<Impl>();
-    impl->nets = create_quietly(checkpoint.spec(), checkpoint.has_flow());
-    checkpoint.load_networks(impl->nets, false);
-    make_ready(*impl, options, checkpoint.has_flow(), file);
-    if (checkpoint.config()) impl->training_configs = checkpoint.lineage();
-    impl->depth_ranges = checkpoint.int8_ranges("depth");
-    impl->pose_ranges = checkpoint.int8_ranges("pose");
-    impl->flow_ranges = checkpoint.int8_ranges("flow");
+    bool has_flow = false;
+    {  // the file's tensors are let go before folding and prepacking add their own copies
+      CheckpointFile checkpoint(file);
+      has_flow = checkpoint.has_flow();
+      impl->nets = create_quietly(checkpoint.spec(), has_flow);
+      checkpoint.load_networks(impl->nets, false);
+      if (checkpoint.config()) impl->training_configs = checkpoint.lineage();
+      impl->depth_ranges = checkpoint.int8_ranges("depth");
+      impl->pose_ranges = checkpoint.int8_ranges("pose");
+      impl->flow_ranges = checkpoint.int8_ranges("flow");
+    }
+    make_ready(*impl, options, has_flow, file);
     Model model(impl);
     // int8: calibrated on the frames given, else with the file's own calibration.
     if (options.precision == "int8") model.quantize_int8(options.calibration);

@@ -8,8 +8,8 @@
 
 namespace geo {
 
-ConvBnImpl::ConvBnImpl(int64_t in, int64_t out, int64_t kernel, int64_t stride, bool relu_)
-    : relu(relu_) {
+ConvBnImpl::ConvBnImpl(int64_t in, int64_t out, int64_t kernel, int64_t stride, bool relu_, bool upsampled_)
+    : relu(relu_), upsampled(upsampled_) {
   conv = register_module("conv", Conv2d(torch::nn::Conv2dOptions(in, out, kernel)
                                                        .stride(stride)
                                                        .padding(kernel / 2)
@@ -21,7 +21,7 @@ torch::Tensor ConvBnImpl::conv_bn_relu(const torch::Tensor& x, const ConvFn& con
   torch::Tensor y;
   if (folded()) {
     TORCH_CHECK(!is_training(), "ConvBn: BatchNorm was folded for inference; this module cannot train");
-    y = conv_fn(x, folded_weight_, folded_bias_);
+    y = conv_fn(x, folded_weight(), folded_bias_);
   } else {
     const auto c = conv_fn(x, conv->weight, conv->bias);
     y = bn(c);
@@ -41,7 +41,7 @@ torch::Tensor packed_conv(const torch::Tensor& x, const torch::Tensor& weight, c
 }  // namespace
 
 bool ConvBnImpl::uses_packed(const torch::Tensor& x, const torch::Tensor& packed) const {
-  if (!packed.defined() || !x.device().is_cpu() || x.scalar_type() != folded_weight_.scalar_type()) return false;
+  if (!packed.defined() || !x.device().is_cpu() || x.scalar_type() != folded_bias_.scalar_type()) return false;
   TORCH_CHECK(!is_training(), "ConvBn: BatchNorm was folded for inference; this module cannot train");
   return true;
 }
@@ -66,7 +66,7 @@ torch::Tensor ConvBnImpl::forward_upsampled(const torch::Tensor& x) {
               "forward_upsampled needs a 3x3 stride-1 ConvBn");
   if (x.size(2) * x.size(3) < kMinSubpixelArea) return forward(upsample2(x, UpsampleMode::kNearest));
   if (uses_packed(x, packed_phase_weight_)) {
-    const int64_t B = x.size(0), Co = folded_weight_.size(0), h = x.size(2), w = x.size(3);
+    const int64_t B = x.size(0), Co = conv->weight.size(0), h = x.size(2), w = x.size(3);
     const auto y = interleave_phases(
         packed_conv(x, packed_phase_weight_, packed_phase_bias_, {1, 1}, {1, 1}).view({B, 2, 2, Co, h + 1, w + 1}));
     return relu ? torch::relu(y) : y;
@@ -83,6 +83,14 @@ void ConvBnImpl::fold_batchnorm(torch::Dtype dtype) {
   folded_bias_ = bias.to(dtype);
   if (conv->weight.device().is_cpu() && at::hasMKLDNN() && at::globalContext().userEnabledMkldnn())
     prepack(weight, bias.to(torch::kFloat32));  // oneDNN adds a float32 bias to bf16 products
+  if (prepacked()) folded_weight_ = torch::Tensor();  // folded_weight() computes it again when asked
+}
+
+torch::Tensor ConvBnImpl::folded_weight() const {
+  if (folded_weight_.defined() || !folded()) return folded_weight_;
+  torch::NoGradGuard no_grad;
+  const auto scale = bn->weight / torch::sqrt(bn->running_var + bn->options.eps());
+  return (conv->weight * scale.view({-1, 1, 1, 1})).to(folded_bias_.scalar_type()).contiguous();
 }
 
 void ConvBnImpl::prepack(const torch::Tensor& w32, const torch::Tensor& b32) {
@@ -93,7 +101,7 @@ void ConvBnImpl::prepack(const torch::Tensor& w32, const torch::Tensor& b32) {
     const auto w = pad_channels(folded_weight_, onednn_channel_padding(folded_weight_));  // as forward pads x
     packed_weight_ = at::mkldnn_reorder_conv2d_weight(w.contiguous().to_mkldnn(), pad, *o.stride(), {1, 1}, 1);
     packed_bias_ = b32;
-    if (k[0] == 3 && k[1] == 3 && (*o.stride())[0] == 1 && (*o.stride())[1] == 1) {
+    if (upsampled && k[0] == 3 && k[1] == 3 && (*o.stride())[0] == 1 && (*o.stride())[1] == 1) {
       packed_phase_weight_ = at::mkldnn_reorder_conv2d_weight(
           phase_kernels(w32).to(folded_weight_.scalar_type()).contiguous().to_mkldnn(), {1, 1}, {1, 1}, {1, 1}, 1);
       packed_phase_bias_ = b32.repeat({4});

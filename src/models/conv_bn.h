@@ -15,7 +15,9 @@ namespace geo {
 // conv (k x k, stride, symmetric padding k/2) -> BatchNorm -> ReLU (relu optional). The conv has
 // no bias because BatchNorm follows (GeoNet's slim.conv2d with batch_norm).
 struct ConvBnImpl : torch::nn::Module {
-  ConvBnImpl(int64_t in, int64_t out, int64_t kernel, int64_t stride = 1, bool relu = true);
+  // `upsampled`: the module is run through forward_upsampled (a decoder's upconv), so folding also
+  // prepacks the phase kernels that needs (16/9 of the kernel's size: only where they are used).
+  ConvBnImpl(int64_t in, int64_t out, int64_t kernel, int64_t stride = 1, bool relu = true, bool upsampled = false);
   torch::Tensor forward(const torch::Tensor& x);
   // forward(nearest_upsample_x2(x)) for a 3x3 stride-1 ConvBn (GeoNet's upconv), computed at x's
   // resolution: see conv3x3_of_upsampled. Same values up to rounding, 2.25x fewer multiply-adds.
@@ -30,16 +32,19 @@ struct ConvBnImpl : torch::nn::Module {
   // On CPU, where LibTorch has oneDNN (MKL-DNN), the folded kernels (and forward_upsampled's phase
   // kernels) are also reordered once into oneDNN's blocked layout, so a call reorders only the
   // activations, not the weights (PyTorch's torch.utils.mkldnn; at::conv2d reorders the weights
-  // on every call). Same results up to rounding.
+  // on every call). Same results up to rounding. A prepacked module keeps only the packed kernel
+  // (the plain folded one is computed again where a call needs it): a loaded model holds its
+  // weights about twice (the parameters and the packed kernels), not four times.
   void fold_batchnorm(torch::Dtype dtype = torch::kFloat32);
-  bool folded() const { return folded_weight_.defined(); }
+  bool folded() const { return folded_bias_.defined(); }
   bool prepacked() const { return packed_weight_.defined(); }
   // The folded kernel and bias (undefined before fold_batchnorm): what the int8 path quantizes.
-  const torch::Tensor& folded_weight() const { return folded_weight_; }
+  torch::Tensor folded_weight() const;
   const torch::Tensor& folded_bias() const { return folded_bias_; }
   Conv2d conv{nullptr};
   SyncBatchNorm2d bn{nullptr};  // synchronised across processes in data-parallel training
   bool relu;
+  bool upsampled;
 
  private:
   using ConvFn = std::function<torch::Tensor(const torch::Tensor&, const torch::Tensor&, const torch::Tensor&)>;

@@ -14,7 +14,7 @@ EncoderDecoderImpl::EncoderDecoderImpl(const EncoderDecoderOptions& o, Head h)
   for (int k = 0; k < 6; ++k) {
     const int64_t width = kDecoderWidths[k];
     const std::string id = std::to_string(6 - k);  // GeoNet names: upconv6 ... upconv1
-    upconv.push_back(register_module("upconv" + id, ConvBn(in, width, 3)));
+    upconv.push_back(register_module("upconv" + id, ConvBn(in, width, 3, 1, true, /*upsampled=*/o.upsample == UpsampleMode::kNearest)));
     // Skip of decoder stage 6..2 is encoder feature 4..0; stage 1 has none.
     int64_t cat = width + (k < 5 ? enc[4 - k] : 0);
     if (k >= 3) cat += o.out_channels;  // upsampled coarser prediction (stages 3, 2, 1)

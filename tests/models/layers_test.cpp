@@ -102,9 +102,13 @@ TEST(Layers, FoldedBatchNormGivesTheSameOutputAndRefusesToTrain) {
   EXPECT_TRUE(cb->folded());
   EXPECT_EQ(cb->prepacked(), at::hasMKLDNN());  // oneDNN-blocked kernels where LibTorch has oneDNN
   EXPECT_LT((cb(x) - ref).abs().max().item<double>(), 1e-5);
+  // The folded kernel (not kept beside a packed one: computed again when asked) is w * gamma / sqrt(var + eps).
+  const auto s = cb->bn->weight / torch::sqrt(cb->bn->running_var + cb->bn->options.eps());
+  EXPECT_TRUE(torch::allclose(cb->folded_weight(), cb->conv->weight * s.view({-1, 1, 1, 1}), 1e-6, 1e-7));
+  EXPECT_TRUE(torch::allclose(cb->folded_bias(), cb->bn->bias - cb->bn->running_mean * s, 1e-6, 1e-7));
   cb->train();
   EXPECT_THROW(cb(x), c10::Error);
-  ConvBn up(3, 4, 3);
+  ConvBn up(3, 4, 3, 1, true, /*upsampled=*/true);  // phase kernels prepacked for forward_upsampled
   up->eval();
   const auto before = up->forward_upsampled(x).detach();
   fold_batchnorm(*up);
