@@ -395,9 +395,9 @@ std::vector<double> Model::sequence_scales(const std::vector<torch::Tensor>& fra
 }
 
 double Model::road_scale(const torch::Tensor& frame, double camera_height, const torch::Tensor& intrinsics) const {
+  guarded("geo::Model::road_scale", [&] { check_camera_height(camera_height); });  // before the DepthNet runs
   const auto d = depth(frame);
   return guarded("geo::Model::road_scale", [&] {
-    check_camera_height(camera_height);
     if (d.dim() != 2) throw Error("road_scale takes one image ([3,H,W]), got " + c10::str(frame.sizes()));
     const auto K = intrinsics.defined()         ? checked_intrinsics(intrinsics, d.size(0), d.size(1), false)
                    : spec().learns_intrinsics ? this->intrinsics(frame, frame)
