@@ -21,9 +21,12 @@
 #include <map>
 #include <optional>
 
+#include <unistd.h>
+
 #include "core/camera_rule.h"
 #include "core/logging.h"
 #include "core/output_folder.h"
+#include "core/files.h"
 #include "core/progress.h"
 #include "core/runtime.h"
 #include "data/kitti/calib.h"
@@ -34,6 +37,7 @@
 #include "data/video/frame_stream.h"
 #include "data/visual_outputs.h"
 #include "eval/metrics.h"
+#include "train/refine.h"
 #include "app_options.h"
 #include "geo/geo.h"
 
@@ -46,6 +50,8 @@ struct InferOptions {
   std::vector<double> intrinsics;
   std::vector<int64_t> ply_frames;
   int64_t max_frames = 0, calibration_frames = 0;  // 0: 8 with --precision int8
+  int64_t refine = 0;                               // 0: off
+  std::string refine_run;
   double camera_height = 0, ply_max_depth = 0;
   int threads = 0;
   bool videos = false, timing = false, force = false;
@@ -81,6 +87,14 @@ struct InferOptions {
                    "depth: the sky)")->check(geo::app::above_zero());
     app.add_option("--threads", threads, "LibTorch's intra-op threads (0 = all cores)")->check(geo::app::non_negative());
     app.add_flag("--timing", timing, "print the time of each step (reading, networks, colour maps, encoding, ...) per frame");
+    app.add_option("--refine", refine,
+                   "first train this many iterations on the input itself (test-time refinement: depth and pose adapt "
+                   "to the clip, with configs/video.yaml's settings and the camera of --intrinsics or the model's), then "
+                   "predict with the refined networks; for short or hard clips (docs/video.md)")
+        ->check(CLI::Range(int64_t{1}, int64_t{1000000}));
+    app.add_option("--refine-run", refine_run,
+                   "with --refine: the refinement's run folder, kept (train.log, checkpoints, refined.pt: a model file "
+                   "for later runs); default: a temporary folder, removed at the end");
     app.add_flag("--force", force, "write into a non-empty --output: the files geo_infer wrote there before (geo_infer-outputs.txt lists them) are removed first, nothing else");
   }
 };
@@ -165,13 +179,35 @@ std::vector<std::string> planned_outputs(const InferOptions& o, const geo::Model
 // --output: created; refused when it is the folder the frames come from (a frame folder, or the
 // folder of a single image), or when it holds something (unless --force, which removes what
 // geo_infer's manifest there says it wrote: an earlier, longer run's frames must not mix in).
+// The folders the input's frames are read from: a frame folder, or the folder of a single image.
+std::vector<std::string> frame_folders(const InferOptions& o, bool video) {
+  if (fs::is_directory(o.input)) return {o.input};
+  if (!video) return {fs::absolute(o.input).parent_path().string()};
+  return {};
+}
+
 void prepare_output(const InferOptions& o, const geo::Model& model, const Input& frames) {
-  std::vector<std::string> frame_folders;
-  if (fs::is_directory(o.input)) frame_folders.push_back(o.input);
-  else if (!frames.video) frame_folders.push_back(fs::absolute(o.input).parent_path().string());
   const int64_t removed = geo::prepare_output_folder(o.output, "--output", "geo_infer-outputs.txt",
-                                                     planned_outputs(o, model, frames), o.force, frame_folders);
+                                                     planned_outputs(o, model, frames), o.force,
+                                                     frame_folders(o, frames.video));
   if (o.force) spdlog::info("--force: {} earlier output file(s) of geo_infer removed from {}", removed, o.output);
+}
+
+// --intrinsics against the input's size (geo's one camera rule).
+void check_intrinsics(const InferOptions& o, int64_t height, int64_t width) {
+  const auto& in = o.intrinsics;
+  const auto problem = geo::camera_problem(in[0], in[1], in[2], in[3], width, height);
+  if (!problem.empty()) throw std::runtime_error("--intrinsics: " + problem + " ('" + o.input + "')");
+}
+
+// The input's frame size (its first frame, as decoded), {height, width}.
+std::pair<int64_t, int64_t> input_size(const InferOptions& o) {
+  FrameReader first(o, 1, 1);
+  std::string name;
+  torch::Tensor image;
+  if (!first.next(name, &image))
+    throw std::runtime_error("--input '" + o.input + "': no frame could be decoded (an empty or damaged video)");
+  return {first.stream().height(), first.stream().width()};
 }
 
 // The camera [3,3] at the model's size: --intrinsics (pixels of the input) scaled, else the camera
@@ -180,8 +216,7 @@ torch::Tensor camera(const InferOptions& o, const geo::Model& model, int64_t hei
   const double W0 = static_cast<double>(width), H0 = static_cast<double>(height);
   if (o.intrinsics.size() == 4) {
     const auto& in = o.intrinsics;
-    const auto problem = geo::camera_problem(in[0], in[1], in[2], in[3], width, height);
-    if (!problem.empty()) throw std::runtime_error("--intrinsics: " + problem + " ('" + o.input + "')");
+    check_intrinsics(o, height, width);
     const double sx = w / W0, sy = h / H0;
     return torch::tensor({in[0] * sx, 0.0, in[2] * sx, 0.0, in[1] * sy, in[3] * sy, 0.0, 0.0, 1.0}).view({3, 3}).to(torch::kFloat32);
   }
@@ -329,10 +364,63 @@ std::string write_outputs(const InferOptions& o, const geo::Model& model, const 
   return written;
 }
 
-// The whole command: load, read, infer, write, report.
+// --refine's run folder when --refine-run names none: a temporary one, removed at the end (the log
+// file the training opened there released first).
+struct ScratchRun {
+  std::string path;
+  ~ScratchRun() {
+    if (path.empty()) return;
+    geo::setup_logging("info");
+    geo::remove_tree(path);
+  }
+};
+
+// --refine: the model trained on the input first; returns the refined model file ("" when a
+// signal stopped the training). Whatever can refuse the run is checked before the training: the
+// output folder, a clip to train on, the camera.
+std::string refined_model(const InferOptions& o, geo::StepTimes& times, ScratchRun& scratch) {
+  const bool video = fs::is_regular_file(o.input) && geo::FrameStream(o.input, "--input").is_video();
+  if (!video && !fs::is_directory(o.input))
+    throw std::runtime_error("--refine " + std::to_string(o.refine) + " trains on a clip: '" + o.input +
+                             "' is a single image (give a video or a folder of frames)");
+  geo::check_output_folder(o.output, "--output", o.force, frame_folders(o, video));
+  if (!o.refine_run.empty() && fs::exists(o.refine_run) && !(fs::is_directory(o.refine_run) && fs::is_empty(o.refine_run)))
+    throw std::runtime_error("--refine-run '" + o.refine_run + "' exists and is not an empty folder: give a new one");
+  const auto [height, width] = input_size(o);
+  geo::RefineOptions r;
+  r.checkpoint = o.checkpoint;
+  r.input = o.input;
+  r.iterations = o.refine;
+  r.intrinsics = o.intrinsics;
+  if (r.intrinsics.empty()) {  // geo_infer's KITTI-like camera, in pixels of the input
+    const auto K = geo::kitti_like_intrinsics(height, width).to(torch::kFloat64);
+    r.intrinsics = {K[0][0].item<double>(), K[1][1].item<double>(), K[0][2].item<double>(), K[1][2].item<double>()};
+  } else {
+    check_intrinsics(o, height, width);
+  }
+  r.device = o.device;
+  r.threads = o.threads;
+  r.option = "--refine";
+  if (o.refine_run.empty()) {
+    const auto stamp = std::chrono::steady_clock::now().time_since_epoch().count();
+    scratch.path = (fs::temp_directory_path() / ("geo_infer-refine-" + std::to_string(::getpid()) + "-" +
+                                                 std::to_string(stamp))).string();
+  }
+  r.run_dir = o.refine_run.empty() ? scratch.path : o.refine_run;
+  auto refined = times.time("refine: train on the input", [&] { return geo::refine(r); });
+  geo::setup_logging("info");  // the run's train.log released
+  return refined;
+}
+
+// The whole command: (refine,) load, read, infer, write, report.
 int infer(const InferOptions& o) {
   const auto started = std::chrono::steady_clock::now();
   geo::StepTimes times;
+  if (!o.refine_run.empty() && o.refine == 0)
+    throw std::runtime_error("--refine-run '" + o.refine_run + "' keeps the run of --refine N: give --refine too");
+  ScratchRun scratch;
+  const std::string checkpoint = o.refine > 0 ? refined_model(o, times, scratch) : o.checkpoint;
+  if (checkpoint.empty()) return 130;  // interrupted: the refinement's checkpoint is in its run folder
   geo::LoadOptions load;
   load.device = o.device;
   const bool int8 = o.precision == "int8";
@@ -341,7 +429,7 @@ int infer(const InferOptions& o) {
   const int64_t calibration_frames = o.calibration_frames > 0 ? o.calibration_frames : 8;
   load.precision = int8 ? "fp32" : o.precision;  // int8: calibrated on the input's frames once they are read
   load.threads = o.threads;
-  geo::Model model = times.time("load the model", [&] { return geo::Model::load(o.checkpoint, load); });
+  geo::Model model = times.time("load the model", [&] { return geo::Model::load(checkpoint, load); });
   const int64_t h = model.spec().height, w = model.spec().width;
   if (int8 && o.calibration_frames == 0 && model.has_int8_calibration()) {
     times.time("int8 (the file's calibration)", [&] { model.quantize_int8({}); });
@@ -361,16 +449,7 @@ int infer(const InferOptions& o) {
   }
   // The input's size (its first frame), the camera, then its frames counted and named (with
   // --camera-height, each frame's metric scale on the way), all before anything is written.
-  int64_t height = 0, width = 0;
-  {
-    FrameReader first(o, h, w);
-    std::string name;
-    torch::Tensor image;
-    if (!first.next(name, &image))
-      throw std::runtime_error("--input '" + o.input + "': no frame could be decoded (an empty or damaged video)");
-    height = first.stream().height();
-    width = first.stream().width();
-  }
+  const auto [height, width] = input_size(o);
   const auto K = camera(o, model, height, width, h, w);
   const auto [frames, scales] = survey_and_scales(o, model, K, times);
   for (const auto f : o.ply_frames)

@@ -31,29 +31,35 @@ bool same_folder(const fs::path& a, const fs::path& b) {
 
 }  // namespace
 
-int64_t prepare_output_folder(const std::string& folder, const std::string& option, const std::string& manifest,
-                              const std::vector<std::string>& planned, bool force,
-                              const std::vector<std::string>& frame_folders) {
+void check_output_folder(const std::string& folder, const std::string& option, bool force,
+                         const std::vector<std::string>& frame_folders) {
   const std::string what = option + " '" + folder + "'";
   if (folder.empty()) throw std::runtime_error(option + " is empty: give the folder to write into");
   for (const auto& frames : frame_folders)
     if (!frames.empty() && same_folder(folder, frames))
       throw std::runtime_error(what + " is the folder the input's frames are read from ('" + frames +
                                "'): its outputs would be read as frames next time");
+  if (!fs::exists(folder)) return;
+  if (!fs::is_directory(folder)) throw std::runtime_error(what + " exists and is not a folder");
+  if (!force && !fs::is_empty(folder))
+    throw std::runtime_error(what + " is not empty (--force replaces this tool's earlier outputs there)");
+}
+
+int64_t prepare_output_folder(const std::string& folder, const std::string& option, const std::string& manifest,
+                              const std::vector<std::string>& planned, bool force,
+                              const std::vector<std::string>& frame_folders) {
+  check_output_folder(folder, option, force, frame_folders);
+  const std::string what = option + " '" + folder + "'";
   int64_t removed = 0;
-  if (fs::exists(folder)) {
-    if (!fs::is_directory(folder)) throw std::runtime_error(what + " exists and is not a folder");
-    if (!fs::is_empty(folder)) {
-      if (!force) throw std::runtime_error(what + " is not empty (--force replaces this tool's earlier outputs there)");
-      const fs::path dir(folder);
-      const auto ours = manifest_names(dir / manifest);
-      for (const auto& name : planned)
-        if (!ours.count(name) && fs::exists(fs::symlink_status(dir / name)))
-          throw std::runtime_error(what + " holds '" + name + "', which this tool did not write (no " + manifest +
-                                   " there names it): move it away or write into another folder");
-      for (const auto& name : ours)
-        if (fs::is_regular_file(fs::symlink_status(dir / name))) removed += fs::remove(dir / name) ? 1 : 0;
-    }
+  if (fs::exists(folder) && !fs::is_empty(folder)) {
+    const fs::path dir(folder);
+    const auto ours = manifest_names(dir / manifest);
+    for (const auto& name : planned)
+      if (!ours.count(name) && fs::exists(fs::symlink_status(dir / name)))
+        throw std::runtime_error(what + " holds '" + name + "', which this tool did not write (no " + manifest +
+                                 " there names it): move it away or write into another folder");
+    for (const auto& name : ours)
+      if (fs::is_regular_file(fs::symlink_status(dir / name))) removed += fs::remove(dir / name) ? 1 : 0;
   }
   fs::create_directories(folder);
   std::string list;

@@ -23,4 +23,10 @@ int64_t prepare_output_folder(const std::string& folder, const std::string& opti
                               const std::vector<std::string>& planned, bool force,
                               const std::vector<std::string>& frame_folders);
 
+// The refusals of prepare_output_folder that need no list of outputs (an empty name, a frame folder,
+// a file, a non-empty folder without `force`), checked without writing anything: before work that
+// comes ahead of the outputs (geo_infer --refine trains first).
+void check_output_folder(const std::string& folder, const std::string& option, bool force,
+                         const std::vector<std::string>& frame_folders);
+
 }  // namespace geo

@@ -19,6 +19,7 @@
 #include <iostream>
 #include <thread>
 
+#include "synth_world.h"
 #include "test_util.h"
 
 namespace geo {
@@ -390,6 +391,65 @@ TEST(GeoInfer, WritesDepthFlowAndTrajectoryAndRefusesMixedFrameSizes) {
   const std::string log = test::read_file(dir + "/log");
   EXPECT_NE(log.find("'" + dir + "/frames/000003.png' is 104x32 but '" + dir + "/frames/000000.png' is 208x64"), std::string::npos)
       << log;
+}
+
+// geo_infer --refine N: the networks trained on the input first (depth and pose; the FlowNet kept as
+// it was), then the outputs of the refined model, which --refine-run keeps as refined.pt. Everything
+// that can refuse the run is refused before the training.
+TEST(GeoInfer, RefinesOnTheInputFirst) {
+  const auto world = test::write_small_world("geo_infer_refine_world", 8, 0, 5);
+  const std::string clip = world + "/raw/2011_01_01/2011_01_01_drive_0001_sync/image_02/data";
+  ASSERT_TRUE(std::filesystem::is_directory(clip)) << clip;
+  const auto dir = test::fresh_dir("geo_infer_refine");
+  auto run = [&](const std::string& args) {
+    return std::system((test::apps_dir() + "/geo_infer --device cpu --threads 2 " + args + " > " + dir + "/log 2>&1").c_str());
+  };
+  const std::string source = "--checkpoint " + checkpoint() + " --input " + clip;
+  ASSERT_EQ(run(source + " --output " + dir + "/refined --refine 2 --refine-run " + dir + "/run"), 0) << test::read_file(dir + "/log");
+  EXPECT_NE(test::read_file(dir + "/log").find("stage refine (1/1): training [depth, pose] for 2 iterations"), std::string::npos)
+      << test::read_file(dir + "/log");
+  const std::string model = dir + "/run/refined.pt";
+  ASSERT_TRUE(std::filesystem::exists(model));
+  ASSERT_EQ(run("--checkpoint " + model + " --input " + clip + " --output " + dir + "/again"), 0) << test::read_file(dir + "/log");
+  ASSERT_EQ(run(source + " --output " + dir + "/plain"), 0) << test::read_file(dir + "/log");
+  for (const char* f : {"0000000000-depth.png", "0000000007-depth.png", "0000000003-flow.png", "trajectory.txt"}) {
+    EXPECT_EQ(test::read_file(dir + "/refined/" + f), test::read_file(dir + "/again/" + f)) << f;
+    EXPECT_NE(test::read_file(dir + "/refined/" + f), test::read_file(dir + "/plain/" + f)) << f;
+  }
+  // Depth and pose trained; the FlowNet is the source's, bit for bit.
+  const auto before = CheckpointFile(checkpoint()).networks(), after = CheckpointFile(model).networks();
+  auto same = [](const torch::nn::Module& a, const torch::nn::Module& b) {
+    const auto pa = a.named_parameters(), pb = b.named_parameters();
+    for (const auto& p : pa)
+      if (!torch::equal(p.value(), pb[p.key()])) return false;
+    return true;
+  };
+  ASSERT_TRUE(after.flow);
+  EXPECT_TRUE(same(*before.flow, *after.flow));
+  EXPECT_FALSE(same(*before.depth, *after.depth));
+  EXPECT_FALSE(same(*before.pose, *after.pose));
+  EXPECT_FALSE(std::filesystem::exists(dir + "/refined/run"));  // the run folder lies where it was told
+
+  // Refused, before any training: no steps, a single image, a clip shorter than a snippet, a
+  // used output folder or run folder, --refine-run alone.
+  auto refused = [&](const std::string& args, const std::string& message) {
+    EXPECT_NE(run(args), 0) << args;
+    const auto log = test::read_file(dir + "/log");
+    EXPECT_NE(log.find(message), std::string::npos) << log;
+    EXPECT_EQ(log.find("training ["), std::string::npos) << log;
+  };
+  refused(source + " --output " + dir + "/o1 --refine 0", "--refine: Value 0 not in range 1 to 1000000");
+  refused("--checkpoint " + checkpoint() + " --input " + clip + "/0000000000.png --output " + dir + "/o1 --refine 2",
+          "--refine 2 trains on a clip: '" + clip + "/0000000000.png' is a single image");
+  std::filesystem::create_directories(dir + "/two");
+  for (const char* f : {"0000000000.png", "0000000001.png"}) std::filesystem::copy(clip + "/" + f, dir + "/two/" + f);
+  refused("--checkpoint " + checkpoint() + " --input " + dir + "/two --output " + dir + "/o1 --refine 2",
+          "--refine 2: clip '" + dir + "/two' has 2 frames: a training snippet needs 3");
+  refused(source + " --output " + dir + "/plain --refine 2 --refine-run " + dir + "/run2", "--output '" + dir + "/plain' is not empty");
+  EXPECT_FALSE(std::filesystem::exists(dir + "/run2"));
+  refused(source + " --output " + dir + "/o1 --refine 2 --refine-run " + dir + "/run",
+          "--refine-run '" + dir + "/run' exists and is not an empty folder");
+  refused(source + " --output " + dir + "/o1 --refine-run " + dir + "/run3", "keeps the run of --refine N: give --refine too");
 }
 
 }  // namespace
