@@ -332,6 +332,10 @@ struct StageConfig {
   int64_t lr_step = 0;               // step schedule: multiply by lr_gamma every lr_step iterations
   double lr_gamma = 0.5;
   std::string init;                  // checkpoint (or run folder) to start from; empty = scratch
+  // BatchNorm normalises with, and keeps, the running statistics of the init (eval mode) while the
+  // weights train: fine-tuning on a few frames (geo_infer --refine), whose batch statistics would
+  // replace what training on many frames measured.
+  bool freeze_batch_norm = false;
   LossWeights weights;
 
   bool trains(Net net) const { return train.has(net); }
@@ -347,6 +351,7 @@ struct StageConfig {
     v("lr_step", lr_step);
     v("lr_gamma", lr_gamma);
     v("init", init);
+    v("freeze_batch_norm", freeze_batch_norm);
     v("weights", weights);
   }
   void validate(Checker& c) const;

@@ -111,6 +111,12 @@ void Networks::set_modes(const StageConfig& s) {
   depth->train(s.trains(Net::kDepth));
   pose->train(s.trains(Net::kPose));
   if (flow) flow->train(s.trains(Net::kFlow));
+  if (!s.freeze_batch_norm) return;
+  for (torch::nn::Module* net : {static_cast<torch::nn::Module*>(depth.get()), static_cast<torch::nn::Module*>(pose.get()),
+                                 flow ? static_cast<torch::nn::Module*>(flow.get()) : nullptr})
+    if (net)
+      for (const auto& m : net->modules())
+        if (m->as<SyncBatchNorm2d>()) m->eval();
 }
 
 void Networks::set_trainable(const StageConfig& s) {

@@ -60,7 +60,8 @@ struct Networks {
   // Built from the spec (BatchNorm eps/momentum/scale included); flow only when `with_flow`.
   static Networks create(const NetworkSpec& spec, bool with_flow);
   void to(const torch::Device& device);
-  // Trainable networks in train mode; frozen ones in eval mode (BatchNorm statistics fixed, GeoNet).
+  // Trainable networks in train mode; frozen ones in eval mode (BatchNorm statistics fixed, GeoNet);
+  // with stage.freeze_batch_norm every BatchNorm in eval mode.
   void set_modes(const StageConfig& stage);
   // requires_grad on: the parameters of the networks the stage trains, BatchNorm scales only when
   // spec.model.bn_scale (GeoNet: no gamma). Call once per stage, before building the optimizer.

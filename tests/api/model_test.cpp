@@ -406,7 +406,7 @@ TEST(GeoInfer, RefinesOnTheInputFirst) {
   };
   const std::string source = "--checkpoint " + checkpoint() + " --input " + clip;
   ASSERT_EQ(run(source + " --output " + dir + "/refined --refine 2 --refine-run " + dir + "/run"), 0) << test::read_file(dir + "/log");
-  EXPECT_NE(test::read_file(dir + "/log").find("stage refine (1/1): training [depth, pose] for 2 iterations"), std::string::npos)
+  EXPECT_NE(test::read_file(dir + "/log").find("stage refine (1/1): training [depth, pose] for 2 iterations from 0, batch 4, lr 0.0001"), std::string::npos)
       << test::read_file(dir + "/log");
   const std::string model = dir + "/run/refined.pt";
   ASSERT_TRUE(std::filesystem::exists(model));

@@ -626,5 +626,38 @@ TEST(Precision, Bf16NetworksWithFloat32Losses) {
   EXPECT_FALSE(autocast_enabled(torch::kCPU));
 }
 
+// stages[].freeze_batch_norm (geo_infer --refine): the weights train while every BatchNorm
+// normalises with, and keeps, its running statistics; without it a step moves them.
+TEST(ComputeLosses, FrozenBatchNormKeepsItsRunningStatistics) {
+  auto running = [](const Networks& n) {
+    std::vector<torch::Tensor> out;
+    for (const torch::nn::Module* net : {static_cast<const torch::nn::Module*>(n.depth.get()),
+                                         static_cast<const torch::nn::Module*>(n.pose.get())})
+      for (const auto& m : net->modules())
+        if (const auto* bn = m->as<SyncBatchNorm2d>()) out.push_back(bn->running_mean.clone());
+    return out;
+  };
+  const auto tgt = torch::rand({2, 3, 64, 128}), srcs = torch::rand({2, 2, 3, 64, 128});
+  const auto K = torch::tensor({60.f, 0.f, 64.f, 0.f, 60.f, 32.f, 0.f, 0.f, 1.f}).view({1, 3, 3}).repeat({2, 1, 1});
+  for (const bool frozen : {true, false}) {
+    Config c = parse_config(std::string("model: {encoder_depth: 18, num_scales: 2}\nstages: [{freeze_batch_norm: ") +
+                            (frozen ? "true" : "false") + "}]\n");
+    torch::manual_seed(5);
+    Networks n = Networks::create(NetworkSpec::of(c), false);
+    n.set_trainable(c.stages[0]);
+    n.set_modes(c.stages[0]);
+    EXPECT_TRUE(n.depth->is_training());
+    const auto before = running(n);
+    ASSERT_GT(before.size(), 20u);
+    compute_losses(n, tgt, srcs, K, c.stages[0], c).losses.total.backward();
+    const auto after = running(n);
+    size_t moved = 0;
+    for (size_t i = 0; i < before.size(); ++i) moved += torch::equal(before[i], after[i]) ? 0 : 1;
+    EXPECT_EQ(moved, frozen ? 0u : before.size()) << (frozen ? "frozen" : "training");
+    ASSERT_TRUE(n.depth->parameters().front().grad().defined());  // the weights train either way
+    EXPECT_GT(n.depth->parameters().front().grad().abs().sum().item<double>(), 0);
+  }
+}
+
 }  // namespace
 }  // namespace geo
