@@ -8,6 +8,7 @@
 #include "geometry/pose.h"
 #include "geometry/road_plane.h"
 #include "geometry/trajectory.h"
+#include "models/conv.h"
 #include "models/int8.h"
 #include "pipeline/checkpoint.h"
 #include "pipeline/networks.h"
@@ -230,7 +231,10 @@ Model Model::load(const std::string& path, const LoadOptions& options) {
     {  // the file's tensors are let go before folding and prepacking add their own copies
       CheckpointFile checkpoint(file);
       has_flow = checkpoint.has_flow();
-      impl->nets = create_quietly(checkpoint.spec(), has_flow);
+      {
+        const UninitialisedWeights every_weight_is_read_next;
+        impl->nets = create_quietly(checkpoint.spec(), has_flow);
+      }
       checkpoint.load_networks(impl->nets, false);
       if (checkpoint.config()) impl->training_configs = checkpoint.lineage();
       impl->depth_ranges = checkpoint.int8_ranges("depth");

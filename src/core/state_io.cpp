@@ -73,7 +73,16 @@ void read_state(torch::nn::Module& module, torch::serialize::InputArchive& archi
     throw std::runtime_error(msg);
   }
   torch::NoGradGuard no_grad;
-  for (auto& [name, target] : state) target.copy_(loaded[name]);
+  for (auto& [name, target] : state) {
+    const auto& t = loaded[name];
+    // A tensor of the file that owns its storage and is laid out as the target is taken as it is
+    // (no second copy of the weights, no pass over them); any other (float16 in a model file,
+    // another device, a view) is copied.
+    const bool whole = t.is_contiguous() && t.storage_offset() == 0 &&
+                       t.storage().nbytes() == static_cast<size_t>(t.numel()) * t.element_size();
+    if (whole && t.dtype() == target.dtype() && t.device() == target.device()) target.set_data(t);
+    else target.copy_(t);
+  }
 }
 
 void save_archive(torch::serialize::OutputArchive& archive, const std::string& path) {

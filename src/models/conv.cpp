@@ -39,6 +39,31 @@ torch::Tensor conv2d(const torch::Tensor& x, const torch::Tensor& weight, const 
   return out_pad > 0 ? y.narrow(1, 0, weight.size(0)) : y;
 }
 
+namespace {
+thread_local bool g_uninitialised = false;
+
+// `o` with one input and one output channel: a placeholder whose initialisation draws next to
+// nothing, given the real shapes right after (UninitialisedWeights).
+torch::nn::Conv2dOptions placeholder(torch::nn::Conv2dOptions o) {
+  return o.in_channels(1).out_channels(1).groups(1);
+}
+}  // namespace
+
+UninitialisedWeights::UninitialisedWeights() : previous_(g_uninitialised) { g_uninitialised = true; }
+UninitialisedWeights::~UninitialisedWeights() { g_uninitialised = previous_; }
+bool UninitialisedWeights::active() { return g_uninitialised; }
+
+Conv2dImpl::Conv2dImpl(const torch::nn::Conv2dOptions& o)
+    : torch::nn::Conv2dImpl(g_uninitialised ? placeholder(o) : o) {
+  if (!g_uninitialised) return;
+  options.in_channels(o.in_channels()).out_channels(o.out_channels()).groups(o.groups());
+  torch::NoGradGuard no_grad;
+  std::vector<int64_t> shape = {o.out_channels(), o.in_channels() / o.groups()};
+  shape.insert(shape.end(), (*o.kernel_size()).begin(), (*o.kernel_size()).end());
+  weight.set_data(torch::empty(shape));
+  if (bias.defined()) bias.set_data(torch::empty({o.out_channels()}));
+}
+
 torch::Tensor conv2d(const torch::nn::Conv2dImpl& m, const torch::Tensor& x) {
   const auto& o = m.options;
   TORCH_CHECK(o.groups() == 1 && (*o.dilation())[0] == 1 && (*o.dilation())[1] == 1,

@@ -33,9 +33,27 @@ int64_t onednn_channel_padding(const torch::Tensor& x);
 // t with n zero channels appended (dimension 1); t itself when n is 0.
 torch::Tensor pad_channels(const torch::Tensor& t, int64_t n);
 
-// torch::nn::Conv2d whose forward is conv2d above: the same parameters and state-dict keys.
+// While one exists on this thread, new geo::Conv2d modules get uninitialised weights (torch::empty,
+// no random numbers drawn for them) and init_weights does nothing: for networks whose every weight
+// is read from a file next (geo::Model::load, CheckpointFile::networks). Random initialisation was
+// about half of opening a model (two draws per weight: LibTorch's and geo's).
+class UninitialisedWeights {
+ public:
+  UninitialisedWeights();
+  ~UninitialisedWeights();
+  UninitialisedWeights(const UninitialisedWeights&) = delete;
+  UninitialisedWeights& operator=(const UninitialisedWeights&) = delete;
+  static bool active();
+
+ private:
+  bool previous_;
+};
+
+// torch::nn::Conv2d whose forward is conv2d above: the same parameters and state-dict keys (and,
+// outside UninitialisedWeights, the same initial values from the same random numbers).
 struct Conv2dImpl : torch::nn::Conv2dImpl {
-  using torch::nn::Conv2dImpl::Conv2dImpl;
+  explicit Conv2dImpl(const torch::nn::Conv2dOptions& options);
+  Conv2dImpl(int64_t in, int64_t out, torch::ExpandingArray<2> kernel) : Conv2dImpl(torch::nn::Conv2dOptions(in, out, kernel)) {}
   torch::Tensor forward(const torch::Tensor& x) { return conv2d(*this, x); }
 };
 TORCH_MODULE(Conv2d);

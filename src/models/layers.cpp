@@ -1,5 +1,6 @@
 #include "models/layers.h"
 
+#include "models/conv.h"
 #include "models/sync_batch_norm.h"
 
 namespace geo {
@@ -20,6 +21,7 @@ torch::Tensor resize_like(const torch::Tensor& x, const torch::Tensor& ref) {
 }
 
 void init_weights(torch::nn::Module& module) {
+  if (UninitialisedWeights::active()) return;  // every weight is read from a file next
   torch::NoGradGuard no_grad;
   for (auto& m : module.modules(/*include_self=*/false)) {  // also callable from constructors
     if (auto* conv = m->as<torch::nn::Conv2dImpl>()) {

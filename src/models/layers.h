@@ -16,7 +16,8 @@ torch::Tensor upsample2(const torch::Tensor& x, UpsampleMode mode);
 torch::Tensor resize_like(const torch::Tensor& x, const torch::Tensor& ref);
 
 // Weight initialisation of every network here: Xavier-uniform convolution weights and zero
-// biases (TF-slim's default, which GeoNet uses), BatchNorm weight 1 and bias 0.
+// biases (TF-slim's default, which GeoNet uses), BatchNorm weight 1 and bias 0. Nothing while an
+// UninitialisedWeights scope (models/conv.h) exists.
 void init_weights(torch::nn::Module& module);
 
 // BatchNorm convention of every BatchNorm (SyncBatchNorm2d) inside `module`: epsilon and momentum (PyTorch's

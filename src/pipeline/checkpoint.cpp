@@ -2,6 +2,7 @@
 
 #include "core/files.h"
 #include "core/state_io.h"
+#include "models/conv.h"
 #include "models/int8.h"
 
 #include <algorithm>
@@ -193,7 +194,10 @@ std::optional<torch::Tensor> CheckpointFile::int8_ranges(const std::string& netw
 }
 
 Networks CheckpointFile::networks() {
-  Networks nets = Networks::create(spec(), has_flow_);
+  Networks nets = [&] {
+    const UninitialisedWeights every_weight_is_read_next;  // load_networks below is strict
+    return Networks::create(spec(), has_flow_);
+  }();
   load_networks(nets, false);
   return nets;
 }

@@ -3,10 +3,13 @@
 #include <torch/torch.h>
 
 #include <condition_variable>
+#include <filesystem>
 #include <mutex>
 #include <thread>
 
 #include "core/runtime.h"
+#include "core/state_io.h"
+#include "models/conv.h"
 #include "models/depth_net.h"
 #include "models/fr.h"
 #include "models/conv_bn.h"
@@ -144,6 +147,52 @@ TEST(Layers, FoldedDepthNetMatchesTheUnfoldedOne) {
   const auto ref = net(x).disp[0].clone();
   fold_batchnorm(*net);
   EXPECT_LT((net(x).disp[0] - ref).abs().max().item<double>(), 1e-4);
+}
+
+// geo::Conv2d draws the initial weights torch::nn::Conv2d draws, from the same random numbers;
+// under UninitialisedWeights (networks whose weights are read next) it draws next to nothing and
+// init_weights does nothing, and a network so made holds exactly what is then loaded into it.
+TEST(Layers, UninitialisedWeightsAreForNetworksLoadedNext) {
+  torch::manual_seed(7);
+  torch::nn::Conv2d theirs(torch::nn::Conv2dOptions(5, 7, 3).bias(true));
+  const auto after_theirs = torch::rand({4});
+  torch::manual_seed(7);
+  Conv2d ours(torch::nn::Conv2dOptions(5, 7, 3).bias(true));
+  EXPECT_TRUE(torch::equal(theirs->weight, ours->weight));
+  EXPECT_TRUE(torch::equal(theirs->bias, ours->bias));
+  EXPECT_TRUE(torch::equal(after_theirs, torch::rand({4})));  // the same numbers drawn
+
+  DepthNetOptions o;
+  o.encoder_depth = 18;
+  torch::manual_seed(5);
+  DepthNet saved(o);
+  DepthNet loaded{nullptr};
+  {
+    const UninitialisedWeights scope;
+    EXPECT_TRUE(UninitialisedWeights::active());
+    loaded = DepthNet(o);
+    Conv2d empty(torch::nn::Conv2dOptions(64, 32, 3).stride(2).padding(1));
+    EXPECT_EQ(empty->weight.sizes(), (torch::IntArrayRef{32, 64, 3, 3}));
+    EXPECT_EQ(empty->bias.sizes(), (torch::IntArrayRef{32}));
+    EXPECT_EQ(empty->options.in_channels(), 64);
+    EXPECT_EQ(empty->options.out_channels(), 32);
+    EXPECT_FALSE(Conv2d(torch::nn::Conv2dOptions(64, 32, 1).bias(false))->bias.defined());
+  }
+  EXPECT_FALSE(UninitialisedWeights::active());
+  const auto a = saved->named_parameters(), b = loaded->named_parameters();
+  ASSERT_EQ(a.size(), b.size());
+  for (const auto& p : a) EXPECT_EQ(p.value().sizes(), b[p.key()].sizes()) << p.key();
+  const auto path = (std::filesystem::temp_directory_path() / "geo_layers_uninitialised.pt").string();
+  save_state(*saved, path);
+  load_state(*loaded, path);
+  std::filesystem::remove(path);
+  for (const auto& p : a) EXPECT_TRUE(torch::equal(p.value(), b[p.key()])) << p.key();
+  for (const auto& p : saved->named_buffers()) EXPECT_TRUE(torch::equal(p.value(), loaded->named_buffers()[p.key()])) << p.key();
+  saved->eval();
+  loaded->eval();
+  torch::NoGradGuard no_grad;
+  const auto x = torch::rand({1, 3, 64, 96});
+  EXPECT_TRUE(torch::equal(saved(x).disp[0], loaded(x).disp[0]));
 }
 
 // `n` processes played by threads: each call waits for all n and hands each the total.
