@@ -37,6 +37,7 @@
 #include "data/video/frame_stream.h"
 #include "data/visual_outputs.h"
 #include "eval/metrics.h"
+#include "infer/report.h"
 #include "train/refine.h"
 #include "app_options.h"
 #include "geo/geo.h"
@@ -54,7 +55,7 @@ struct InferOptions {
   std::string refine_run;
   double camera_height = 0, ply_max_depth = 0;
   int threads = 0;
-  bool videos = false, timing = false, force = false;
+  bool videos = false, timing = false, force = false, report = false;
 
   void add_to(CLI::App& app) {
     app.add_option("--checkpoint", checkpoint, "checkpoint file, run folder or geo_export model file")->required();
@@ -87,6 +88,10 @@ struct InferOptions {
                    "depth: the sky)")->check(geo::app::above_zero());
     app.add_option("--threads", threads, "LibTorch's intra-op threads (0 = all cores)")->check(geo::app::non_negative());
     app.add_flag("--timing", timing, "print the time of each step (reading, networks, colour maps, encoding, ...) per frame");
+    app.add_flag("--report", report,
+                 "also write report.html: input, disparity and flow side by side (up to 60 frames spread over the clip, "
+                 "each input as <name>-input.jpg), the trajectory, the camera, the scale and the time of each step; "
+                 "it opens offline in any browser");
     app.add_option("--refine", refine,
                    "first train this many iterations on the input itself (test-time refinement: depth and pose adapt "
                    "to the clip, with configs/video.yaml's settings and the camera of --intrinsics or the model's), then "
@@ -169,6 +174,10 @@ std::vector<std::string> planned_outputs(const InferOptions& o, const geo::Model
       names.push_back(name + ".ply");
   }
   if (sequence && three) names.insert(names.end(), {"trajectory.txt", "trajectory.png"});
+  if (o.report) {
+    names.push_back("report.html");
+    for (const size_t i : geo::infer::report_rows(frames.size())) names.push_back(geo::infer::input_image_name(frames.names[i]));
+  }
   if ((o.videos || frames.video) && sequence) {
     names.push_back("disp.avi");
     if (three) names.push_back("flow.avi");
@@ -312,6 +321,7 @@ std::string write_outputs(const InferOptions& o, const geo::Model& model, const 
     return image;
   };
   torch::Tensor previous, current = read(0), next;
+  const auto rows = o.report ? geo::infer::report_rows(frames.size()) : std::vector<size_t>();
   std::vector<torch::Tensor> motions;  // frame i's camera -> frame i+1's
   int64_t beyond_png = 0;              // depths that KITTI's 16-bit PNG (depth x 256) cannot hold
   for (size_t i = 0; i < frames.size(); ++i) {
@@ -328,6 +338,8 @@ std::string write_outputs(const InferOptions& o, const geo::Model& model, const 
       geo::write_depth_png(o.output + "/" + name + "-depth.png", depth);
     });
     beyond_png += (depth > 255.99).sum().item<int64_t>();
+    if (std::binary_search(rows.begin(), rows.end(), i))
+      times.time("report: input frames (JPEG)", [&] { geo::write_image(o.output + "/" + geo::infer::input_image_name(name), current.cpu()); });
     if (disp_video) times.time("video encode", [&] { disp_video->write(disp_colour); });
     if (std::find(o.ply_frames.begin(), o.ply_frames.end(), static_cast<int64_t>(i)) != o.ply_frames.end()) {
       const double limit = o.ply_max_depth > 0 ? o.ply_max_depth : o.camera_height > 0 ? 80.0 : 20 * depth.median().item<double>();
@@ -362,6 +374,37 @@ std::string write_outputs(const InferOptions& o, const geo::Model& model, const 
   times.add("trajectory, videos closed",
             std::chrono::duration<double>(std::chrono::steady_clock::now() - finishing).count());
   return written;
+}
+
+// --report: report.html, from what was written (the rows' input frames among it) and the timing.
+void write_report(const InferOptions& o, const geo::Model& model, const Input& frames, const torch::Tensor& K,
+                  std::pair<int64_t, int64_t> input_size, bool ground_truth, const std::string& timing) {
+  const int64_t h = model.spec().height, w = model.spec().width;
+  const bool sequence = frames.size() > 1, three = model.spec().seq_length == 3;
+  geo::infer::Report r;
+  r.input = o.input;
+  r.checkpoint = o.checkpoint + (o.refine > 0 ? " refined on the input (--refine " + std::to_string(o.refine) + ")" : "");
+  r.precision = model.spec().precision;
+  r.device = model.device().str();
+  r.frames = static_cast<int64_t>(frames.size());
+  r.width = w;
+  r.height = h;
+  std::tie(r.input_height, r.input_width) = input_size;
+  const double sx = static_cast<double>(r.input_width) / w, sy = static_cast<double>(r.input_height) / h;
+  const auto k = K.to(torch::kFloat64).cpu();
+  r.camera = {k[0][0].item<double>() * sx, k[1][1].item<double>() * sy, k[0][2].item<double>() * sx, k[1][2].item<double>() * sy};
+  r.camera_source = o.intrinsics.size() == 4          ? "--intrinsics"
+                    : model.spec().learns_intrinsics ? "learned by the model"
+                                                     : "KITTI-like default: fx 0.58 W, fy 1.92 H, centred; --intrinsics gives yours";
+  r.camera_height = o.camera_height;
+  r.trajectory = sequence && three;
+  r.ground_truth = ground_truth;
+  for (const size_t i : geo::infer::report_rows(frames.size())) {
+    r.rows.push_back(frames.names[i]);
+    r.row_flow.push_back(three && i + 1 < frames.size());
+  }
+  r.timing = timing;
+  geo::write_file_atomic(o.output + "/report.html", geo::infer::report_html(r));
 }
 
 // --refine's run folder when --refine-run names none: a temporary one, removed at the end (the log
@@ -464,13 +507,17 @@ int infer(const InferOptions& o) {
   if (frames.size() > 1 && model.spec().seq_length != 3)
     spdlog::warn("this model's PoseNet takes {}-frame snippets: geo_infer writes flow and trajectory.txt for "
                  "3-frame models only; depth is written for every frame", model.spec().seq_length);
-  const std::string written = write_outputs(o, model, frames, K, scales, truth, times);
+  std::string written = write_outputs(o, model, frames, K, scales, truth, times);
+  const std::string table = times.table(static_cast<int64_t>(frames.size()), "frame",
+                                        std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
+  if (o.report) {
+    write_report(o, model, frames, K, {height, width}, truth.defined(), table);
+    written += ", report.html";
+  }
   spdlog::info("done: {}/{{{}}}", o.output, written);
   if (o.timing)
     std::printf("geo_infer --timing: %zu frame(s) at %lldx%lld, %s, %s\n%s", frames.size(), static_cast<long long>(w),
-                static_cast<long long>(h), model.spec().precision.c_str(), model.device().str().c_str(),
-                times.table(static_cast<int64_t>(frames.size()), "frame",
-                            std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count()).c_str());
+                static_cast<long long>(h), model.spec().precision.c_str(), model.device().str().c_str(), table.c_str());
   return 0;
 }
 

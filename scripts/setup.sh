@@ -11,6 +11,7 @@
 #                   0: one translation unit per source.
 #                   Default: 1 for a new build folder, an existing one keeps its setting.
 #   GEO_SETUP_PACKAGES_ONLY=1  install the packages, build nothing (scripts/fuzz.sh)
+#   GEO_SETUP_BROWSER=0  do not install Chromium (only the browser test of geo_infer --report needs it)
 #   GEO_TARGETS     build only these targets (space-separated, e.g. "geo_train geo_eval"; default: all,
 #                   the tests included)
 #   GEO_TORCH       which LibTorch to build against:
@@ -72,6 +73,9 @@ if [ "$TORCH" = system ]; then
   )
 fi
 if [ "$OPENCV" = 1 ]; then PACKAGES+=(libopencv-dev); fi
+# Headless Chromium: the test that opens geo_infer's report.html in a browser
+# (Apps.InferReportLoadsInABrowser, skipped without it); GEO_SETUP_BROWSER=0 leaves it out.
+if [ "$OPENCV" = 1 ] && [ "$TORCH" = system ] && [ "${GEO_SETUP_BROWSER:-1}" = 1 ]; then PACKAGES+=(chromium); fi
 
 missing=()
 for p in "${PACKAGES[@]}"; do
