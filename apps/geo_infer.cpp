@@ -185,9 +185,6 @@ std::vector<std::string> planned_outputs(const InferOptions& o, const geo::Model
   return names;
 }
 
-// --output: created; refused when it is the folder the frames come from (a frame folder, or the
-// folder of a single image), or when it holds something (unless --force, which removes what
-// geo_infer's manifest there says it wrote: an earlier, longer run's frames must not mix in).
 // The folders the input's frames are read from: a frame folder, or the folder of a single image.
 std::vector<std::string> frame_folders(const InferOptions& o, bool video) {
   if (fs::is_directory(o.input)) return {o.input};
@@ -195,6 +192,9 @@ std::vector<std::string> frame_folders(const InferOptions& o, bool video) {
   return {};
 }
 
+// --output: created; refused when it is the folder the frames come from (a frame folder, or the
+// folder of a single image), or when it holds something (unless --force, which removes what
+// geo_infer's manifest there says it wrote: an earlier, longer run's frames must not mix in).
 void prepare_output(const InferOptions& o, const geo::Model& model, const Input& frames) {
   const int64_t removed = geo::prepare_output_folder(o.output, "--output", "geo_infer-outputs.txt",
                                                      planned_outputs(o, model, frames), o.force,
