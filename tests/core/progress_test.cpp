@@ -3,40 +3,34 @@
 #include "core/runtime.h"
 
 #include <gtest/gtest.h>
-#include <spdlog/sinks/ostream_sink.h>
-#include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <cstdlib>
 #include <thread>
 #include <sstream>
 
+#include "log_capture.h"
+
 namespace geo {
 namespace {
 
 TEST(Progress, LogLinesEveryNItemsAndAtTheEndWhenNotATerminal) {
-  setenv("GEO_PROGRESS", "lines", 1);
-  std::ostringstream out;
-  auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(out);
-  sink->set_pattern("%v");
-  auto saved = spdlog::default_logger();
-  spdlog::set_default_logger(std::make_shared<spdlog::logger>("progress_test", sink));
-  {
+  bool interactive = true;
+  const std::string out = test::captured_log("%v", [&] {
     Progress p("pack", 12, 5, "snippets");
     for (int64_t i = 1; i <= 12; ++i) p.update(i, "x");
-  }
-  spdlog::set_default_logger(saved);
-  std::istringstream lines(out.str());
+    interactive = Progress::interactive();
+  });
+  std::istringstream lines(out);
   std::vector<std::string> got;
   for (std::string l; std::getline(lines, l);) got.push_back(l);
-  ASSERT_EQ(got.size(), 3u) << out.str();  // 5, 10, 12
+  ASSERT_EQ(got.size(), 3u) << out;  // 5, 10, 12
   EXPECT_EQ(got[0].rfind("pack 5/12 x | ", 0), 0u) << got[0];
   EXPECT_EQ(got[1].rfind("pack 10/12 x | ", 0), 0u) << got[1];
   EXPECT_EQ(got[2].rfind("pack 12/12 x | ", 0), 0u) << got[2];
   EXPECT_NE(got[1].find(" snippets/s, ETA "), std::string::npos) << got[1];
-  EXPECT_EQ(out.str().find('\r'), std::string::npos);  // nothing drawn in place
-  EXPECT_FALSE(Progress::interactive());
-  unsetenv("GEO_PROGRESS");
+  EXPECT_EQ(out.find('\r'), std::string::npos);  // nothing drawn in place
+  EXPECT_FALSE(interactive);
 }
 
 TEST(Progress, FormatDuration) {

@@ -2,11 +2,8 @@
 #include "train/metrics.h"
 
 #include <gtest/gtest.h>
-#include <spdlog/sinks/ostream_sink.h>
-#include <spdlog/spdlog.h>
 
-#include <cstdlib>
-#include <sstream>
+#include "log_capture.h"
 
 namespace geo {
 namespace {
@@ -15,13 +12,7 @@ namespace {
 // negative: no auto-masking, the term absent as LossTerms::values leaves it out).
 template <class F>
 std::string stage_log(int64_t iterations, F masked) {
-  setenv("GEO_PROGRESS", "lines", 1);
-  std::ostringstream out;
-  auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(out);
-  sink->set_pattern("%l %v");
-  auto saved = spdlog::default_logger();
-  spdlog::set_default_logger(std::make_shared<spdlog::logger>("metrics_test", sink));
-  {
+  return test::captured_log("%l %v", [&] {
     ProgressSink progress(1000);
     for (int64_t i = 1; i <= iterations; ++i) {
       StepRecord r;
@@ -32,10 +23,7 @@ std::string stage_log(int64_t iterations, F masked) {
       if (masked(i) >= 0) r.losses.emplace_back("automasked", masked(i));
       progress.on_step(r);
     }
-  }
-  spdlog::set_default_logger(saved);
-  unsetenv("GEO_PROGRESS");
-  return out.str();
+  });
 }
 
 size_t count(const std::string& text, const std::string& part) {
