@@ -14,6 +14,7 @@
 #include <torch/torch.h>
 
 #include "models/int8_engine.h"
+#include "models/int8_kernels.h"
 
 #include <memory>
 #include <string>
@@ -24,24 +25,7 @@ namespace geo {
 struct Conv2dImpl;
 struct ConvBnImpl;
 struct EncoderDecoderImpl;
-struct FeatureRefinementImpl;
 struct PoseNetImpl;
-
-// x float [B,C,H,W] -> quint8 [B,C,H,W] channels-last (NHWC bytes) with (scale, zero_point): what
-// at::quantize_per_tensor computes (ties rounded up rather than to even), vectorised.
-torch::Tensor quantize_to_nhwc(const torch::Tensor& x, double scale, int64_t zero_point);
-
-// quint8 [B,Ci,H,W] tensors concatenated along the channels into quint8 channels-last with (scale,
-// zero_point), each requantized on the way (quantized::cat's result in one vectorised pass: it took
-// ~2 ms of each int8 encoder-decoder here).
-torch::Tensor cat_int8(const std::vector<torch::Tensor>& parts, double scale, int64_t zero_point);
-
-// FR on an 8-bit NHWC feature q (quint8): the channel gate from q's max and mean over space, the
-// spatial gate from the max and mean over the channels of q * a_c (both pooled from the 8-bit
-// values), then q * a_c * a_s requantized to (scale, zero_point) in one pass; the gates themselves
-// (MLP, 7x7 convolution, sigmoids) in float, as in the float network.
-torch::Tensor int8_feature_refinement(FeatureRefinementImpl& fr, const torch::Tensor& q, double scale,
-                                      int64_t zero_point);
 
 // What every int8 network shares: its quantized points (each calibrated range -> a scale and zero
 // point), its prepacked int8 weights, and the two passes of its graph (models/int8.cpp).
