@@ -60,12 +60,21 @@ torch::Tensor pixel_grid(int64_t height, int64_t width, const torch::TensorOptio
   return torch::stack({xs, ys, torch::ones({height, width}, options)}, 0).unsqueeze(0);
 }
 
+torch::Tensor inverse_3x3(const torch::Tensor& M) {
+  check_shape(M, "M", {-1, 3, 3});
+  const auto r0 = M.select(1, 0), r1 = M.select(1, 1), r2 = M.select(1, 2);
+  // The inverse's columns: the cross products of the rows, over the determinant.
+  const auto c0 = at::linalg_cross(r1, r2, -1), c1 = at::linalg_cross(r2, r0, -1), c2 = at::linalg_cross(r0, r1, -1);
+  const auto det = (r0 * c0).sum(-1).view({-1, 1, 1});
+  return torch::stack({c0, c1, c2}, -1) / det;
+}
+
 torch::Tensor back_project(const torch::Tensor& depth, const torch::Tensor& K) {
   check_shape(depth, "depth", {-1, 1, -1, -1});
   check_shape(K, "K", {depth.size(0), 3, 3});
   const auto B = depth.size(0), H = depth.size(2), W = depth.size(3);
   const auto pix = pixel_grid(H, W, depth.options()).view({1, 3, H * W});
-  const auto rays = K.inverse().matmul(pix);  // [B,3,HW]
+  const auto rays = inverse_3x3(K).matmul(pix);  // [B,3,HW]
   return (rays * depth.view({B, 1, H * W})).view({B, 3, H, W});
 }
 

@@ -25,6 +25,22 @@ TEST(Camera, IntrinsicsPerScaleDivideByPowersOfTwo) {
   EXPECT_DOUBLE_EQ(Ks[3][0][2][2].item<double>(), 1.0);
 }
 
+TEST(Camera, Inverse3x3IsTheInverse) {
+  // A camera: [1/fx 0 -cx/fx; 0 1/fy -cy/fy; 0 0 1], exactly for powers of two.
+  const auto K = intrinsics(4, 8, 2, 16);
+  const auto hand = torch::tensor({0.25, 0., -0.5, 0., 0.125, -2., 0., 0., 1.}, torch::kFloat64).view({1, 3, 3});
+  EXPECT_TRUE(torch::equal(geo::inverse_3x3(K), hand));
+  // Any invertible matrix, batched: M times its inverse is the identity; gradients flow to M.
+  torch::manual_seed(3);
+  const auto M = (torch::randn({5, 3, 3}, torch::kFloat64) + 3 * torch::eye(3, torch::kFloat64)).requires_grad_();
+  const auto inv = geo::inverse_3x3(M);
+  EXPECT_LT((M.matmul(inv) - torch::eye(3, torch::kFloat64)).abs().max().item<double>(), 1e-12);
+  inv.sum().backward();
+  EXPECT_TRUE(torch::allclose(M.grad(), -inv.transpose(1, 2).matmul(torch::ones({5, 3, 3}, torch::kFloat64))
+                                            .matmul(inv.transpose(1, 2)), 1e-9, 1e-12));
+  EXPECT_THROW(geo::inverse_3x3(torch::zeros({2, 3, 4})), c10::Error);
+}
+
 TEST(Camera, ProjectOfBackProjectIsThePixelGrid) {
   torch::manual_seed(5);
   const auto K = intrinsics(50, 45, 15.5, 9.5, 2);
