@@ -279,6 +279,10 @@ struct LossConfig {
   // GeoNet's L_br carries a factor num_source / 2 (geonet_model.py: build_losses): 1 for 3-frame
   // snippets, 2 for the 5-frame odometry snippets, where it weighs L_br twice against L_ds.
   bool rigid_source_factor = true;
+  // The FlowNet's inputs (rigid flow, rigid warp, its error) keep their gradient in stages that train
+  // depth or pose with the flow (GeoNet's graph: L_fr, L_fs and L_fg reach the DepthNet and PoseNet
+  // through them as well as through the rigid flow added to the residual); false: computed without.
+  bool flow_input_gradient = true;
 
   template <class V> void fields(V& v) {
     v("ssim_alpha", ssim_alpha);
@@ -295,6 +299,7 @@ struct LossConfig {
     v("min_reprojection", min_reprojection);
     v("automask", automask);
     v("rigid_source_factor", rigid_source_factor);
+    v("flow_input_gradient", flow_input_gradient);
   }
   void validate(Checker& c) const;
 };

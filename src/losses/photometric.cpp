@@ -203,8 +203,10 @@ torch::Tensor photometric_error(const torch::Tensor& x, const torch::Tensor& y, 
 
 torch::Tensor channel_l2_norm(const torch::Tensor& x) {
   TORCH_CHECK(x.dim() == 4, "x must be [B,C,H,W], got ", x.sizes());
-  torch::NoGradGuard no_grad;
-  return x.square().sum(1, /*keepdim=*/true).sqrt_();
+  const auto squares = x.square().sum(1, /*keepdim=*/true);
+  if (!torch::GradMode::is_enabled() || !x.requires_grad()) return squares.sqrt_();
+  // sqrt's gradient is infinite at 0: the zero branch takes those pixels (their gradient is 0).
+  return torch::where(squares > 0, squares.clamp_min(1e-30).sqrt(), torch::zeros_like(squares));
 }
 
 std::vector<torch::Tensor> image_pyramid(const torch::Tensor& image, int num_scales) {

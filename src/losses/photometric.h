@@ -24,8 +24,9 @@ torch::Tensor photometric_error_channels_reference(const torch::Tensor& x, const
 //   alpha * clip((1 - SSIM) / 2, 0, 1) + (1 - alpha) * |x - y|   (alpha = 0.85 in the paper).
 torch::Tensor photometric_error(const torch::Tensor& x, const torch::Tensor& y, double alpha);
 
-// L2 norm over the channels [B,C,H,W] -> [B,1,H,W], without gradient (the FlowNet's input
-// "L2 norm of the rigid error"; a plain sum of squares: at::norm over 3 channels is slow).
+// L2 norm over the channels [B,C,H,W] -> [B,1,H,W] (the FlowNet's input "L2 norm of the rigid
+// error"; a plain sum of squares: at::norm over 3 channels is slow). Differentiable where grad mode
+// is on, with a zero gradient (not NaN) where the norm is 0.
 torch::Tensor channel_l2_norm(const torch::Tensor& x);
 
 // [image, image/2, ...]: each level the 2x2 mean of the previous (area resize, GeoNet).

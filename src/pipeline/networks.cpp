@@ -1,5 +1,7 @@
 #include "pipeline/networks.h"
 
+#include <optional>
+
 #include "geometry/camera.h"
 #include "geometry/pose.h"
 #include "geometry/warp.h"
@@ -180,8 +182,10 @@ void Networks::prepare_inference(bool fold, bool bf16) {
 }
 
 torch::Tensor rigid_flow_net_input(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& rigid_flow,
-                                   const LossConfig& loss, torch::Tensor warped, torch::Tensor error_norm) {
-  torch::NoGradGuard no_grad;
+                                   const LossConfig& loss, torch::Tensor warped, torch::Tensor error_norm,
+                                   bool keep_gradient) {
+  std::optional<torch::NoGradGuard> no_grad;
+  if (!keep_gradient) no_grad.emplace();
   if (!warped.defined() || !error_norm.defined()) {
     const auto view = rigid_view(to_loss_range(src, loss), to_loss_range(tgt, loss), rigid_flow, loss);
     warped = view.warp.image;

@@ -61,13 +61,16 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
   }
   TORCH_CHECK(nets.flow, "the stage trains flow but no FlowNet was created");
   // Both directions of every source in one FlowNet pass: [fwd_0..fwd_N-1, bwd_0..bwd_N-1].
+  // GeoNet's graph (loss.flow_input_gradient): the FlowNet's inputs carry the rigid step's gradient
+  // when the stage trains depth or pose with the flow.
+  const bool keep = config.loss.flow_input_gradient && (stage.trains(Net::kDepth) || stage.trains(Net::kPose));
   std::vector<torch::Tensor> inputs;
   for (int64_t i = 0; i < N; ++i)
     inputs.push_back(rigid_flow_net_input(tgt, src_list[i], out.rigid.fwd_flow[i][0], config.loss,
-                                          out.rigid.fwd_warp[i][0], out.rigid.fwd_error_norm[i]));
+                                          out.rigid.fwd_warp[i][0], out.rigid.fwd_error_norm[i], keep));
   for (int64_t i = 0; i < N; ++i)
     inputs.push_back(rigid_flow_net_input(src_list[i], tgt, out.rigid.bwd_flow[i][0], config.loss,
-                                          out.rigid.bwd_warp[i][0], out.rigid.bwd_error_norm[i]));
+                                          out.rigid.bwd_warp[i][0], out.rigid.bwd_error_norm[i], keep));
   std::optional<torch::NoGradGuard> frozen;
   if (!stage.trains(Net::kFlow)) frozen.emplace();
   auto residual = network_pass(config, tgt.device(), [&] { return nets.flow->forward(torch::cat(inputs, 0)).flow; });

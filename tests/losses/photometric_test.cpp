@@ -63,14 +63,21 @@ TEST(Photometric, MaskedMeanAveragesOnlyMaskedPixels) {
   EXPECT_THROW(geo::masked_mean(v, torch::ones({1, 2, 2, 2})), c10::Error);
 }
 
-TEST(Photometric, ChannelL2NormIsHandComputedAndCarriesNoGradient) {
-  // Pixel 0: (3, 4, 0) -> 5; pixel 1: (0, 0, 0) -> 0 (no NaN at zero).
+TEST(Photometric, ChannelL2NormIsHandComputedWithAGradientThatIsZeroAtZero) {
+  // Pixel 0: (3, 4, 0) -> 5, gradient x / 5; pixel 1: (0, 0, 0) -> 0, gradient 0 (not NaN).
   const auto x = torch::tensor({3., 0., 4., 0., 0., 0.}, torch::kFloat64).view({1, 3, 1, 2}).requires_grad_();
   const auto n = geo::channel_l2_norm(x);
   ASSERT_EQ(n.sizes(), (std::vector<int64_t>{1, 1, 1, 2}));
   EXPECT_DOUBLE_EQ(n[0][0][0][0].item<double>(), 5.0);
   EXPECT_DOUBLE_EQ(n[0][0][0][1].item<double>(), 0.0);
-  EXPECT_FALSE(n.requires_grad());
+  n.sum().backward();
+  EXPECT_TRUE(torch::allclose(x.grad(), torch::tensor({0.6, 0., 0.8, 0., 0., 0.}, torch::kFloat64).view({1, 3, 1, 2}),
+                              0, 1e-15));
+  // Without grad mode: the same values, no graph.
+  torch::NoGradGuard no_grad;
+  const auto plain = geo::channel_l2_norm(x);
+  EXPECT_FALSE(plain.requires_grad());
+  EXPECT_TRUE(torch::equal(plain, n.detach()));
 }
 
 // The fused CPU kernel against the same error composed of tensor ops (autograd's gradients), at

@@ -11,6 +11,8 @@
 #include <ATen/autocast_mode.h>
 #include <gtest/gtest.h>
 
+#include <map>
+
 #include <unistd.h>
 
 #include <algorithm>
@@ -657,6 +659,57 @@ TEST(ComputeLosses, FrozenBatchNormKeepsItsRunningStatistics) {
     ASSERT_TRUE(n.depth->parameters().front().grad().defined());  // the weights train either way
     EXPECT_GT(n.depth->parameters().front().grad().abs().sum().item<double>(), 0);
   }
+}
+
+// loss.flow_input_gradient (GeoNet's graph): in a stage that trains depth and pose with the flow,
+// L_fr reaches the DepthNet and PoseNet through the FlowNet's input too. The FlowNet's own gradients
+// are the same either way (bit for bit: the same forward values and the same gradient from the loss);
+// the DepthNet's and PoseNet's differ; in a flow-only stage the setting changes nothing.
+TEST(ComputeLosses, FlowInputGradientReachesDepthAndPoseOnlyInAJointStage) {
+  const auto tgt = torch::rand({2, 3, 64, 128}), srcs = torch::rand({2, 2, 3, 64, 128});
+  const auto K = torch::tensor({60.f, 0.f, 64.f, 0.f, 60.f, 32.f, 0.f, 0.f, 1.f}).view({1, 3, 3}).repeat({2, 1, 1});
+  auto gradients = [&](bool keep, bool joint) {
+    Config c = parse_config(std::string("model: {encoder_depth: 18, num_scales: 2}\nloss: {flow_input_gradient: ") +
+                            (keep ? "true" : "false") +
+                            "}\nstages: [{weights: {rigid: 0, disp_smooth: 0, flow: 1, flow_smooth: 0, "
+                            "flow_consistency: 0}}]\n");
+    c.stages[0].train = NetworkSet{joint, joint, true};
+    torch::manual_seed(5);
+    Networks n = Networks::create(NetworkSpec::of(c), true);
+    n.set_trainable(c.stages[0]);
+    n.set_modes(c.stages[0]);
+    compute_losses(n, tgt, srcs, K, c.stages[0], c).losses.total.backward();
+    std::map<std::string, std::vector<torch::Tensor>> g;
+    for (auto [name, net] : std::vector<std::pair<std::string, torch::nn::Module*>>{
+             {"depth", n.depth.get()}, {"pose", n.pose.get()}, {"flow", n.flow.get()}})
+      for (const auto& p : net->parameters())
+        g[name].push_back(p.grad().defined() ? p.grad().clone() : torch::zeros_like(p));
+    return g;
+  };
+  auto same = [](const std::vector<torch::Tensor>& a, const std::vector<torch::Tensor>& b) {
+    for (size_t i = 0; i < a.size(); ++i)
+      if (!torch::equal(a[i], b[i])) return false;
+    return true;
+  };
+  auto norm = [](const std::vector<torch::Tensor>& a) {
+    double s = 0;
+    for (const auto& t : a) s += t.square().sum().item<double>();
+    return std::sqrt(s);
+  };
+  auto distance = [](const std::vector<torch::Tensor>& a, const std::vector<torch::Tensor>& b) {
+    double s = 0;
+    for (size_t i = 0; i < a.size(); ++i) s += (a[i] - b[i]).square().sum().item<double>();
+    return std::sqrt(s);
+  };
+  const auto kept = gradients(true, true), cut = gradients(false, true);
+  EXPECT_TRUE(same(kept.at("flow"), cut.at("flow")));
+  for (const char* net : {"depth", "pose"}) {
+    ASSERT_GT(norm(cut.at(net)), 0) << net << ": L_fr reaches it through the rigid flow either way";
+    EXPECT_GT(distance(kept.at(net), cut.at(net)), 1e-3 * norm(cut.at(net))) << net;
+  }
+  const auto flow_only_kept = gradients(true, false), flow_only_cut = gradients(false, false);
+  for (const char* net : {"depth", "pose", "flow"}) EXPECT_TRUE(same(flow_only_kept.at(net), flow_only_cut.at(net))) << net;
+  EXPECT_EQ(norm(flow_only_kept.at("depth")), 0.0);
 }
 
 }  // namespace
