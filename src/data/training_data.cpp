@@ -96,6 +96,10 @@ TrainingData open_at(const DataConfig& d, TrainingData out) {
   if (entries.empty())
     throw ConfigError("data.split " + d.split + ": all " + std::to_string(listed) + " entries of " + out.train_list +
                       " are excluded (test scenes or static frames listed in " + join_list(out.exclusions, ",") + ")");
+  if (lists.from_drives && d.val_split == "list")
+    spdlog::warn("data.split kitti_raw_stereo with data.val_split list: the validation list's frames are in the "
+                 "drives trained on (most are training frames), so validation measures fit, not generalisation; "
+                 "data.val_split geonet holds GeoNet's 10% out of training (configs/rigid_geonet.yaml does)");
   std::vector<SplitEntry> held_out;  // data.val_split geonet: GeoNet's 10% of the training snippets
   if (d.val_split == "geonet") {
     std::vector<SplitEntry> kept;

@@ -302,6 +302,8 @@ TEST(Config, ShippedConfigsParseWithThePapersSchedule) {
   EXPECT_EQ(pose.data.sequences, (std::vector<std::string>{"00", "01", "02", "03", "04", "05", "06", "07", "08"}));
   const Config flow = geo::load_config(geo::resolve_config_path("flow_geonet"));
   EXPECT_EQ(flow.data.split, "kitti_raw_stereo");
+  EXPECT_EQ(flow.data.val_split, "geonet");  // the list's validation frames lie in the drives it trains on
+  EXPECT_EQ(geo::load_config(geo::resolve_config_path("rigid_geonet")).data.val_split, "geonet");
   EXPECT_EQ(flow.stages[0].train.names(), std::vector<std::string>{"flow"});
   EXPECT_EQ(flow.loss.flow_mask, geo::FlowMask::kConsistency);
 }
