@@ -46,7 +46,9 @@ Batch augment(Batch b, const AugmentConfig& c, uint64_t seed) {
                                   .align_corners(false));
     all = all.slice(2, oy, oy + H).slice(3, ox, ox + W);
     // Exact for pixel centres at integers and align_corners=false: u' = (u + 0.5) s - 0.5 - offset,
-    // with s the effective scale of the rounded size (GeoNet uses c s - offset; < 0.1 px apart).
+    // with s the effective scale of the rounded size. GeoNet (data_loader.py: random_scaling) scales
+    // by the drawn factor instead of the rounded size's and leaves out the half pixel: its intrinsics
+    // are off by up to ~0.5 px at the image edges (a focal length off by up to f / W).
     const double ex = static_cast<double>(Ws) / W, ey = static_cast<double>(Hs) / H;
     auto K = b.K.clone();
     K.select(1, 0).select(1, 0).mul_(ex);

@@ -40,7 +40,9 @@ struct RigidTerms {
   PerSourceScale<torch::Tensor> bwd_error;
   std::vector<torch::Tensor> fwd_error_norm;  // N: full-scale L2 norm over colour channels of the
   std::vector<torch::Tensor> bwd_error_norm;  //    per-channel error [B,1,H,W] (FlowNet input; no gradient)
-  torch::Tensor rigid;        // L_br: sum over scales of (fwd + bwd) masked means, mean over sources
+  // L_br: sum over scales of (fwd + bwd) masked means, mean over sources, times num_source / 2
+  // (loss.rigid_source_factor, GeoNet's).
+  torch::Tensor rigid;
   torch::Tensor disp_smooth;  // L_ds: sum over scales of smoothness / 2^s over all frames
   torch::Tensor automasked;   // loss.automask: the share of full-scale pixels a still frame explains
                               // better (left out; mean of both directions; no gradient), else undefined
