@@ -12,6 +12,7 @@
 #include "models/int8.h"
 #include "pipeline/checkpoint.h"
 #include "pipeline/networks.h"
+#include "api/model_impl.h"
 
 #include <ATen/CPUGeneratorImpl.h>
 #include <torch/torch.h>
@@ -23,33 +24,12 @@
 
 namespace geo {
 
-struct Model::Impl {
-  Networks nets;  // and their NetworkSpec
-  torch::Device device = torch::kCPU;
-  ModelSpec spec;
-  std::vector<std::string> training_configs;  // CheckpointFile::lineage() of a training checkpoint
-  // The int8 calibration the file keeps, per network (a file written in int8), else nullopt.
-  std::optional<torch::Tensor> depth_ranges, pose_ranges, flow_ranges;
-};
 
 namespace {
 
 namespace fs = std::filesystem;
 namespace F = torch::nn::functional;
 
-// Runs `f`, turning any failure into a geo::Error that says what was being done.
-template <class Fn> auto guarded(const std::string& what, Fn&& f) -> decltype(f()) {
-  try {
-    return f();
-  } catch (const Error&) {
-    throw;
-  } catch (const c10::Error& e) {
-    std::string why = e.what_without_backtrace();
-    throw Error(what + ": " + why.substr(0, why.find('\n')));
-  } catch (const std::exception& e) {
-    throw Error(what + ": " + e.what());
-  }
-}
 
 ModelSpec public_spec(const NetworkSpec& s, bool has_flow, const std::string& source) {
   return ModelSpec{s.height, s.width, s.seq_length, s.model.encoder_depth, s.model.use_fr, has_flow, source,
@@ -134,23 +114,6 @@ PreparedPair prepare_pair(const Model::Impl& m, const torch::Tensor& from, const
   return p;
 }
 
-// Given intrinsics [3,3] or [B,3,3] of H x W images as float64 on the CPU: finite, and each a
-// plausible camera of such an image (camera_problem: the rule of every tool); throws Error.
-torch::Tensor checked_intrinsics(const torch::Tensor& K, int64_t H, int64_t W, bool batch_allowed) {
-  const bool ok = (K.dim() == 2 && K.size(0) == 3 && K.size(1) == 3) ||
-                  (batch_allowed && K.dim() == 3 && K.size(1) == 3 && K.size(2) == 3);
-  if (!ok) throw Error(std::string("intrinsics must be [3,3]") + (batch_allowed ? " or [B,3,3]" : "") +
-                       " (pixels of the given image), got " + c10::str(K.sizes()));
-  const auto k = K.to(torch::kCPU, torch::kFloat64).clone();
-  if (!torch::isfinite(k).all().item<bool>()) throw Error("intrinsics hold NaN or infinity");
-  const auto each = k.reshape({-1, 3, 3});
-  for (int64_t b = 0; b < each.size(0); ++b) {
-    const auto problem = camera_problem(each[b][0][0].item<double>(), each[b][1][1].item<double>(),
-                                        each[b][0][2].item<double>(), each[b][1][2].item<double>(), W, H);
-    if (!problem.empty()) throw Error("intrinsics: " + problem);
-  }
-  return k;
-}
 
 // [B,3,3] intrinsics at the network's size from ones at H x W (or KITTI's proportions); undefined
 // when none are given to a model that learns them (predict_pair then uses the learned ones).
@@ -176,6 +139,24 @@ torch::Tensor to_size(const torch::Tensor& x, int64_t H, int64_t W) {
 }
 
 }  // namespace
+
+// Given intrinsics [3,3] or [B,3,3] of H x W images as float64 on the CPU: finite, and each a
+// plausible camera of such an image (camera_problem: the rule of every tool); throws Error.
+torch::Tensor checked_intrinsics(const torch::Tensor& K, int64_t H, int64_t W, bool batch_allowed) {
+  const bool ok = (K.dim() == 2 && K.size(0) == 3 && K.size(1) == 3) ||
+                  (batch_allowed && K.dim() == 3 && K.size(1) == 3 && K.size(2) == 3);
+  if (!ok) throw Error(std::string("intrinsics must be [3,3]") + (batch_allowed ? " or [B,3,3]" : "") +
+                       " (pixels of the given image), got " + c10::str(K.sizes()));
+  const auto k = K.to(torch::kCPU, torch::kFloat64).clone();
+  if (!torch::isfinite(k).all().item<bool>()) throw Error("intrinsics hold NaN or infinity");
+  const auto each = k.reshape({-1, 3, 3});
+  for (int64_t b = 0; b < each.size(0); ++b) {
+    const auto problem = camera_problem(each[b][0][0].item<double>(), each[b][1][1].item<double>(),
+                                        each[b][0][2].item<double>(), each[b][1][2].item<double>(), W, H);
+    if (!problem.empty()) throw Error("intrinsics: " + problem);
+  }
+  return k;
+}
 
 torch::Tensor rgb8_image(const uint8_t* rgb, int64_t height, int64_t width, int64_t stride) {
   if (!rgb) throw Error("rgb8_image: null pixel pointer");
@@ -327,104 +308,6 @@ torch::Tensor Model::depth(const torch::Tensor& image) const {
     const auto disp = impl_->nets.depth->forward(x).disp[0];  // [B,1,h,w]
     auto depth = to_size(1.0 / disp, H, W).squeeze(1);
     return batched ? depth : depth[0];
-  });
-}
-
-torch::Tensor kitti_like_intrinsics(int64_t height, int64_t width) {
-  const double h = static_cast<double>(height), w = static_cast<double>(width);
-  return torch::tensor({0.58 * w, 0.0, 0.5 * w, 0.0, 1.92 * h, 0.5 * h, 0.0, 0.0, 1.0}, torch::kFloat64).view({3, 3});
-}
-
-namespace {
-void check_camera_height(double camera_height) {
-  if (!(camera_height > 0) || !std::isfinite(camera_height))
-    throw Error("camera_height must be a positive number of metres, got " + std::to_string(camera_height));
-}
-
-// Each frame's smoothed scale (geometry/trajectory.h metric_scales); `hint` follows the message
-// naming a frame without a road near it.
-std::vector<double> smoothed_scales(const std::vector<double>& per_frame, const std::string& hint) {
-  return guarded("smooth_road_scales", [&] {
-    return metric_scales(per_frame, [&](size_t i) {
-      return "no road plane in any frame near frame " + std::to_string(i) + " of " + std::to_string(per_frame.size()) +
-             hint + ": metric scale needs a flat road in front of the camera";
-    });
-  });
-}
-}  // namespace
-
-torch::Tensor Model::metric_depth(const torch::Tensor& image, double camera_height, const torch::Tensor& intrinsics,
-                                  std::vector<double>* scale) const {
-  const auto depth = this->depth(image);
-  return guarded("geo::Model::metric_depth", [&] {
-    torch::InferenceMode guard;
-    check_camera_height(camera_height);
-    const bool batched = depth.dim() == 3;
-    const int64_t B = batched ? depth.size(0) : 1, H = depth.size(-2), W = depth.size(-1);
-    // Not given: the learned camera (a batch's mean), else KITTI's proportions.
-    const auto K = intrinsics.defined()         ? checked_intrinsics(intrinsics, H, W, false)
-                   : spec().learns_intrinsics ? (batched ? this->intrinsics(image, image).mean(0) : this->intrinsics(image, image))
-                                              : kitti_like_intrinsics(H, W);
-    auto out = depth.clone();
-    if (scale) scale->clear();
-    for (int64_t b = 0; b < B; ++b) {
-      auto d = batched ? out[b] : out;
-      const auto plane = fit_road_plane(d.cpu(), K);
-      if (!plane.found)
-        throw Error("no road plane in the lower image" + std::string(batched ? " of batch item " + std::to_string(b) : "") +
-                    ": " + plane.why + " (metric depth needs a flat road in front of the camera)");
-      const double s = camera_height_scale(plane, camera_height);
-      d.mul_(s);
-      if (scale) scale->push_back(s);
-    }
-    return out;
-  });
-}
-
-std::vector<double> Model::sequence_scales(const std::vector<torch::Tensor>& frames, double camera_height,
-                                           const torch::Tensor& intrinsics, std::vector<size_t>* without_road) const {
-  guarded("geo::Model::sequence_scales", [&] { check_camera_height(camera_height); });
-  if (without_road) without_road->clear();
-  std::vector<double> per_frame;
-  for (size_t i = 0; i < frames.size(); ++i) {
-    if (frames[i].dim() != 3)
-      throw Error("sequence_scales takes one image per frame ([3,H,W]), frame " + std::to_string(i) + " is " +
-                  c10::str(frames[i].sizes()));
-    per_frame.push_back(road_scale(frames[i], camera_height, intrinsics));
-    if (!(per_frame.back() > 0) && without_road) without_road->push_back(i);
-  }
-  return smoothed_scales(per_frame, intrinsics.defined() || spec().learns_intrinsics
-                                        ? ""
-                                        : " (with the default KITTI-like camera: give the intrinsics)");
-}
-
-double Model::road_scale(const torch::Tensor& frame, double camera_height, const torch::Tensor& intrinsics) const {
-  guarded("geo::Model::road_scale", [&] { check_camera_height(camera_height); });  // before the DepthNet runs
-  const auto d = depth(frame);
-  return guarded("geo::Model::road_scale", [&] {
-    if (d.dim() != 2) throw Error("road_scale takes one image ([3,H,W]), got " + c10::str(frame.sizes()));
-    const auto K = intrinsics.defined()         ? checked_intrinsics(intrinsics, d.size(0), d.size(1), false)
-                   : spec().learns_intrinsics ? this->intrinsics(frame, frame)
-                                              : kitti_like_intrinsics(d.size(0), d.size(1));
-    const auto plane = fit_road_plane(d.cpu(), K);
-    return plane.found ? camera_height_scale(plane, camera_height) : 0.0;
-  });
-}
-
-std::vector<double> smooth_road_scales(const std::vector<double>& road_scales) { return smoothed_scales(road_scales, ""); }
-
-torch::Tensor chain_poses(const std::vector<torch::Tensor>& motions, const std::vector<double>& scales) {
-  return guarded("chain_poses", [&] {
-    if (!scales.empty() && scales.size() != motions.size())
-      throw Error("chain_poses: " + std::to_string(motions.size()) + " motions and " + std::to_string(scales.size()) +
-                  " scales (one per step, or none)");
-    TrajectoryChain chain;
-    for (size_t i = 0; i < motions.size(); ++i) {
-      if (motions[i].sizes() != torch::IntArrayRef{4, 4})
-        throw Error("chain_poses: motion " + std::to_string(i) + " must be [4,4], got " + c10::str(motions[i].sizes()));
-      chain.add_step(motions[i]);
-    }
-    return chain.poses(scales);
   });
 }
 
