@@ -102,9 +102,9 @@ RigidTerms rigid_terms(const LossInputs& in, const LossConfig& cfg) {
       out.bwd_warp[i][s] = bw.image;
       out.fwd_error[i][s] = fwd_channels.mean(1, true);
       out.bwd_error[i][s] = bwd_channels.mean(1, true);
-      if (s == 0) {  // FlowNet input (used without gradient)
-        out.fwd_error_norm.push_back(channel_l2_norm(fwd_channels));
-        out.bwd_error_norm.push_back(channel_l2_norm(bwd_channels));
+      if (s == 0) {  // for the FlowNet's input (flow stages only take their norm)
+        out.fwd_error_channels.push_back(fwd_channels);
+        out.bwd_error_channels.push_back(bwd_channels);
       }
       fe.push_back(out.fwd_error[i][s]);
       fv.push_back(fw.valid);

@@ -38,8 +38,8 @@ struct RigidTerms {
   PerSourceScale<torch::Tensor> bwd_warp;   // target warped into the source view
   PerSourceScale<torch::Tensor> fwd_error;  // photometric error maps [B,1,h,w]
   PerSourceScale<torch::Tensor> bwd_error;
-  std::vector<torch::Tensor> fwd_error_norm;  // N: full-scale L2 norm over colour channels of the
-  std::vector<torch::Tensor> bwd_error_norm;  //    per-channel error [B,1,H,W] (FlowNet input; no gradient)
+  std::vector<torch::Tensor> fwd_error_channels;  // N: the full-scale per-channel error [B,3,H,W]
+  std::vector<torch::Tensor> bwd_error_channels;  //    (its L2 norm is the FlowNet's input)
   // L_br: sum over scales of (fwd + bwd) masked means, mean over sources, times num_source / 2
   // (loss.rigid_source_factor, GeoNet's).
   torch::Tensor rigid;

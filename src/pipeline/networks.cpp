@@ -182,16 +182,16 @@ void Networks::prepare_inference(bool fold, bool bf16) {
 }
 
 torch::Tensor rigid_flow_net_input(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& rigid_flow,
-                                   const LossConfig& loss, torch::Tensor warped, torch::Tensor error_norm,
+                                   const LossConfig& loss, torch::Tensor warped, torch::Tensor error_channels,
                                    bool keep_gradient) {
   std::optional<torch::NoGradGuard> no_grad;
   if (!keep_gradient) no_grad.emplace();
-  if (!warped.defined() || !error_norm.defined()) {
+  if (!warped.defined() || !error_channels.defined()) {
     const auto view = rigid_view(to_loss_range(src, loss), to_loss_range(tgt, loss), rigid_flow, loss);
     warped = view.warp.image;
-    error_norm = channel_l2_norm(view.error_channels);
+    error_channels = view.error_channels;
   }
-  return flow_net_input(tgt, src, from_loss_range(warped, loss), rigid_flow, error_norm);
+  return flow_net_input(tgt, src, from_loss_range(warped, loss), rigid_flow, channel_l2_norm(error_channels));
 }
 
 PairPrediction predict_pair(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& src,

@@ -85,12 +85,12 @@ struct Networks {
 // for models with model.learn_intrinsics); call under NoGradGuard/InferenceMode.
 // The FlowNet's input for the pair tgt <- src (both [B,3,H,W] in [0,1]) from the rigid step at full
 // scale: the rigid flow tgt -> src, the source warped by it and the L2 norm over colour channels of
-// the warp's photometric error (loss range, as rigid_terms computes them: pass them when at hand,
-// else they are computed here with rigid_view). keep_gradient: the input carries the rigid step's
+// the warp's photometric error (loss range; pass the warp and the per-channel error when at hand, as
+// rigid_terms keeps them, else they are computed here with rigid_view). keep_gradient: the input carries the rigid step's
 // gradient (GeoNet's graph, loss.flow_input_gradient); else it is computed without.
 // Training (compute_losses) and inference (predict_pair) both feed the FlowNet this.
 torch::Tensor rigid_flow_net_input(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& rigid_flow,
-                                   const LossConfig& loss, torch::Tensor warped = {}, torch::Tensor error_norm = {},
+                                   const LossConfig& loss, torch::Tensor warped = {}, torch::Tensor error_channels = {},
                                    bool keep_gradient = false);
 
 struct PairPrediction {

@@ -67,10 +67,10 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
   std::vector<torch::Tensor> inputs;
   for (int64_t i = 0; i < N; ++i)
     inputs.push_back(rigid_flow_net_input(tgt, src_list[i], out.rigid.fwd_flow[i][0], config.loss,
-                                          out.rigid.fwd_warp[i][0], out.rigid.fwd_error_norm[i], keep));
+                                          out.rigid.fwd_warp[i][0], out.rigid.fwd_error_channels[i], keep));
   for (int64_t i = 0; i < N; ++i)
     inputs.push_back(rigid_flow_net_input(src_list[i], tgt, out.rigid.bwd_flow[i][0], config.loss,
-                                          out.rigid.bwd_warp[i][0], out.rigid.bwd_error_norm[i], keep));
+                                          out.rigid.bwd_warp[i][0], out.rigid.bwd_error_channels[i], keep));
   std::optional<torch::NoGradGuard> frozen;
   if (!stage.trains(Net::kFlow)) frozen.emplace();
   auto residual = network_pass(config, tgt.device(), [&] { return nets.flow->forward(torch::cat(inputs, 0)).flow; });
