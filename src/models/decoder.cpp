@@ -1,5 +1,7 @@
 #include "models/decoder.h"
 
+#include "models/graph.h"
+
 namespace geo {
 
 namespace {
@@ -37,25 +39,8 @@ EncoderDecoderImpl::EncoderDecoderImpl(const EncoderDecoderOptions& o, Head h)
 
 std::vector<torch::Tensor> EncoderDecoderImpl::forward(const torch::Tensor& x) {
   if (int8) return int8->forward(x);
-  const auto feats = encoder(x);
-  std::vector<torch::Tensor> preds;  // coarsest first while building
-  auto y = feats[5];
-  for (int k = 0; k < 6; ++k) {
-    const torch::Tensor& ref = k < 5 ? feats[4 - k] : x;  // stage 1 resizes to the input size
-    // Nearest x2 then 3x3 conv (GeoNet's upconv), computed at the coarse resolution (exact).
-    auto up = resize_like(options.upsample == UpsampleMode::kNearest ? upconv[k]->forward_upsampled(y)
-                                                        : upconv[k](upsample2(y, options.upsample)),
-                          ref);
-    std::vector<torch::Tensor> parts;  // (not an initializer list: GCC 12 -Warray-bounds false positive)
-    parts.reserve(3);
-    parts.push_back(up);
-    if (k < 5) parts.push_back(feats[4 - k]);
-    if (k >= 3) parts.push_back(resize_like(upsample2(preds.back(), options.upsample), ref));
-    y = iconv[k](torch::cat(parts, 1));
-    if (!refine.empty()) y = refine[k](y);
-    if (k >= 2) preds.push_back(head(conv2d(*pred[k - 2], y)));
-  }
-  return {preds[3], preds[2], preds[1], preds[0]};
+  FloatOps ops;
+  return encoder_decoder_graph(*this, ops, x);
 }
 
 }  // namespace geo

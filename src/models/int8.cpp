@@ -13,9 +13,9 @@
 #include "models/conv_bn.h"
 #include "models/decoder.h"
 #include "models/fr.h"
+#include "models/graph.h"
 #include "models/layers.h"
 #include "models/pose_net.h"
-#include "models/resnet_encoder.h"
 #include "models/upsample_conv.h"
 
 namespace geo {
@@ -71,83 +71,25 @@ struct Int8Graph::State {
 
 namespace {
 
-// A network's graph, once, for both passes: `Ops` computes each step in float while recording the
-// ranges of its quantized points (Observe) or in int8 (Quantized). Every point takes the next slot,
-// in this order: statements, never two slots in one expression (C++ leaves their order open).
-template <class Ops>
-std::vector<torch::Tensor> encoder_decoder_graph(EncoderDecoderImpl& net, Ops& ops, const torch::Tensor& x) {
-  auto& enc = *net.encoder;
-  std::vector<torch::Tensor> feats;
-  const auto input = ops.quantize(x);
-  feats.push_back(ops.conv(*enc.conv1, input));
-  // (Max-pooling keeps a quantized tensor's scale: no point of its own, the same call for both.)
-  feats.push_back(torch::max_pool2d(feats.back(), {3, 3}, {2, 2}, {1, 1}, {1, 1}));
-  for (size_t s = 0; s < enc.stages.size(); ++s) {
-    auto y = feats.back();
-    for (const auto& m : enc.stages[s]->children()) {
-      if (auto* b = m->as<BottleneckImpl>()) {
-        auto r = ops.conv(*b->c1, y);
-        r = ops.conv(*b->c2, r);
-        r = ops.conv(*b->c3, r);
-        const auto shortcut = ops.conv(*b->proj, y);
-        y = ops.add_relu(r, shortcut);
-      } else if (auto* bb = m->as<BasicBlockImpl>()) {
-        auto r = ops.conv(*bb->c1, y);
-        r = ops.conv(*bb->c2, r);
-        const auto shortcut = bb->proj ? ops.conv(*bb->proj, y) : y;
-        y = ops.add_relu(r, shortcut);
-      } else {
-        TORCH_CHECK(false, "int8: unknown block in the encoder");
-      }
-    }
-    if (!enc.refine.empty()) y = ops.fr(*enc.refine[s], y);
-    feats.push_back(y);
-  }
-  const auto mode = net.options.upsample;
-  std::vector<torch::Tensor> preds;  // coarsest first while building
-  auto y = feats[5];
-  for (int k = 0; k < 6; ++k) {
-    const torch::Tensor& ref = k < 5 ? feats[4 - k] : x;
-    std::vector<torch::Tensor> parts;
-    parts.reserve(3);
-    parts.push_back(resize_like(ops.upconv(*net.upconv[k], y, mode), ref));
-    if (k < 5) parts.push_back(feats[4 - k]);
-    if (k >= 3) parts.push_back(ops.quantize(resize_like(upsample2(preds.back(), mode), ref)));
-    y = ops.cat(parts);
-    y = ops.conv(*net.iconv[k], y);
-    if (!net.refine.empty()) y = ops.fr(*net.refine[k], y);
-    if (k >= 2) preds.push_back(net.head(ops.pred(*net.pred[k - 2], y)));
-  }
-  return {preds[3], preds[2], preds[1], preds[0]};
-}
-
-template <class Ops>
-std::vector<torch::Tensor> pose_graph(PoseNetImpl& net, Ops& ops, const torch::Tensor& x) {
-  // The last convolution stays in float (1% of the multiply-adds: 256 channels on a few pixels):
-  // 8 bits at its output, which the heads average, moved the learning check's ATE by +8% (float: -2%).
-  auto y = ops.quantize(x);
-  for (size_t i = 0; i + 1 < net.convs.size(); ++i) y = ops.conv(*net.convs[i], y);
-  return {net.convs.back()->forward(ops.dequantize(y))};
-}
-
-struct Observe {
+// Float arithmetic (FloatOps) recording the range each quantized point takes.
+struct Observe : FloatOps {
   std::vector<Int8Graph::State::Point>& points;
   size_t i = 0;
+  explicit Observe(std::vector<Int8Graph::State::Point>& p) : points(p) {}
   torch::Tensor seen(torch::Tensor t) {
     if (i == points.size()) points.emplace_back();
     points[i++].see(t);
     return t;
   }
   torch::Tensor quantize(const torch::Tensor& x) { return seen(x); }
-  torch::Tensor conv(ConvBnImpl& m, const torch::Tensor& x) { return seen(m.forward(x)); }
+  torch::Tensor conv(ConvBnImpl& m, const torch::Tensor& x) { return seen(FloatOps::conv(m, x)); }
   torch::Tensor upconv(ConvBnImpl& m, const torch::Tensor& x, UpsampleMode mode) {
-    return seen(mode == UpsampleMode::kNearest ? m.forward_upsampled(x) : m.forward(upsample2(x, mode)));
+    return seen(FloatOps::upconv(m, x, mode));
   }
-  torch::Tensor add_relu(const torch::Tensor& a, const torch::Tensor& b) { return seen(torch::relu(a + b)); }
-  torch::Tensor fr(FeatureRefinementImpl& m, const torch::Tensor& x) { return seen(m.forward(x)); }
-  torch::Tensor cat(const std::vector<torch::Tensor>& parts) { return seen(torch::cat(parts, 1)); }
-  torch::Tensor pred(Conv2dImpl& m, const torch::Tensor& y) { return seen(m.forward(y)); }
-  torch::Tensor dequantize(const torch::Tensor& y) { return y; }
+  torch::Tensor add_relu(const torch::Tensor& a, const torch::Tensor& b) { return seen(FloatOps::add_relu(a, b)); }
+  torch::Tensor fr(FeatureRefinementImpl& m, const torch::Tensor& x) { return seen(FloatOps::fr(m, x)); }
+  torch::Tensor cat(const std::vector<torch::Tensor>& parts) { return seen(FloatOps::cat(parts)); }
+  torch::Tensor pred(Conv2dImpl& m, const torch::Tensor& x) { return seen(FloatOps::pred(m, x)); }
 };
 
 struct Quantized {
@@ -260,7 +202,8 @@ std::vector<torch::Tensor> Int8EncoderDecoder::forward(const torch::Tensor& x) {
 Int8PoseNet::Int8PoseNet(PoseNetImpl& net) : Int8Graph(net, {}, {}), net_(net) {}
 
 torch::Tensor Int8PoseNet::forward(const torch::Tensor& x) {
-  return run(x, [this](auto& ops, const torch::Tensor& in) { return pose_graph(net_, ops, in); }).at(0);
+  return run(x, [this](auto& ops, const torch::Tensor& in) { return std::vector<torch::Tensor>{pose_graph(net_, ops, in)}; })
+      .at(0);
 }
 
 void Int8Graph::quantize() {

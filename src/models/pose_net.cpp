@@ -1,5 +1,6 @@
 #include "models/pose_net.h"
 
+#include "models/graph.h"
 #include "models/layers.h"
 
 namespace geo {
@@ -41,7 +42,8 @@ PoseOutput PoseNetImpl::predict(const torch::Tensor& tgt, const std::vector<torc
   if (int8) {
     x = int8->forward(x);
   } else {
-    for (auto& c : convs) x = c(x);
+    FloatOps ops;
+    x = pose_graph(*this, ops, x);
   }
   PoseOutput out;
   if (intrinsics) {

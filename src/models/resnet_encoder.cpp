@@ -1,5 +1,7 @@
 #include "models/resnet_encoder.h"
 
+#include "models/graph.h"
+
 namespace geo {
 
 BottleneckImpl::BottleneckImpl(int64_t in, int64_t n, int64_t stride) {
@@ -9,7 +11,10 @@ BottleneckImpl::BottleneckImpl(int64_t in, int64_t n, int64_t stride) {
   proj = register_module("shortcut", ConvBn(in, 4 * n, 1, stride, false));
 }
 
-torch::Tensor BottleneckImpl::forward(const torch::Tensor& x) { return torch::relu(c3(c2(c1(x))) + proj(x)); }
+torch::Tensor BottleneckImpl::forward(const torch::Tensor& x) {
+  FloatOps ops;
+  return bottleneck_graph(*this, ops, x);
+}
 
 BasicBlockImpl::BasicBlockImpl(int64_t in, int64_t n, int64_t stride) {
   c1 = register_module("conv1", ConvBn(in, n, 3, stride));
@@ -18,8 +23,8 @@ BasicBlockImpl::BasicBlockImpl(int64_t in, int64_t n, int64_t stride) {
 }
 
 torch::Tensor BasicBlockImpl::forward(const torch::Tensor& x) {
-  const auto shortcut = proj ? proj(x) : x;
-  return torch::relu(c2(c1(x)) + shortcut);
+  FloatOps ops;
+  return basic_block_graph(*this, ops, x);
 }
 
 ResNetEncoderImpl::ResNetEncoderImpl(const ResNetEncoderOptions& o) : options(o) {
@@ -58,18 +63,8 @@ ResNetEncoderImpl::ResNetEncoderImpl(const ResNetEncoderOptions& o) : options(o)
 }
 
 std::vector<torch::Tensor> ResNetEncoderImpl::forward(const torch::Tensor& x) {
-  TORCH_CHECK(x.dim() == 4 && x.size(1) == options.in_channels, "encoder input must be [B,",
-              options.in_channels, ",H,W], got ", x.sizes());
-  std::vector<torch::Tensor> feats;
-  feats.push_back(conv1(x));
-  namespace F = torch::nn::functional;
-  feats.push_back(F::max_pool2d(feats.back(), F::MaxPool2dFuncOptions(3).stride(2).padding(1)));
-  for (size_t s = 0; s < stages.size(); ++s) {
-    auto y = stages[s]->forward(feats.back());
-    if (!refine.empty()) y = refine[s](y);
-    feats.push_back(y);
-  }
-  return feats;
+  FloatOps ops;
+  return encoder_graph(*this, ops, x);
 }
 
 }  // namespace geo
