@@ -6,17 +6,17 @@ stride in the last block of each stage and a projection shortcut in every block,
 + ReLU everywhere, a decoder of nearest-upsample + 3x3 conv "upconvs" with skip connections and
 four disparity heads 10 * sigmoid + 0.01), written here as a PyTorch user would write it: nn.Conv2d
 / nn.BatchNorm2d modules, eval mode, no BatchNorm folding. Same parameter count as geo's DepthNet
-with FR off (printed, and checked by scripts/bench_vs_pytorch.sh).
+with FR off (printed, and checked by benchmarks/vs_pytorch.sh).
 
 Also GeoNet's PoseNet (7 strided conv + BatchNorm + ReLU layers and a 1x1 pose head) and its
 stage-1 training step ("train_rigid"): the DepthNet on the target and source frames, the PoseNet on
 the snippet, rigid flow from depth and pose in both directions at 4 scales, bilinear warping,
 SSIM + L1 reconstruction (alpha 0.85), edge-aware disparity smoothness, backward, Adam.
 
-  python3 scripts/pytorch_reference.py --row depth --threads 2 --iters 9    DepthNet inference, batch 1
-  python3 scripts/pytorch_reference.py --row step --batch 4 --iters 3       a stage-1 training step
-  python3 scripts/pytorch_reference.py --row ceiling                        a large fp32/bf16 matrix product
-  python3 scripts/pytorch_reference.py --export-onnx depth.onnx                   the DepthNet as ONNX (ONNX Runtime's input)
+  python3 benchmarks/geonet_pytorch.py --row depth --threads 2 --iters 9    DepthNet inference, batch 1
+  python3 benchmarks/geonet_pytorch.py --row step --batch 4 --iters 3       a stage-1 training step
+  python3 benchmarks/geonet_pytorch.py --row ceiling                        a large fp32/bf16 matrix product
+  python3 benchmarks/geonet_pytorch.py --export-onnx depth.onnx                   the DepthNet as ONNX (ONNX Runtime's input)
   options: --precision fp32|bf16 (bf16: the networks under torch.autocast, the losses in fp32),
            --channels-last, --compile (torch.compile, PyTorch >= 2.0)
 prints one JSON line: {"row": ..., "median_ms": x, "times_ms": [...], "torch": version, ...}.

@@ -5,11 +5,11 @@ quantization with the onednn engine (Debian's PyTorch has qnnpack and onednn, no
 per channel, activations calibrated on --calibration random frames; timed against the same
 module in fp32 eager at batch 1.
 
-  PYTHONPATH=build/python python3 scripts/int8_probe.py --fr off --threads 2
+  PYTHONPATH=build/python python3 benchmarks/int8_probe.py --fr off --threads 2
 prints one line: eager fp32 ms, int8 ms, and the mean relative difference of the finest disparity
 (with untrained weights and random calibration frames: a speed probe, not an accuracy figure).
 
-  python3 scripts/int8_probe.py --convs --threads 2
+  python3 benchmarks/int8_probe.py --convs --threads 2
 times single convolutions of the DepthNet's shapes at 128x416 instead: fp32, the int8 convolution
 alone (quantized::conv2d_relu, prepacked per-channel weights, NHWC uint8 activations), and what
 quantizing its input and dequantizing its output costs with ATen's quantize_per_tensor /

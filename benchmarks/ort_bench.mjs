@@ -1,13 +1,13 @@
 // ONNX Runtime's CPU engine on one ONNX model: the anchor a deployment user would pick, timed as
 // geo_bench times geo (batch 1, median of --iters runs after --warmup). Prints one JSON line.
-//   node scripts/ort_bench.mjs MODEL.onnx --threads 2 --iters 15 --warmup 3 [--reference FLOAT.onnx]
+//   node benchmarks/ort_bench.mjs MODEL.onnx --threads 2 --iters 15 --warmup 3 [--reference FLOAT.onnx]
 // --reference: also runs FLOAT.onnx on the same input and reports how far MODEL's first output is
 // from its (mean |difference| / mean |reference|): an int8 model's error.
-// Preparing int8 models (scripts/ort_qdq.py):
-//   node scripts/ort_bench.mjs MODEL.onnx --optimized OUT.onnx    ONNX Runtime's basic optimisation, saved
-//   node scripts/ort_bench.mjs AUGMENTED.onnx --ranges OUT.json [--calibration 8]
+// Preparing int8 models (benchmarks/ort_qdq.py):
+//   node benchmarks/ort_bench.mjs MODEL.onnx --optimized OUT.onnx    ONNX Runtime's basic optimisation, saved
+//   node benchmarks/ort_bench.mjs AUGMENTED.onnx --ranges OUT.json [--calibration 8]
 //                                     the range of every output over --calibration inputs
-// onnxruntime-node from the npm registry (scripts/bench_vs_onnxruntime.sh installs it and passes
+// onnxruntime-node from the npm registry (benchmarks/vs_onnxruntime.sh installs it and passes
 // its folder as GEO_ORT_DIR).
 import { createRequire } from "module";
 import fs from "fs";

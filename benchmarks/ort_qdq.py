@@ -8,7 +8,7 @@ DequantizeLinear -> op -> QuantizeLinear group into its int8 kernels (QLinearCon
 QLinearConcat, ...) when it loads the model.
 
   ort_qdq.py augment MODEL OUT            MODEL with every float activation a graph output, for
-                                          calibration (scripts/ort_bench.mjs --ranges runs it)
+                                          calibration (benchmarks/ort_bench.mjs --ranges runs it)
   ort_qdq.py quantize MODEL RANGES OUT    the QDQ model from the ranges seen ({tensor: [min, max]})
 
 MODEL should be ONNX Runtime's own basic optimisation of the exported model (ort_bench.mjs

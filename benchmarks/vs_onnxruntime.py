@@ -1,15 +1,15 @@
 #!/usr/bin/python3
-"""geo against ONNX Runtime's CPU engine, side by side in one run (scripts/bench_vs_onnxruntime.sh
+"""geo against ONNX Runtime's CPU engine, side by side in one run (benchmarks/vs_onnxruntime.sh
 sets it up). DepthNet inference at batch 1 and --height x --width on --threads threads:
 
   geo fp32 / bf16 / int8 geo_bench's "infer DepthNet" rows (BatchNorm folded; int8 calibrated on
                          random frames), FR off and on
   ORT geo's DepthNet     geo.nn.DepthNet (the same network in torch.nn) exported with torch.onnx.export
-  ORT GeoNet's DepthNet  scripts/pytorch_reference.py's, exported the same way (the reference a
+  ORT GeoNet's DepthNet  benchmarks/geonet_pytorch.py's, exported the same way (the reference a
                          deployment user would start from)
-  PyTorch fp32 / bf16    GeoNet's DepthNet in eager PyTorch (scripts/pytorch_reference.py; Debian's
+  PyTorch fp32 / bf16    GeoNet's DepthNet in eager PyTorch (benchmarks/geonet_pytorch.py; Debian's
                          python3-torch, the LibTorch geo links), fp32 and bf16 autocast
-  ORT int8               each of those quantized statically to ONNX's QDQ form (scripts/ort_qdq.py:
+  ORT int8               each of those quantized statically to ONNX's QDQ form (benchmarks/ort_qdq.py:
                          MinMax calibration on 8 inputs through ONNX Runtime, uint8 activations, int8
                          weights per channel), which ONNX Runtime runs with its int8 kernels
 
@@ -52,8 +52,8 @@ def geo_ms(a, fr):
 
 
 def pytorch_ms(a, precision):
-    """GeoNet's DepthNet in eager PyTorch (scripts/pytorch_reference.py), batch 1."""
-    cmd = [sys.executable, str(a.repo / "scripts" / "pytorch_reference.py"), "--row", "depth", "--height", str(a.height),
+    """GeoNet's DepthNet in eager PyTorch (benchmarks/geonet_pytorch.py), batch 1."""
+    cmd = [sys.executable, str(a.repo / "benchmarks" / "geonet_pytorch.py"), "--row", "depth", "--height", str(a.height),
            "--width", str(a.width), "--threads", str(a.threads), "--iters", str(a.iters), "--warmup", "3",
            "--precision", precision]
     r = subprocess.run(cmd, check=True, capture_output=True, text=True)
@@ -62,8 +62,8 @@ def pytorch_ms(a, precision):
 
 
 def ort(a, *args):
-    """scripts/ort_bench.mjs with args; its JSON line, if it printed one."""
-    cmd = ["node", str(a.repo / "scripts" / "ort_bench.mjs"), *map(str, args)]
+    """benchmarks/ort_bench.mjs with args; its JSON line, if it printed one."""
+    cmd = ["node", str(a.repo / "benchmarks" / "ort_bench.mjs"), *map(str, args)]
     r = subprocess.run(cmd, check=True, capture_output=True, text=True, env={**os.environ, "GEO_ORT_DIR": str(a.ort)})
     lines = r.stdout.strip().splitlines()
     return json.loads(lines[-1]) if lines else None
@@ -79,12 +79,12 @@ def ort_ms(a, model, reference=None):
 
 
 def ort_int8(a, model):
-    """model quantized for ONNX Runtime (scripts/ort_qdq.py): optimised by ONNX Runtime (basic), every
+    """model quantized for ONNX Runtime (benchmarks/ort_qdq.py): optimised by ONNX Runtime (basic), every
     activation's range over 8 calibration inputs, then the QDQ model."""
     stem = model.with_suffix("")
     optimized, augmented = f"{stem}-opt.onnx", f"{stem}-augmented.onnx"
     ranges, out = f"{stem}-ranges.json", a.out / f"{stem.name}-int8.onnx"
-    qdq = [sys.executable, str(a.repo / "scripts" / "ort_qdq.py")]
+    qdq = [sys.executable, str(a.repo / "benchmarks" / "ort_qdq.py")]
     ort(a, model, "--optimized", optimized)
     subprocess.run(qdq + ["augment", optimized, augmented], check=True)
     ort(a, augmented, "--ranges", ranges, "--calibration", 8)
@@ -120,7 +120,7 @@ def main():
         subprocess.run([sys.executable, "-c", code, str(models[("geo", fr)])], check=True, env=env,
                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     models[("geonet", "off")] = a.out / "geonet-depth.onnx"
-    subprocess.run([sys.executable, str(a.repo / "scripts" / "pytorch_reference.py"), "--height", str(a.height), "--width",
+    subprocess.run([sys.executable, str(a.repo / "benchmarks" / "geonet_pytorch.py"), "--height", str(a.height), "--width",
                     str(a.width), "--export-onnx", str(models[("geonet", "off")])], check=True,
                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     # Each entry: FR, what it runs -> {variant name: ms}.
@@ -148,7 +148,7 @@ def main():
     lines = [f"DepthNet inference, batch 1, {a.height}x{a.width}, {a.threads} threads, median of {a.rounds} rounds "
              f"(each the median of {a.iters} runs); CPU {model} ({flags}); ONNX Runtime {a.ort_version} (onnxruntime-node); "
              f"PyTorch {a.torch_version} (eager); "
-             f"command: scripts/bench_vs_onnxruntime.sh --rounds {a.rounds} --iters {a.iters}", "",
+             f"command: benchmarks/vs_onnxruntime.sh --rounds {a.rounds} --iters {a.iters}", "",
              "| variant | FR | ms | per round | geo fp32 / this | geo / this at equal precision |", "|---|---|---|---|---|---|"]
     for name, fr in variants:
         ratio = med[("geo fp32", fr)] / med[(name, fr)]

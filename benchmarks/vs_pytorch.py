@@ -2,7 +2,7 @@
 """geo against PyTorch at its best, side by side: runs every variant in its own process, in rounds,
 and writes the table (markdown) with the machine, versions, ceilings and commands.
 
-Run through scripts/bench_vs_pytorch.sh, which builds what is needed first. Variants:
+Run through benchmarks/vs_pytorch.sh, which builds what is needed first. Variants:
   PyTorch 1.13 (Debian 12, this machine) and 2.6 (Debian 13 root, scripts/debian13.sh): eager fp32,
   bf16 autocast, each contiguous and channels-last, each with glibc's allocator and with jemalloc
   tuned as PyTorch's CPU performance guide advises (memory kept in the process); torch.compile
@@ -55,7 +55,7 @@ def command(v, row, a, tag):
     if v["kind"] == "pytorch":
         py = "python3" if d13 else "/usr/bin/python3"
         iters = a.iters if row == "depth" else a.step_iters
-        cmd = prefix + ["env"] + v["env"] + [py, "scripts/pytorch_reference.py", "--row", row, "--threads",
+        cmd = prefix + ["env"] + v["env"] + [py, "benchmarks/geonet_pytorch.py", "--row", row, "--threads",
                                              str(a.threads), "--iters", str(iters)] + v["args"]
         return cmd, None
     json_name = f"geo-{v['platform']}-{v['precision']}-{row}-{tag}.json"
@@ -140,7 +140,7 @@ def main():
         if platform not in platforms:
             continue
         cmd = (["scripts/debian13.sh", "python3"] if platform == "d13" else ["/usr/bin/python3"]) + \
-            ["scripts/pytorch_reference.py", "--row", "ceiling", "--threads", str(a.threads)]
+            ["benchmarks/geonet_pytorch.py", "--row", "ceiling", "--threads", str(a.threads)]
         p = subprocess.run(cmd, capture_output=True, text=True)
         line = [l for l in p.stdout.splitlines() if l.startswith("{")]
         if line:
@@ -177,7 +177,7 @@ def main():
     lines = [f"Measured {time.strftime('%Y-%m-%d')} on {cpu()}; {a.threads} threads; 128x416, FR off "
              f"(GeoNet's networks); {a.rounds} round(s), each variant in its own process, median of {a.iters} "
              f"DepthNet calls after 5 warm-ups / {a.step_iters} training steps after 2.",
-             f"Command: `scripts/bench_vs_pytorch.sh` (rounds {a.rounds}).", ""]
+             f"Command: `benchmarks/vs_pytorch.sh` (rounds {a.rounds}).", ""]
     for row, title in (("depth", "DepthNet inference, batch 1"), ("step", "Stage-1 training step, batch 4")):
         if row not in a.rows.split(","):
             continue
