@@ -1,8 +1,8 @@
 // How config values are written in YAML and in error messages, shared by the parts of core/config
-// (config.cpp: parsing, emitting, overrides, entry points; config_checks.cpp: validation). Internal.
+// (config.cpp: parsing, emitting, overrides; config_check.h: validation). Internal.
 #pragma once
 
-#include "core/config.h"
+#include "core/config_base.h"
 
 #include <cmath>
 #include <sstream>
@@ -61,7 +61,6 @@ inline std::string to_text(const std::vector<double>& v) {
   for (size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + format_double(v[i]);
   return s + "]";
 }
-inline std::string to_text(const NetworkSet& v) { return to_text(v.names()); }
 
 template <class E> std::string valid_names() {
   std::string all;
