@@ -286,20 +286,43 @@ torch::Tensor ground_truth_of(const InferOptions& o, const Input& frames) {
   return truth.slice(0, 0, n);
 }
 
-// trajectory.txt (KITTI pose file) chained from the motions, and trajectory.png (with the ground
-// truth, when given, beside it, scale-aligned).
-void write_trajectory(const InferOptions& o, const std::vector<torch::Tensor>& motions, std::vector<double> scales,
-                      torch::Tensor truth) {
-  scales.resize(motions.size());  // one per step: each at its first frame's depth scale
-  auto poses = geo::chain_poses(motions, scales);
-  geo::write_poses(o.output + "/trajectory.txt", poses);
-  if (truth.defined()) std::tie(truth, poses) = geo::align_trajectory_scale(truth, poses);
-  geo::write_image(o.output + "/trajectory.png", geo::trajectory_plot(poses, truth));
-}
+// The input's frames for geo::Model::run_sequence, read again as they are needed (the previous,
+// the current and the next): each must be the survey's frame of that place (the input must not
+// have changed since), its reading timed.
+class SurveyedFrames : public geo::FrameSource {
+ public:
+  SurveyedFrames(const InferOptions& o, const Input& frames, int64_t h, int64_t w, geo::StepTimes& times)
+      : o_(o), frames_(frames), h_(h), w_(w), times_(times) {}
+  bool next(torch::Tensor& image) override {
+    if (i_ == frames_.size()) return false;
+    std::string name;
+    const auto started = std::chrono::steady_clock::now();
+    const bool got = times_.time("read, decode, resize frames", [&] { return reader_->next(name, &image); });
+    seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+    if (!got || name != frames_.names[i_])
+      throw std::runtime_error("--input '" + o_.input + "' changed while geo_infer read it: frame " + std::to_string(i_) +
+                               " was '" + frames_.names[i_] + "', now " + (got ? "'" + name + "'" : "none"));
+    ++i_;
+    return true;
+  }
+  void restart() override {
+    reader_.emplace(o_, h_, w_);
+    i_ = 0;
+  }
+  double seconds = 0;  // spent reading
 
-// Per frame: depth (and with a next frame the flow and the motion, each network once per frame),
-// colour maps, PNGs, videos, point clouds; then the trajectory. The frames are read again, as they
-// are needed: the previous, the current and the next. Returns what was written.
+ private:
+  const InferOptions& o_;
+  const Input& frames_;
+  int64_t h_, w_;
+  geo::StepTimes& times_;
+  std::optional<FrameReader> reader_;
+  size_t i_ = 0;
+};
+
+// Per frame (geo::Model::run_sequence: depth, and with a next frame the flow and the motion, each
+// network once per frame): colour maps, PNGs, videos, point clouds; then the trajectory. Returns
+// what was written.
 std::string write_outputs(const InferOptions& o, const geo::Model& model, const Input& frames, const torch::Tensor& K,
                           const std::vector<double>& scales, const torch::Tensor& truth, geo::StepTimes& times) {
   const int64_t h = model.spec().height, w = model.spec().width;
@@ -309,61 +332,50 @@ std::string write_outputs(const InferOptions& o, const geo::Model& model, const 
     disp_video.emplace(o.output + "/disp.avi", frames.fps);
     if (three) flow_video.emplace(o.output + "/flow.avi", frames.fps);
   }
-  FrameReader reader(o, h, w);
-  // Frame i of the survey, read now: the input must not have changed since.
-  auto read = [&](size_t i) {
-    std::string name;
-    torch::Tensor image;
-    const bool got = times.time("read, decode, resize frames", [&] { return reader.next(name, &image); });
-    if (!got || name != frames.names[i])
-      throw std::runtime_error("--input '" + o.input + "' changed while geo_infer read it: frame " + std::to_string(i) +
-                               " was '" + frames.names[i] + "', now " + (got ? "'" + name + "'" : "none"));
-    return image;
-  };
-  torch::Tensor previous, current = read(0), next;
   const auto rows = o.report ? geo::infer::report_rows(frames.size()) : std::vector<size_t>();
-  std::vector<torch::Tensor> motions;  // frame i's camera -> frame i+1's
-  int64_t beyond_png = 0;              // depths that KITTI's 16-bit PNG (depth x 256) cannot hold
-  for (size_t i = 0; i < frames.size(); ++i) {
-    const auto& name = frames.names[i];
-    next = i + 1 < frames.size() ? read(i + 1) : torch::Tensor();
-    const bool pair = next.defined() && three;
-    geo::Model::FlowParts parts;
-    if (pair)
-      parts = times.time("depth, pose, flow", [&] { return model.flow_parts(current, next, K, previous); });
-    const auto depth = pair ? parts.depth.cpu() * scales[i] : times.time("depth", [&] { return model.depth(current).cpu() * scales[i]; });
-    const auto disp_colour = times.time("colour maps", [&] { return geo::colorize_disparity(1.0 / depth); });
+  int64_t beyond_png = 0;  // depths that KITTI's 16-bit PNG (depth x 256) cannot hold
+  double outside = 0;      // seconds spent reading frames and writing outputs (the rest is the networks')
+  const auto write = [&](const geo::SequenceFrame& f) {
+    const auto started = std::chrono::steady_clock::now();
+    const auto& name = frames.names[f.index];
+    const auto disp_colour = times.time("colour maps", [&] { return geo::colorize_disparity(1.0 / f.depth); });
     times.time("PNG encode + write", [&] {
       geo::write_image(o.output + "/" + name + "-disp.png", disp_colour);
-      geo::write_depth_png(o.output + "/" + name + "-depth.png", depth);
+      geo::write_depth_png(o.output + "/" + name + "-depth.png", f.depth);
     });
-    beyond_png += (depth > 255.99).sum().item<int64_t>();
-    if (std::binary_search(rows.begin(), rows.end(), i))
-      times.time("report: input frames (JPEG)", [&] { geo::write_image(o.output + "/" + geo::infer::input_image_name(name), current.cpu()); });
+    beyond_png += (f.depth > 255.99).sum().item<int64_t>();
+    if (std::binary_search(rows.begin(), rows.end(), f.index))
+      times.time("report: input frames (JPEG)", [&] { geo::write_image(o.output + "/" + geo::infer::input_image_name(name), f.image); });
     if (disp_video) times.time("video encode", [&] { disp_video->write(disp_colour); });
-    if (std::find(o.ply_frames.begin(), o.ply_frames.end(), static_cast<int64_t>(i)) != o.ply_frames.end()) {
-      const double limit = o.ply_max_depth > 0 ? o.ply_max_depth : o.camera_height > 0 ? 80.0 : 20 * depth.median().item<double>();
-      const auto n = geo::write_point_cloud_ply(o.output + "/" + name + ".ply", depth, current.cpu(), K, limit);
+    if (std::find(o.ply_frames.begin(), o.ply_frames.end(), static_cast<int64_t>(f.index)) != o.ply_frames.end()) {
+      const double limit = o.ply_max_depth > 0 ? o.ply_max_depth : o.camera_height > 0 ? 80.0 : 20 * f.depth.median().item<double>();
+      const auto n = geo::write_point_cloud_ply(o.output + "/" + name + ".ply", f.depth, f.image, K, limit);
       spdlog::info("{}/{}.ply: {} points (depth up to {:.3g})", o.output, name, n, limit);
     }
-    if (pair) {
-      const auto flow_colour = times.time("colour maps", [&] { return geo::colorize_flow(parts.full.cpu()); });
+    if (f.flow.defined()) {
+      const auto flow_colour = times.time("colour maps", [&] { return geo::colorize_flow(f.flow); });
       times.time("PNG encode + write", [&] { geo::write_image(o.output + "/" + name + "-flow.png", flow_colour); });
       if (flow_video) times.time("video encode", [&] { flow_video->write(flow_colour); });
-      motions.push_back(parts.motion);
     }
-    if ((i + 1) % 10 == 0 || i + 1 == frames.size()) spdlog::info("  {}/{} frames", i + 1, frames.size());
-    previous = std::move(current);
-    current = std::move(next);
-  }
+    if ((f.index + 1) % 10 == 0 || f.index + 1 == frames.size()) spdlog::info("  {}/{} frames", f.index + 1, frames.size());
+    outside += std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  };
+  SurveyedFrames source(o, frames, h, w, times);
+  const auto started = std::chrono::steady_clock::now();
+  auto poses = model.run_sequence(source, write, scales, K);
+  const double all = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  times.add(three && sequence ? "depth, pose, flow" : "depth",
+            all - outside - source.seconds);
   const double beyond = static_cast<double>(beyond_png) / (static_cast<double>(frames.size()) * h * w);
   if (beyond > 0.01)
     spdlog::warn("{:.0f}% of the depths are beyond 256, the most a KITTI depth PNG holds: *-depth.png saturates there{}",
                  100 * beyond, o.camera_height > 0 ? fmt::format(" (is --camera-height {} in metres?)", o.camera_height) : "");
   std::string written = "*-disp.png, *-depth.png";
   const auto finishing = std::chrono::steady_clock::now();
-  if (sequence && motions.size() + 1 == frames.size()) {
-    write_trajectory(o, motions, scales, truth);
+  if (poses.defined()) {
+    geo::write_poses(o.output + "/trajectory.txt", poses);
+    if (truth.defined()) std::tie(std::ignore, poses) = geo::align_trajectory_scale(truth, poses);
+    geo::write_image(o.output + "/trajectory.png", geo::trajectory_plot(poses, truth));
     written += ", *-flow.png, trajectory.txt, trajectory.png";
   }
   for (const auto& [video, file] : {std::pair{&disp_video, ", disp.avi"}, std::pair{&flow_video, ", flow.avi"}})

@@ -3,18 +3,60 @@
 #include "bindings.h"
 
 #include "core/files.h"
+#include "data/cv_tensor.h"
 #include "data/image_io.h"
+#include "data/video/frame_stream.h"
 #include "eval/protocols.h"
 #include "geo/geo.h"
 
 #include <filesystem>
 #include <optional>
+#include <string>
+#include <utility>
+#include <vector>
 
 namespace geo::python {
 
 using namespace pybind11::literals;
 
 namespace {
+
+// geo.io.Frames: a FrameStream's frames at the size asked for, as geo_infer's reader gives them.
+class StreamFrames : public FrameSource {
+ public:
+  StreamFrames(std::string path, std::optional<std::pair<int64_t, int64_t>> size, int64_t max_frames)
+      : path_(std::move(path)), size_(size), max_frames_(max_frames) {
+    if (size_ && (size_->first < 1 || size_->second < 1))
+      throw Error("geo.io.Frames: size must be (height, width) of at least 1, got (" + std::to_string(size_->first) +
+                  ", " + std::to_string(size_->second) + ")");
+    if (max_frames_ < 0) throw Error("geo.io.Frames: max_frames must be >= 0 (0: all), got " + std::to_string(max_frames_));
+    restart();  // opens it now: a missing path is an error here
+  }
+  bool next(torch::Tensor& frame) override {
+    if (max_frames_ > 0 && static_cast<int64_t>(read_) >= max_frames_) return false;
+    cv::Mat m;
+    std::string name;
+    if (!stream_->next(name, &m)) return false;
+    const std::string what = path_ + " [" + name + "]";
+    frame = size_ ? resized_mat_to_frame(m, size_->first, size_->second, what) : resized_mat_to_frame(m, m.rows, m.cols, what);
+    if (read_ == names_.size()) names_.push_back(name);
+    ++read_;
+    return true;
+  }
+  void restart() override {
+    stream_.emplace(path_, "frames");
+    read_ = 0;
+  }
+  const std::vector<std::string>& names() const { return names_; }
+
+ private:
+  std::string path_;
+  std::optional<std::pair<int64_t, int64_t>> size_;
+  int64_t max_frames_;
+  std::optional<FrameStream> stream_;
+  size_t read_ = 0;
+  std::vector<std::string> names_;
+};
 
 py::object evaluate_split(const std::string& split, const std::string& data_root, const std::string& checkpoint,
                           const std::string& predictions, bool trivial, const std::string& split_file,
@@ -73,6 +115,16 @@ void bind_eval(py::module_& m) {
       "files"_a, "geo_eval --compare: results JSON files side by side, with a note for every difference but the model.");
 
   auto io = m.def_submodule("io", "Images, depth maps and flow fields in KITTI's file formats (OpenCV).");
+  py::class_<StreamFrames, FrameSource>(io, "Frames",
+                                        "The frames of an image, a folder of frames (natural order) or a video, read\n"
+                                        "one at a time as geo_infer reads them (RGB uint8 [3,H,W], 16-bit images as\n"
+                                        "float [0,1]), resized to size=(h, w) when given (the model's: geo_infer's\n"
+                                        "frames); max_frames > 0: the first that many. For Model.run_sequence.")
+      .def(py::init<std::string, std::optional<std::pair<int64_t, int64_t>>, int64_t>(), "path"_a, "size"_a = py::none(),
+           "max_frames"_a = 0)
+      .def_property_readonly("names", &StreamFrames::names,
+                             "The frames' names (a file's name without extension; a video frame's number), as read so far "
+                             "(all after a pass).");
   io.def(
       "read_image",
       [](const std::string& path, std::optional<std::pair<int64_t, int64_t>> size) {

@@ -4,6 +4,9 @@
 
 #include "geo/geo.h"
 
+#include <optional>
+#include <utility>
+
 namespace geo::python {
 
 using namespace pybind11::literals;
@@ -29,6 +32,16 @@ std::vector<torch::Tensor> images_arg(const py::sequence& frames, const std::str
   std::vector<torch::Tensor> xs;
   for (size_t i = 0; i < frames.size(); ++i) xs.push_back(image_arg(frames[i], what + "[" + std::to_string(i) + "]"));
   return xs;
+}
+
+// A sequence's frames: a geo.FrameSource (geo.io.Frames: a folder or a video, read as needed) as it
+// is, else a sequence of images held in `held`.
+FrameSource& frames_arg(py::handle frames, std::optional<TensorFrames>& held) {
+  if (py::isinstance<FrameSource>(frames)) return frames.cast<FrameSource&>();
+  if (py::isinstance<py::str>(frames))
+    throw Error("frames: a path names no frames here: geo.io.Frames(path, size=...) reads a folder or a video");
+  held.emplace(images_arg(frames.cast<py::sequence>(), "frames"));
+  return *held;
 }
 
 // Model.load's and Model.create's keyword arguments.
@@ -62,6 +75,10 @@ void bind_model(py::module_& m) {
 
   m.def("smooth_road_scales", &smooth_road_scales, "road_scales"_a,
         "Model.sequence_scales() from each frame's Model.road_scale() (0: no road), for a sequence read frame by frame.");
+
+  py::class_<FrameSource>(m, "FrameSource",
+                          "A sequence's frames read as they are needed (geo.io.Frames): for Model.run_sequence and\n"
+                          "Model.sequence_scales.");
 
   py::class_<ModelSpec>(m, "ModelSpec", "What a model expects and has (read from its file).")
       .def_readonly("height", &ModelSpec::height)
@@ -226,22 +243,75 @@ void bind_model(py::module_& m) {
           "from_"_a, "to"_a, "The camera a model that learns it predicts for the pair: [3,3] in pixels of the images.")
       .def(
           "sequence_scales",
-          [](const Model& model, const py::sequence& frames, double camera_height, py::handle intrinsics,
+          [](const Model& model, py::handle frames, double camera_height, py::handle intrinsics,
              bool return_without_road) {
-            const auto xs = images_arg(frames, "frames");
+            std::optional<TensorFrames> held;
+            auto& source = frames_arg(frames, held);
             const auto K = optional_tensor_arg(intrinsics, "intrinsics");
             std::vector<size_t> without;
             std::vector<double> scales;
             {
               py::gil_scoped_release release;
-              scales = model.sequence_scales(xs, camera_height, K, &without);
+              scales = model.sequence_scales(source, camera_height, K, &without);
             }
             if (!return_without_road) return py::cast(scales);
             return py::object(py::make_tuple(scales, without));
           },
           "frames"_a, "camera_height"_a = 1.65, "intrinsics"_a = py::none(), py::kw_only(), "return_without_road"_a = false,
-          "Metres per unit of depth of each frame of a sequence: metric_depth()'s factor smoothed over 11 frames\n"
-          "(frames without a road take their neighbours'); return_without_road: also those frames' indices.")
+          "Metres per unit of depth of each frame of a sequence (a list of images or a geo.io.Frames): metric_depth()'s\n"
+          "factor smoothed over 11 frames (frames without a road take their neighbours'); return_without_road: also\n"
+          "those frames' indices.")
+      .def(
+          "run_sequence",
+          [](const Model& model, py::handle frames, py::object callback, std::vector<double> scales,
+             py::handle intrinsics) {
+            std::optional<TensorFrames> held;
+            auto& source = frames_arg(frames, held);
+            const auto K = optional_tensor_arg(intrinsics, "intrinsics");
+            std::vector<torch::Tensor> depth, flow, rigid, motion;
+            const auto as_dict = [](const SequenceFrame& f) {
+              py::dict d("index"_a = f.index, "image"_a = f.image, "depth"_a = f.depth, "scale"_a = f.scale);
+              for (const auto& [key, t] : {std::pair{"flow", &f.flow}, std::pair{"rigid_flow", &f.rigid_flow},
+                                          std::pair{"motion", &f.motion}})
+                d[key] = t->defined() ? py::cast(*t) : py::none();
+              return d;
+            };
+            torch::Tensor poses;
+            {
+              py::gil_scoped_release release;
+              poses = model.run_sequence(
+                  source,
+                  [&](const SequenceFrame& f) {
+                    if (!callback.is_none()) {
+                      py::gil_scoped_acquire acquire;
+                      callback(as_dict(f));
+                      return;
+                    }
+                    depth.push_back(f.depth);
+                    if (!f.flow.defined()) return;
+                    flow.push_back(f.flow), rigid.push_back(f.rigid_flow), motion.push_back(f.motion);
+                  },
+                  scales, K);
+            }
+            const auto stacked = [](const std::vector<torch::Tensor>& ts) {
+              return ts.empty() ? py::object(py::none()) : py::cast(torch::stack(ts));
+            };
+            py::dict out("poses"_a = poses.defined() ? py::cast(poses) : py::none());
+            if (callback.is_none()) {
+              out["depth"] = stacked(depth), out["flow"] = stacked(flow), out["rigid_flow"] = stacked(rigid);
+              out["motion"] = stacked(motion);
+            }
+            return out;
+          },
+          "frames"_a, "callback"_a = py::none(), py::kw_only(), "scales"_a = std::vector<double>{},
+          "intrinsics"_a = py::none(),
+          "A whole sequence as geo_infer runs it (a list of images, or a geo.io.Frames read as needed: three frames\n"
+          "held at a time): each frame's depth (times scales[i], e.g. sequence_scales(); none: 1) and, to the next\n"
+          "frame, the flow (full and rigid) and the motion [4,4], each network once per frame. With callback, each\n"
+          "frame's dict (index, image, depth, scale, flow, rigid_flow, motion; None for the last frame's) goes to\n"
+          "it as it is computed and the result holds only poses; else the result also holds depth [N,H,W], flow and\n"
+          "rigid_flow [N-1,2,H,W], motion [N-1,4,4]. poses: the trajectory [N,4,4] float64 (geo_infer's\n"
+          "trajectory.txt), None for one frame or a 5-frame model.")
       .def(
           "road_scale",
           [](const Model& model, py::handle frame, double camera_height, py::handle intrinsics) {

@@ -24,9 +24,11 @@
 #include <torch/types.h>
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace geo {
@@ -79,6 +81,47 @@ torch::Tensor chain_poses(const std::vector<torch::Tensor>& motions, const std::
 // frames found within 5 on each side, else the nearest frame's. Throws geo::Error naming a frame
 // with no road in any frame of the sequence.
 std::vector<double> smooth_road_scales(const std::vector<double>& road_scales);
+
+// A sequence's frames (one camera, in order) for Model::run_sequence and Model::sequence_scales:
+// each a [3,H,W] image as Model's methods take them (uint8 or float in [0,1], any size, all the
+// same). A source is read from the start as often as asked (metric scale takes a pass of its own),
+// one frame at a time: a video of an hour needs no more memory than a few frames.
+class FrameSource {
+ public:
+  virtual ~FrameSource() = default;
+  // The next frame into `frame`; false after the last.
+  virtual bool next(torch::Tensor& frame) = 0;
+  // Back to the first frame.
+  virtual void restart() = 0;
+};
+
+// Frames already in memory.
+class TensorFrames : public FrameSource {
+ public:
+  explicit TensorFrames(std::vector<torch::Tensor> frames) : frames_(std::move(frames)) {}
+  bool next(torch::Tensor& frame) override {
+    if (i_ >= frames_.size()) return false;
+    frame = frames_[i_++];
+    return true;
+  }
+  void restart() override { i_ = 0; }
+
+ private:
+  std::vector<torch::Tensor> frames_;
+  size_t i_ = 0;
+};
+
+// One frame of a sequence as Model::run_sequence hands it on, at the frame's size, on the CPU.
+struct SequenceFrame {
+  size_t index = 0;       // from 0
+  torch::Tensor image;    // the frame as the source gave it
+  torch::Tensor depth;    // [H,W] float: depth() times `scale`
+  double scale = 1.0;     // the frame's factor (Model::sequence_scales; 1 without one)
+  // To the next frame, for models of 3-frame snippets (undefined for the last frame and for 5-frame
+  // models): the full and the rigid flow [2,H,W] (Model::flow_parts, the previous frame as the
+  // snippet's first) and the motion [4,4] of this frame's camera into the next one's.
+  torch::Tensor flow, rigid_flow, motion;
+};
 
 class Model {
  public:
@@ -167,6 +210,20 @@ class Model {
   // found: a sequence too long to hold takes it frame by frame, then smooth_road_scales() gives
   // what sequence_scales() gives for the whole sequence.
   double road_scale(const torch::Tensor& frame, double camera_height, const torch::Tensor& intrinsics = {}) const;
+  // sequence_scales() of the frames a source gives, read once, one at a time.
+  std::vector<double> sequence_scales(FrameSource& frames, double camera_height, const torch::Tensor& intrinsics = {},
+                                      std::vector<size_t>* without_road = nullptr) const;
+
+  // A whole sequence, as geo_infer runs it: from the start of `frames`, each frame's depth (times
+  // its entry of `scales`, e.g. sequence_scales(); empty: 1) and, with a next frame, the flow and
+  // the motion to it (flow_parts(frame, next, intrinsics, previous): each network once per frame),
+  // handed to `sink` in order while at most three frames are held. Returns the camera trajectory
+  // (chain_poses of the motions, each step scaled by its first frame's factor): [N,4,4] float64
+  // for N frames; undefined for one frame or a 5-frame model. `intrinsics`: as flow_parts takes them
+  // (pixels of the frames). Throws geo::Error on no frame, frames of different sizes, or scales of
+  // another count than the frames.
+  torch::Tensor run_sequence(FrameSource& frames, const std::function<void(const SequenceFrame&)>& sink,
+                             const std::vector<double>& scales = {}, const torch::Tensor& intrinsics = {}) const;
 
   // Writes the weights only (no optimiser, no training config) with the spec: geo_export.
   // `half`: weights stored as float16 (half the size; loaded back as float32). An int8 model's file

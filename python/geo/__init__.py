@@ -8,6 +8,8 @@ copies):
     depth = model.depth(image)                   # image: numpy HxWx3 uint8 or torch 3xHxW -> [H,W]
     motion = model.relative_pose(prev, image)    # [4,4]
     flow = model.flow(prev, image)               # [2,H,W] pixels
+    frames = geo.io.Frames("clip.mp4", size=(model.spec.height, model.spec.width))  # read as needed
+    out = model.run_sequence(frames, scales=model.sequence_scales(frames, 1.65))  # geo_infer's numbers
 
     geo.eval.depth_errors(gt, depth)             # Eigen metrics (median scaling) as a dict
     world = geo.synth.world(frames=3)            # the synthetic world with ground truth
@@ -39,6 +41,7 @@ from ._geo import (  # noqa: F401
     ConfigError,
     Error,
     FlowParts,
+    FrameSource,
     Model,
     ModelSpec,
     chain_poses,
@@ -64,5 +67,5 @@ for _name in ("eval", "synth", "kitti", "io"):
         _sys.modules[__name__ + "." + _name] = globals()[_name]
 del _name
 
-__all__ = ["Model", "ModelSpec", "Networks", "FlowParts", "Error", "ConfigError", "chain_poses", "smooth_road_scales", "image",
+__all__ = ["Model", "ModelSpec", "Networks", "FlowParts", "FrameSource", "Error", "ConfigError", "chain_poses", "smooth_road_scales", "image",
            "kitti_like_intrinsics", "train", "resume", "state_dicts", "eval", "synth", "kitti"] + (["io"] if has_opencv else [])

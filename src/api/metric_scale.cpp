@@ -63,14 +63,22 @@ torch::Tensor Model::metric_depth(const torch::Tensor& image, double camera_heig
 
 std::vector<double> Model::sequence_scales(const std::vector<torch::Tensor>& frames, double camera_height,
                                            const torch::Tensor& intrinsics, std::vector<size_t>* without_road) const {
+  TensorFrames source(frames);
+  return sequence_scales(source, camera_height, intrinsics, without_road);
+}
+
+std::vector<double> Model::sequence_scales(FrameSource& frames, double camera_height, const torch::Tensor& intrinsics,
+                                           std::vector<size_t>* without_road) const {
   guarded("geo::Model::sequence_scales", [&] { check_camera_height(camera_height); });
   if (without_road) without_road->clear();
   std::vector<double> per_frame;
-  for (size_t i = 0; i < frames.size(); ++i) {
-    if (frames[i].dim() != 3)
+  frames.restart();
+  torch::Tensor frame;
+  for (size_t i = 0; frames.next(frame); ++i) {
+    if (frame.dim() != 3)
       throw Error("sequence_scales takes one image per frame ([3,H,W]), frame " + std::to_string(i) + " is " +
-                  c10::str(frames[i].sizes()));
-    per_frame.push_back(road_scale(frames[i], camera_height, intrinsics));
+                  c10::str(frame.sizes()));
+    per_frame.push_back(road_scale(frame, camera_height, intrinsics));
     if (!(per_frame.back() > 0) && without_road) without_road->push_back(i);
   }
   return smoothed_scales(per_frame, intrinsics.defined() || spec().learns_intrinsics

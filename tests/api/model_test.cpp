@@ -122,6 +122,55 @@ TEST(Api, AnyInputSizeAndBatches) {
   EXPECT_GT(big[0].abs().mean().item<double>(), 0.1);  // a flow whose x component matters
 }
 
+// run_sequence: each frame's depth and, to the next frame, flow_parts with the previous frame as the
+// snippet's first; the trajectory is chain_poses of the motions; scales multiply depth and steps.
+TEST(Api, RunSequenceIsTheCallsFrameByFrame) {
+  const Model m = Model::load(checkpoint());
+  const std::vector<torch::Tensor> frames{image(64, 208), image(64, 208, 0.1), image(64, 208, 0.25), image(64, 208, 0.3)};
+  TensorFrames source(frames);
+  std::vector<SequenceFrame> seen;
+  const auto poses = m.run_sequence(source, [&](const SequenceFrame& f) { seen.push_back(f); });
+  ASSERT_EQ(seen.size(), 4u);
+  std::vector<torch::Tensor> motions;
+  for (size_t i = 0; i < 4; ++i) {
+    EXPECT_EQ(seen[i].index, i);
+    EXPECT_TRUE(torch::equal(seen[i].image, frames[i]));
+    EXPECT_EQ(seen[i].scale, 1.0);
+    if (i == 3) {
+      EXPECT_TRUE(torch::equal(seen[i].depth, m.depth(frames[i])));
+      EXPECT_FALSE(seen[i].flow.defined() || seen[i].motion.defined() || seen[i].rigid_flow.defined());
+      continue;
+    }
+    const auto parts = m.flow_parts(frames[i], frames[i + 1], {}, i > 0 ? frames[i - 1] : torch::Tensor());
+    EXPECT_TRUE(torch::equal(seen[i].depth, parts.depth)) << i;
+    EXPECT_TRUE(torch::equal(seen[i].flow, parts.full)) << i;
+    EXPECT_TRUE(torch::equal(seen[i].rigid_flow, parts.rigid)) << i;
+    EXPECT_TRUE(torch::equal(seen[i].motion, parts.motion)) << i;
+    motions.push_back(parts.motion);
+  }
+  ASSERT_TRUE(poses.defined());
+  EXPECT_TRUE(torch::equal(poses, chain_poses(motions)));
+  // Scales: depth times its frame's, each step's translation times its first frame's.
+  std::vector<SequenceFrame> scaled;
+  const auto scaled_poses =
+      m.run_sequence(source, [&](const SequenceFrame& f) { scaled.push_back(f); }, {2.0, 3.0, 4.0, 5.0});
+  EXPECT_TRUE(torch::allclose(scaled[3].depth, 5 * seen[3].depth, 1e-6, 0));
+  EXPECT_TRUE(torch::equal(scaled_poses, chain_poses(motions, {2.0, 3.0, 4.0})));
+  // One frame: depth, no trajectory.
+  TensorFrames one({frames[0]});
+  size_t calls = 0;
+  EXPECT_FALSE(m.run_sequence(one, [&](const SequenceFrame&) { ++calls; }).defined());
+  EXPECT_EQ(calls, 1u);
+  // What is refused, by name.
+  const auto nothing = [](const SequenceFrame&) {};
+  TensorFrames none({});
+  GEO_EXPECT_THROW_WITH(m.run_sequence(none, nothing), "no frame");
+  TensorFrames mixed({frames[0], image(32, 104)});
+  GEO_EXPECT_THROW_WITH(m.run_sequence(mixed, nothing), "frame 1 is [3, 32, 104], expected [3, 64, 208]");
+  GEO_EXPECT_THROW_WITH(m.run_sequence(source, nothing, {1.0, 1.0, 1.0, 1.0, 1.0}), "5 scales for 4 frames");
+  GEO_EXPECT_THROW_WITH(m.run_sequence(source, nothing, {1.0}), "1 scales for a sequence of more");
+}
+
 TEST(Api, ExportedFilesGiveTheCheckpointsOutputs) {
   const Model m = Model::load(checkpoint());
   const auto dir = test::fresh_dir("api_export");

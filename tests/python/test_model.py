@@ -88,7 +88,7 @@ def test_outputs_have_the_documented_shapes(model, frames):
     assert torch.equal(model.flow(b, c, K.numpy()), model.flow(b, c, K))
 
 
-def test_depth_equals_geo_infer_byte_for_byte(model, model_file, frames, tmp_path):
+def test_a_frame_folder_through_the_library_gives_geo_infers_files(model, model_file, frames, tmp_path):
     if not geo.has_opencv:
         pytest.skip("geo_infer and geo.io need OpenCV")
     inputs = tmp_path / "frames"
@@ -97,11 +97,39 @@ def test_depth_equals_geo_infer_byte_for_byte(model, model_file, frames, tmp_pat
         geo.io.write_image(str(inputs / f"{i:06d}.png"), f)
     out = tmp_path / "geo_infer"
     run_app("geo_infer", "--checkpoint", model_file, "--input", inputs, "--output", out)
-    for i in range(len(frames)):
-        image = geo.io.read_image(str(inputs / f"{i:06d}.png"), size=(model.spec.height, model.spec.width))
-        mine = tmp_path / f"{i:06d}-depth.png"
-        geo.io.write_depth_png(str(mine), model.depth(image))
-        assert mine.read_bytes() == (out / f"{i:06d}-depth.png").read_bytes()
+    # The library reads the folder as geo_infer does and runs the same sequence: no geo_infer here.
+    source = geo.io.Frames(str(inputs), size=(model.spec.height, model.spec.width))
+    seen = []
+    result = model.run_sequence(source)
+    assert source.names == ["000000", "000001", "000002"]
+    assert result["depth"].shape == (3, 64, 208) and result["flow"].shape == (2, 2, 64, 208)
+    assert result["motion"].shape == (2, 4, 4) and result["poses"].shape == (3, 4, 4)
+    for i, name in enumerate(source.names):
+        mine = tmp_path / f"{name}-depth.png"
+        geo.io.write_depth_png(str(mine), result["depth"][i])
+        assert mine.read_bytes() == (out / f"{name}-depth.png").read_bytes()
+    written = geo.kitti.read_poses(str(out / "trajectory.txt"))
+    assert torch.allclose(result["poses"], written, rtol=0, atol=1e-6)  # the file's decimals
+    assert torch.equal(result["poses"], geo.chain_poses(list(result["motion"])))
+    # Frame by frame through a callback (nothing held): the same numbers; a list of images: the same.
+    streamed = model.run_sequence(source, seen.append)
+    assert set(streamed) == {"poses"} and torch.equal(streamed["poses"], result["poses"])
+    assert [f["index"] for f in seen] == [0, 1, 2] and seen[2]["flow"] is None and seen[2]["motion"] is None
+    assert all(torch.equal(f["depth"], result["depth"][f["index"]]) for f in seen)
+    in_memory = model.run_sequence([f["image"] for f in seen])
+    assert torch.equal(in_memory["depth"], result["depth"]) and torch.equal(in_memory["poses"], result["poses"])
+    # Scales multiply each frame's depth and each step of the trajectory.
+    scaled = model.run_sequence(source, scales=[2.0, 3.0, 4.0])
+    assert torch.allclose(scaled["depth"][1], 3 * result["depth"][1], rtol=1e-6, atol=0)
+    assert torch.allclose(scaled["poses"][1, :3, 3], 2 * result["poses"][1, :3, 3], rtol=1e-6, atol=1e-9)
+    with pytest.raises(geo.Error, match="2 scales for a sequence of more frames"):
+        model.run_sequence(source, scales=[1.0, 1.0])
+    with pytest.raises(geo.Error, match="no frame"):
+        model.run_sequence([])
+    with pytest.raises(geo.Error, match="geo.io.Frames"):
+        model.run_sequence(str(inputs))
+    with pytest.raises(RuntimeError, match="missing"):
+        geo.io.Frames(str(tmp_path / "missing"))
 
 
 def test_bad_inputs_raise_geo_errors_naming_them(model, frames, tmp_path):
