@@ -21,78 +21,74 @@ namespace geo {
 
 namespace {
 
-TrainingData open_at(const DataConfig& d, TrainingData out) {
-  // A folder with any cache file is a cache: a corrupt or partial one is an error naming it, never a
-  // silent fall-back to the raw KITTI lists.
-  const bool packed =
-      d.format == DataFormat::kPacked || (d.format == DataFormat::kAuto && has_packed_cache_files(d.root + "/train"));
-  if (packed) {
-    out.format = "packed";
-    // train/ and val/ each hold what the config asks for, and come from one geo_prepare run: a val/
-    // left by an earlier run (another size, or a run killed before it rewrote val/) would choose
-    // best-<stage>.pt on stale frames.
-    const auto check = [&](const PackedSnippets& p, const std::string& part) {
-      if (p.height() != d.height || p.width() != d.width || p.seq_length() != d.seq_length)
-        throw ConfigError("packed cache '" + d.root + "/" + part + "' holds " + std::to_string(p.seq_length()) +
-                          "-frame snippets at " + std::to_string(p.width()) + "x" + std::to_string(p.height()) +
-                          " but data.width/height/seq_length ask for " + std::to_string(d.seq_length) + " frames at " +
-                          std::to_string(d.width) + "x" + std::to_string(d.height) + " (re-run geo_prepare)");
-    };
-    auto train = std::make_shared<PackedSnippets>(d.root + "/train");
-    check(*train, "train");
-    out.train = train;
-    if (has_packed_cache_files(d.root + "/val")) {
-      auto val = std::make_shared<PackedSnippets>(d.root + "/val");
-      check(*val, "val");
-      if (val->pack() != train->pack())
-        throw ConfigError("packed cache '" + d.root + "': val/ was written by another geo_prepare run than train/ (pack '" +
-                          val->pack() + "', train/ '" + train->pack() + "'): a stale validation set; re-run geo_prepare --out " +
-                          d.root + ", or remove " + d.root + "/val to train without validation");
-      out.val = val;
-    }
-    out.train_list = d.root + "/train";
-    return out;
+// A packed cache (geo_prepare): train/ and, when there, val/.
+TrainingData open_packed(const DataConfig& d, TrainingData out) {
+  out.format = "packed";
+  // train/ and val/ each hold what the config asks for, and come from one geo_prepare run: a val/
+  // left by an earlier run (another size, or a run killed before it rewrote val/) would choose
+  // best-<stage>.pt on stale frames.
+  const auto check = [&](const PackedSnippets& p, const std::string& part) {
+    if (p.height() != d.height || p.width() != d.width || p.seq_length() != d.seq_length)
+      throw ConfigError("packed cache '" + d.root + "/" + part + "' holds " + std::to_string(p.seq_length()) +
+                        "-frame snippets at " + std::to_string(p.width()) + "x" + std::to_string(p.height()) +
+                        " but data.width/height/seq_length ask for " + std::to_string(d.seq_length) + " frames at " +
+                        std::to_string(d.width) + "x" + std::to_string(d.height) + " (re-run geo_prepare)");
+  };
+  auto train = std::make_shared<PackedSnippets>(d.root + "/train");
+  check(*train, "train");
+  out.train = train;
+  if (has_packed_cache_files(d.root + "/val")) {
+    auto val = std::make_shared<PackedSnippets>(d.root + "/val");
+    check(*val, "val");
+    if (val->pack() != train->pack())
+      throw ConfigError("packed cache '" + d.root + "': val/ was written by another geo_prepare run than train/ (pack '" +
+                        val->pack() + "', train/ '" + train->pack() + "'): a stale validation set; re-run geo_prepare --out " +
+                        d.root + ", or remove " + d.root + "/val to train without validation");
+    out.val = val;
   }
-#ifndef GEO_WITH_OPENCV
-  throw ConfigError("data.root '" + d.root + "' is not a packed cache (no " + d.root + "/train/index.txt), and this "
-                    "geo was built without OpenCV (-DGEO_WITH_OPENCV=OFF), so it cannot read KITTI's image files: "
-                    "train from a packed cache (geo_prepare, on a machine with OpenCV) or from the built-in "
-                    "synthetic world (data.format: synthetic)");
-#else
-  if (d.split == "odometry") {
-    OdometryDatasetOptions oo;
-    oo.root = d.root;
-    oo.sequences = d.sequences;
-    oo.height = d.height;
-    oo.width = d.width;
-    oo.seq_length = d.seq_length;
-    out.format = "kitti_odometry";
-    out.train = std::make_shared<OdometryDataset>(oo);
-    out.train_list = d.root + "/sequences/{" + join_list(d.sequences, ",") + "}";
-    if (out.train->size() == 0)
-      throw ConfigError("data.sequences: no " + std::to_string(d.seq_length) + "-frame snippet in " + out.train_list);
-    return out;
-  }
-  out.format = "kitti_raw";
-  const bool minus_2015 = d.split == "raw_minus_kitti2015" || d.split == "kitti_raw_stereo";
-  auto lists = raw_training_lists(d, d.root);
-  out.train_list = lists.train_list;
-  out.val_list = lists.val_list;
-  out.exclusions = lists.exclusions;
-  const auto& scenes = lists.test_scenes;
-  const auto& statics = lists.static_frames;
-  SequenceDatasetOptions so;
-  so.root = d.root;
-  so.height = d.height;
-  so.width = d.width;
-  so.seq_length = d.seq_length;
-  auto entries = lists.from_drives ? raw_drive_snippets(d.root, scenes, statics, d.seq_length) : read_split(out.train_list);
+  out.train_list = d.root + "/train";
+  return out;
+}
+
+#ifdef GEO_WITH_OPENCV
+// KITTI odometry (data.split odometry): the snippets of data.sequences.
+TrainingData open_odometry(const DataConfig& d, TrainingData out) {
+  OdometryDatasetOptions oo;
+  oo.root = d.root;
+  oo.sequences = d.sequences;
+  oo.height = d.height;
+  oo.width = d.width;
+  oo.seq_length = d.seq_length;
+  out.format = "kitti_odometry";
+  out.train = std::make_shared<OdometryDataset>(oo);
+  out.train_list = d.root + "/sequences/{" + join_list(d.sequences, ",") + "}";
+  if (out.train->size() == 0)
+    throw ConfigError("data.sequences: no " + std::to_string(d.seq_length) + "-frame snippet in " + out.train_list);
+  return out;
+}
+
+// A list's first entry missing on disk: the target, or the first absent neighbour.
+std::string first_missing_frame(const DataConfig& d, const std::string& list) {
+  const auto first = read_split(list).front();
+  for (int64_t o = -d.seq_length / 2; o <= d.seq_length / 2; ++o)
+    if (first.frame + o < 0 || !fs::exists(first.image_path(d.root, o)))
+      return first.frame + o < 0 ? "frame " + std::to_string(first.frame + o) + " of " + first.folder
+                                 : first.image_path(d.root, o);
+  return first.image_path(d.root);
+}
+
+// KITTI raw's training snippets of a split (a list, or every drive: kitti_raw_stereo) without the
+// test scenes and static frames; with data.val_split geonet, GeoNet's 10% moved into `held_out`.
+std::vector<SplitEntry> raw_training_entries(const DataConfig& d, const RawTrainingLists& lists, TrainingData& out,
+                                             std::vector<SplitEntry>& held_out) {
+  auto entries = lists.from_drives ? raw_drive_snippets(d.root, lists.test_scenes, lists.static_frames, d.seq_length)
+                                   : read_split(out.train_list);
   const size_t listed = entries.size();
   if (lists.from_drives && entries.empty())
     throw ConfigError("data.split kitti_raw_stereo: no " + std::to_string(d.seq_length) + "-frame snippet under '" + d.root +
                       "' (looked for <date>/<drive>_sync/image_02|03/data/*.png outside the KITTI 2015 scenes of " +
                       join_list(out.exclusions, ",") + ")");
-  if (!lists.from_drives) out.excluded = exclude_entries(entries, scenes, statics);
+  if (!lists.from_drives) out.excluded = exclude_entries(entries, lists.test_scenes, lists.static_frames);
   if (entries.empty())
     throw ConfigError("data.split " + d.split + ": all " + std::to_string(listed) + " entries of " + out.train_list +
                       " are excluded (test scenes or static frames listed in " + join_list(out.exclusions, ",") + ")");
@@ -100,40 +96,62 @@ TrainingData open_at(const DataConfig& d, TrainingData out) {
     spdlog::warn("data.split kitti_raw_stereo with data.val_split list: the validation list's frames are in the "
                  "drives trained on (most are training frames), so validation measures fit, not generalisation; "
                  "data.val_split geonet holds GeoNet's 10% out of training (configs/rigid_geonet.yaml does)");
-  std::vector<SplitEntry> held_out;  // data.val_split geonet: GeoNet's 10% of the training snippets
   if (d.val_split == "geonet") {
     std::vector<SplitEntry> kept;
     for (auto& e : entries) (in_geonet_validation(e) ? held_out : kept).push_back(std::move(e));
     entries = std::move(kept);
     out.val_list = "GeoNet's 10% of " + out.train_list;
   }
-  auto train = std::make_shared<SequenceDataset>(std::move(entries), so);
+  return entries;
+}
+
+// KITTI raw (the Eigen split's lists, raw_minus_kitti2015, kitti_raw_stereo's drives).
+TrainingData open_kitti_raw(const DataConfig& d, TrainingData out) {
+  out.format = "kitti_raw";
+  const bool minus_2015 = d.split == "raw_minus_kitti2015" || d.split == "kitti_raw_stereo";
+  const auto lists = raw_training_lists(d, d.root);
+  out.train_list = lists.train_list;
+  out.val_list = lists.val_list;
+  out.exclusions = lists.exclusions;
+  SequenceDatasetOptions so;
+  so.root = d.root;
+  so.height = d.height;
+  so.width = d.width;
+  so.seq_length = d.seq_length;
+  std::vector<SplitEntry> held_out;  // data.val_split geonet: GeoNet's 10% of the training snippets
+  auto train = std::make_shared<SequenceDataset>(raw_training_entries(d, lists, out, held_out), so);
   out.dropped = train->dropped();
-  if (train->size() == 0 && !lists.from_drives) {
-    // Name a frame that is really missing: the target, or the first absent neighbour.
-    const auto first = read_split(out.train_list).front();
-    std::string missing = first.image_path(d.root);
-    for (int64_t o = -d.seq_length / 2; o <= d.seq_length / 2; ++o)
-      if (first.frame + o < 0 || !fs::exists(first.image_path(d.root, o))) {
-        missing = first.frame + o < 0 ? "frame " + std::to_string(first.frame + o) + " of " + first.folder
-                                      : first.image_path(d.root, o);
-        break;
-      }
-    throw ConfigError("data.root '" + d.root + "': none of the " + std::to_string(out.dropped) +
-                      " entries of " + out.train_list + " has all its " + std::to_string(d.seq_length) +
-                      " frames on disk (first missing: " + missing + ")");
-  }
+  if (train->size() == 0 && !lists.from_drives)
+    throw ConfigError("data.root '" + d.root + "': none of the " + std::to_string(out.dropped) + " entries of " +
+                      out.train_list + " has all its " + std::to_string(d.seq_length) + " frames on disk (first missing: " +
+                      first_missing_frame(d, out.train_list) + ")");
   out.train = train;
   if (d.val_split == "geonet") {
     auto val = std::make_shared<SequenceDataset>(std::move(held_out), so);
     if (val->size() > 0) out.val = val;
   } else if (!out.val_list.empty()) {
     auto val_entries = read_split(out.val_list);
-    if (minus_2015) out.excluded += exclude_entries(val_entries, scenes, {});
+    if (minus_2015) out.excluded += exclude_entries(val_entries, lists.test_scenes, {});
     auto val = std::make_shared<SequenceDataset>(std::move(val_entries), so);
     if (val->size() > 0) out.val = val;
   }
   return out;
+}
+#endif
+
+// data.root's training data: a packed cache, KITTI odometry or KITTI raw.
+TrainingData open_at(const DataConfig& d, TrainingData out) {
+  // A folder with any cache file is a cache: a corrupt or partial one is an error naming it, never a
+  // silent fall-back to the raw KITTI lists.
+  if (d.format == DataFormat::kPacked || (d.format == DataFormat::kAuto && has_packed_cache_files(d.root + "/train")))
+    return open_packed(d, std::move(out));
+#ifndef GEO_WITH_OPENCV
+  throw ConfigError("data.root '" + d.root + "' is not a packed cache (no " + d.root + "/train/index.txt), and this "
+                    "geo was built without OpenCV (-DGEO_WITH_OPENCV=OFF), so it cannot read KITTI's image files: "
+                    "train from a packed cache (geo_prepare, on a machine with OpenCV) or from the built-in "
+                    "synthetic world (data.format: synthetic)");
+#else
+  return d.split == "odometry" ? open_odometry(d, std::move(out)) : open_kitti_raw(d, std::move(out));
 #endif
 }
 
