@@ -148,46 +148,46 @@ struct Options {
   int warmup = 10, iters = 5, train_warmup = 2, train_iters = 5, threads = 0, train_batch = 0, loader_batches = 20,
       profile_top = 0;
   int64_t ceiling_size = 0;
-
-  void add_to(CLI::App& app) {
-    geo::app::add_config_options(app, config_path, overrides,
-                                 "YAML config (model, data size, stages); default: the paper's settings and its two stages");
-    geo::app::add_device_option(app, device_name, "default: cpu");
-    app.add_option("--batch", batches, "inference batch sizes, e.g. 1,4 (1..1024)")->delimiter(',')->check(CLI::Range(1, 1024));
-    geo::app::add_precision_option(app, precision, {"fp32", "tf32", "bf16"},
-                                   "fp32, tf32 or bf16 (run.precision; default: the config's)");
-    app.add_option("--train-batch", train_batch, "training batch size, 1..1024 (default: each stage's batch_size)")
-        ->check(CLI::Range(1, 1024));
-    app.add_option("--stage", stages, "time only these stages' training steps (names, e.g. stage1)")->delimiter(',');
-    app.add_option("--fr", fr_mode, "feature refinement: both, on or off")->check(CLI::IsMember({"both", "on", "off"}));
-    app.add_option("--warmup", warmup, "untimed inference runs before timing (fresh memory is slow to touch)")
-        ->check(geo::app::non_negative());
-    app.add_option("--iters", iters, "timed inference runs (the median is reported)")->check(geo::app::positive());
-    app.add_option("--train-warmup", train_warmup, "untimed training steps")->check(geo::app::non_negative());
-    app.add_option("--train-iters", train_iters, "timed training steps (median)")->check(geo::app::positive());
-    app.add_option("--threads", threads, "intra-op threads (0 = all cores)")->check(geo::app::non_negative());
-    app.add_option("--data-root", data_root, "also time the loader on this data (packed cache; PNG data in the OpenCV build)");
-    app.add_option("--loader-batches", loader_batches, "batches timed for the loader")->check(geo::app::positive());
-    app.add_flag("--no-infer", no_infer, "skip the inference timings");
-    app.add_flag("--no-train", no_train, "skip the training-step timings");
-    app.add_flag("--no-comm", no_comm, "skip the gradient all-reduce timings (data-parallel training's cost per step)");
-    app.add_flag("--int8", int8,
-                 "also time int8 inference (DepthNet, PoseNet, FlowNet, pipeline; calibrated on random frames; CPU)");
-    app.add_flag("--no-fold", no_fold, "inference with BatchNorm as separate layers (default: folded into the convolutions)");
-    app.add_flag("--no-ceiling", no_ceiling, "skip the matrix-product ceiling (and the rows' share of it)");
-    app.add_option("--ceiling-size", ceiling_size,
-                   "side of the square matrices timed for the ceiling, 64..16384 (default: 2048 on CPU, 8192 on CUDA)")
-        ->check(CLI::Range(64, 16384));
-    app.add_option("--json", json_path, "also write every row as JSON to this file");
-    app.add_option("--markdown", markdown_path,
-                   "also write the table as markdown (machine, LibTorch version and command in its header)");
-    app.add_option("--profile", profile_top,
-                   "after timing, profile one more call of each inference/training row and print its N most costly "
-                   "operators (self time)")->check(geo::app::non_negative());
-    app.add_flag("--profile-shapes", profile_shapes, "--profile tells operators apart by input shapes too");
-    app.add_flag("--summary", summary, "only parameter counts and FLOPs, no timings");
-  }
 };
+
+void add_options(CLI::App& app, Options& o) {
+  geo::app::add_config_options(app, o.config_path, o.overrides,
+                               "YAML config (model, data size, stages); default: the paper's settings and its two stages");
+  geo::app::add_device_option(app, o.device_name, "default: cpu");
+  app.add_option("--batch", o.batches, "inference batch sizes, e.g. 1,4 (1..1024)")->delimiter(',')->check(CLI::Range(1, 1024));
+  geo::app::add_precision_option(app, o.precision, {"fp32", "tf32", "bf16"},
+                                 "fp32, tf32 or bf16 (run.precision; default: the config's)");
+  app.add_option("--train-batch", o.train_batch, "training batch size, 1..1024 (default: each stage's batch_size)")
+      ->check(CLI::Range(1, 1024));
+  app.add_option("--stage", o.stages, "time only these stages' training steps (names, e.g. stage1)")->delimiter(',');
+  app.add_option("--fr", o.fr_mode, "feature refinement: both, on or off")->check(CLI::IsMember({"both", "on", "off"}));
+  app.add_option("--warmup", o.warmup, "untimed inference runs before timing (fresh memory is slow to touch)")
+      ->check(geo::app::non_negative());
+  app.add_option("--iters", o.iters, "timed inference runs (the median is reported)")->check(geo::app::positive());
+  app.add_option("--train-warmup", o.train_warmup, "untimed training steps")->check(geo::app::non_negative());
+  app.add_option("--train-iters", o.train_iters, "timed training steps (median)")->check(geo::app::positive());
+  app.add_option("--threads", o.threads, "intra-op threads (0 = all cores)")->check(geo::app::non_negative());
+  app.add_option("--data-root", o.data_root, "also time the loader on this data (packed cache; PNG data in the OpenCV build)");
+  app.add_option("--loader-batches", o.loader_batches, "batches timed for the loader")->check(geo::app::positive());
+  app.add_flag("--no-infer", o.no_infer, "skip the inference timings");
+  app.add_flag("--no-train", o.no_train, "skip the training-step timings");
+  app.add_flag("--no-comm", o.no_comm, "skip the gradient all-reduce timings (data-parallel training's cost per step)");
+  app.add_flag("--int8", o.int8,
+               "also time int8 inference (DepthNet, PoseNet, FlowNet, pipeline; calibrated on random frames; CPU)");
+  app.add_flag("--no-fold", o.no_fold, "inference with BatchNorm as separate layers (default: folded into the convolutions)");
+  app.add_flag("--no-ceiling", o.no_ceiling, "skip the matrix-product ceiling (and the rows' share of it)");
+  app.add_option("--ceiling-size", o.ceiling_size,
+                 "side of the square matrices timed for the ceiling, 64..16384 (default: 2048 on CPU, 8192 on CUDA)")
+      ->check(CLI::Range(64, 16384));
+  app.add_option("--json", o.json_path, "also write every row as JSON to this file");
+  app.add_option("--markdown", o.markdown_path,
+                 "also write the table as markdown (machine, LibTorch version and command in its header)");
+  app.add_option("--profile", o.profile_top,
+                 "after timing, profile one more call of each inference/training row and print its N most costly "
+                 "operators (self time)")->check(geo::app::non_negative());
+  app.add_flag("--profile-shapes", o.profile_shapes, "--profile tells operators apart by input shapes too");
+  app.add_flag("--summary", o.summary, "only parameter counts and FLOPs, no timings");
+}
 
 // Parameter counts and FLOPs of each network and of the whole pipeline at batch 1.
 std::vector<Row> parameter_rows(const geo::Config& config, const std::vector<bool>& frs) {
@@ -477,6 +477,6 @@ int main(int argc, char** argv) {
       argc, argv,
       "geo_bench: parameter counts, FLOPs, inference and training-step timings, loader throughput, "
       "and each as a share of the machine's matrix-product ceiling",
-      [](CLI::App& app, Options& o) { o.add_to(app); },
+      add_options,
       [&](Options& o) { return bench(o, geo::join_list(args, " ")); });
 }

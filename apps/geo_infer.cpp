@@ -56,53 +56,53 @@ struct InferOptions {
   double camera_height = 0, ply_max_depth = 0;
   int threads = 0;
   bool videos = false, timing = false, force = false, report = false;
-
-  void add_to(CLI::App& app) {
-    app.add_option("--checkpoint", checkpoint, "checkpoint file, run folder or geo_export model file")->required();
-    app.add_option("--input", input, "an image, a folder of frames (natural order: 2 before 10) or a video file")->required();
-    app.add_option("--output", output, "output folder (created)")->required();
-    geo::app::add_device_option(app, device, "default: auto");
-    geo::app::add_precision_option(app, precision, {"fp32", "bf16", "auto", "int8"},
-                                   "fp32, bf16 (faster on CPUs with AVX512-BF16/AMX, depth within ~1%), auto (bf16 on such a "
-                                   "CPU) or int8 (CPU: the networks in int8, with the calibration a geo_export --int8 file keeps, else "
-                                   "calibrated on the input's first frames)");
-    app.add_option("--calibration-frames", calibration_frames,
-                   "with --precision int8: calibrate on this many of the input's first frames, 1..1000 (default: 8, "
-                   "and none for a model file that keeps its calibration)")
-        ->check(CLI::Range(1, 1000));
-    app.add_option("--intrinsics", intrinsics,
-                   "fx fy cx cy of the input images in pixels (default: KITTI-like 0.58 W, 1.92 H, W/2, H/2)")
-        ->expected(4);
-    app.add_option("--max-frames", max_frames, "stop after this many frames (0 = all)");
-    app.add_option("--camera-height", camera_height,
-                   "the camera's height above the road in metres (KITTI: 1.65): depth and trajectory in metres")
-        ->check(geo::app::above_zero());
-    app.add_option("--ground-truth", ground_truth,
-                   "KITTI pose file of the input's frames (odometry poses/XX.txt): drawn in trajectory.png beside the "
-                   "estimate, scale-aligned")->check(CLI::ExistingFile);
-    app.add_flag("--videos", videos, "write disp.avi and flow.avi for a frame folder too (always for a video input)");
-    app.add_option("--ply", ply_frames, "frame numbers (from 0) to write as coloured point clouds <name>.ply")
-        ->check(geo::app::non_negative());
-    app.add_option("--ply-max-depth", ply_max_depth,
-                   "leave out points farther than this (default: 80 with --camera-height, else 20x the frame's median "
-                   "depth: the sky)")->check(geo::app::above_zero());
-    app.add_option("--threads", threads, "LibTorch's intra-op threads (0 = all cores)")->check(geo::app::non_negative());
-    app.add_flag("--timing", timing, "print the time of each step (reading, networks, colour maps, encoding, ...) per frame");
-    app.add_flag("--report", report,
-                 "also write report.html: input, disparity and flow side by side (up to 60 frames spread over the clip, "
-                 "each input as <name>-input.jpg), the trajectory, the camera, the scale and the time of each step; "
-                 "it opens offline in any browser");
-    app.add_option("--refine", refine,
-                   "first train this many iterations on the input itself (test-time refinement: depth and pose adapt "
-                   "to the clip, with configs/video.yaml's settings and the camera of --intrinsics or the model's), then "
-                   "predict with the refined networks; for short or hard clips (docs/video.md)")
-        ->check(CLI::Range(int64_t{1}, int64_t{1000000}));
-    app.add_option("--refine-run", refine_run,
-                   "with --refine: the refinement's run folder, kept (train.log, checkpoints, refined.pt: a model file "
-                   "for later runs); default: a temporary folder, removed at the end");
-    app.add_flag("--force", force, "write into a non-empty --output: the files geo_infer wrote there before (geo_infer-outputs.txt lists them) are removed first, nothing else");
-  }
 };
+
+void add_options(CLI::App& app, InferOptions& o) {
+  app.add_option("--checkpoint", o.checkpoint, "checkpoint file, run folder or geo_export model file")->required();
+  app.add_option("--input", o.input, "an image, a folder of frames (natural order: 2 before 10) or a video file")->required();
+  app.add_option("--output", o.output, "output folder (created)")->required();
+  geo::app::add_device_option(app, o.device, "default: auto");
+  geo::app::add_precision_option(app, o.precision, {"fp32", "bf16", "auto", "int8"},
+                                 "fp32, bf16 (faster on CPUs with AVX512-BF16/AMX, depth within ~1%), auto (bf16 on such a "
+                                 "CPU) or int8 (CPU: the networks in int8, with the calibration a geo_export --int8 file keeps, else "
+                                 "calibrated on the input's first frames)");
+  app.add_option("--calibration-frames", o.calibration_frames,
+                 "with --precision int8: calibrate on this many of the input's first frames, 1..1000 (default: 8, "
+                 "and none for a model file that keeps its calibration)")
+      ->check(CLI::Range(1, 1000));
+  app.add_option("--intrinsics", o.intrinsics,
+                 "fx fy cx cy of the input images in pixels (default: KITTI-like 0.58 W, 1.92 H, W/2, H/2)")
+      ->expected(4);
+  app.add_option("--max-frames", o.max_frames, "stop after this many frames (0 = all)");
+  app.add_option("--camera-height", o.camera_height,
+                 "the camera's height above the road in metres (KITTI: 1.65): depth and trajectory in metres")
+      ->check(geo::app::above_zero());
+  app.add_option("--ground-truth", o.ground_truth,
+                 "KITTI pose file of the input's frames (odometry poses/XX.txt): drawn in trajectory.png beside the "
+                 "estimate, scale-aligned")->check(CLI::ExistingFile);
+  app.add_flag("--videos", o.videos, "write disp.avi and flow.avi for a frame folder too (always for a video input)");
+  app.add_option("--ply", o.ply_frames, "frame numbers (from 0) to write as coloured point clouds <name>.ply")
+      ->check(geo::app::non_negative());
+  app.add_option("--ply-max-depth", o.ply_max_depth,
+                 "leave out points farther than this (default: 80 with --camera-height, else 20x the frame's median "
+                 "depth: the sky)")->check(geo::app::above_zero());
+  app.add_option("--threads", o.threads, "LibTorch's intra-op threads (0 = all cores)")->check(geo::app::non_negative());
+  app.add_flag("--timing", o.timing, "print the time of each step (reading, networks, colour maps, encoding, ...) per frame");
+  app.add_flag("--report", o.report,
+               "also write report.html: input, disparity and flow side by side (up to 60 frames spread over the clip, "
+               "each input as <name>-input.jpg), the trajectory, the camera, the scale and the time of each step; "
+               "it opens offline in any browser");
+  app.add_option("--refine", o.refine,
+                 "first train this many iterations on the input itself (test-time refinement: depth and pose adapt "
+                 "to the clip, with configs/video.yaml's settings and the camera of --intrinsics or the model's), then "
+                 "predict with the refined networks; for short or hard clips (docs/video.md)")
+      ->check(CLI::Range(int64_t{1}, int64_t{1000000}));
+  app.add_option("--refine-run", o.refine_run,
+                 "with --refine: the refinement's run folder, kept (train.log, checkpoints, refined.pt: a model file "
+                 "for later runs); default: a temporary folder, removed at the end");
+  app.add_flag("--force", o.force, "write into a non-empty --output: the files geo_infer wrote there before (geo_infer-outputs.txt lists them) are removed first, nothing else");
+}
 
 // The input as geo_infer names its frames, known before any output is written: each frame's name
 // (at most --max-frames) and the rate.
@@ -538,5 +538,5 @@ int infer(const InferOptions& o) {
 int main(int argc, char** argv) {
   return geo::app::run_command<InferOptions>(
       argc, argv, "geo_infer: depth, optical flow and camera trajectory of images, frame folders or videos",
-      [](CLI::App& app, InferOptions& o) { o.add_to(app); }, infer);
+      add_options, infer);
 }
