@@ -22,7 +22,8 @@ namespace geo::app {
 // applies, every core for LibTorch (a tool's --threads or run.threads may set fewer), logging at
 // info, and any exception as one error line naming what is wrong with exit code 1 (a tool's own
 // codes, e.g. 130 for an interrupted training, come back from `body`).
-template <class Body> int run_tool(Body&& body) {
+template <class Body>
+int run_tool(Body&& body) {
   keep_freed_memory();
   use_all_cores();
   try {
@@ -44,7 +45,8 @@ inline void refuse_empty_values(const CLI::App& app) {
           throw std::runtime_error(opt->get_name() + " '': an empty value (" +
                                    (opt->get_type_name() == "TEXT" || opt->get_type_name().empty()
                                         ? std::string("a path or name")
-                                        : "a " + opt->get_type_name()) + " was expected)");
+                                        : "a " + opt->get_type_name()) +
+                                   " was expected)");
 }
 
 // A whole tool: its command line described by `add(app, command)` into a `Command`, parsed (--help
@@ -78,9 +80,9 @@ inline CLI::Validator bounded_below(long long min, bool strict) {
       bound);
 }
 
-inline CLI::Validator positive() { return bounded_below(1, false); }       // counts: 1, 2, ...
-inline CLI::Validator non_negative() { return bounded_below(0, false); }   // 0 = off / all
-inline CLI::Validator above_zero() { return bounded_below(0, true); }      // lengths, heights
+inline CLI::Validator positive() { return bounded_below(1, false); }      // counts: 1, 2, ...
+inline CLI::Validator non_negative() { return bounded_below(0, false); }  // 0 = off / all
+inline CLI::Validator above_zero() { return bounded_below(0, true); }     // lengths, heights
 
 // --config FILE (a path or a shipped config's name, e.g. stage1.yaml) and --set KEY=VALUE...
 // (config overrides). Returns the --config option.
@@ -94,7 +96,8 @@ inline CLI::Option* add_config_options(CLI::App& app, std::string& config, std::
 // --device auto|cpu|cuda|cuda:N, checked when parsed; `unset` says what leaving it out means.
 inline CLI::Option* add_device_option(CLI::App& app, std::string& device, const std::string& unset) {
   return app
-      .add_option("--device", device, "auto (CUDA when available), cpu, cuda or cuda:N (an error without CUDA); " + unset)
+      .add_option("--device", device,
+                  "auto (CUDA when available), cpu, cuda or cuda:N (an error without CUDA); " + unset)
       ->check(CLI::Validator(
           [](std::string& value) -> std::string {
             return is_device_name(value) ? "" : std::string(kDeviceNameRule) + " (got '" + value + "')";
@@ -112,8 +115,9 @@ inline CLI::Option* add_precision_option(CLI::App& app, std::string& precision, 
 // first frames of a folder or video; `with` names the option they serve ("--int8", "--precision int8").
 inline void add_calibration_options(CLI::App& app, std::string& frames, int64_t& count, const std::string& with) {
   app.add_option("--calibration", frames,
-                 "with " + with + ": a folder of frames or a video like those the model will see (its first frames "
-                 "calibrate it)");
+                 "with " + with +
+                     ": a folder of frames or a video like those the model will see (its first frames "
+                     "calibrate it)");
   app.add_option("--calibration-frames", count, "with " + with + ": how many frames calibrate it, 1..1000")
       ->check(CLI::Range(1, 1000));
 }

@@ -66,7 +66,8 @@ std::pair<geo::Config, geo::Networks> networks_with_fr(const geo::Config& config
 // The gradient all-reduce of one training step of `stage` between `world` processes (threads of
 // this process, each a rank of a Gloo group on 127.0.0.1): what data-parallel training adds per
 // step on top of the step itself. ms: median over `iters` after `warmup`, as seen by rank 0.
-Row time_allreduce(const geo::Config& config, const geo::StageConfig& stage, bool fr, int world, int warmup, int iters) {
+Row time_allreduce(const geo::Config& config, const geo::StageConfig& stage, bool fr, int world, int warmup,
+                   int iters) {
   auto made = networks_with_fr(config, fr, stage.uses_flow(), torch::kCPU);
   made.second.set_trainable(stage);
   const auto params = made.second.trainable_parameters();
@@ -151,10 +152,13 @@ struct Options {
 };
 
 void add_options(CLI::App& app, Options& o) {
-  geo::app::add_config_options(app, o.config_path, o.overrides,
-                               "YAML config (model, data size, stages); default: the paper's settings and its two stages");
+  geo::app::add_config_options(
+      app, o.config_path, o.overrides,
+      "YAML config (model, data size, stages); default: the paper's settings and its two stages");
   geo::app::add_device_option(app, o.device_name, "default: cpu");
-  app.add_option("--batch", o.batches, "inference batch sizes, e.g. 1,4 (1..1024)")->delimiter(',')->check(CLI::Range(1, 1024));
+  app.add_option("--batch", o.batches, "inference batch sizes, e.g. 1,4 (1..1024)")
+      ->delimiter(',')
+      ->check(CLI::Range(1, 1024));
   geo::app::add_precision_option(app, o.precision, {"fp32", "tf32", "bf16"},
                                  "fp32, tf32 or bf16 (run.precision; default: the config's)");
   app.add_option("--train-batch", o.train_batch, "training batch size, 1..1024 (default: each stage's batch_size)")
@@ -167,14 +171,16 @@ void add_options(CLI::App& app, Options& o) {
   app.add_option("--train-warmup", o.train_warmup, "untimed training steps")->check(geo::app::non_negative());
   app.add_option("--train-iters", o.train_iters, "timed training steps (median)")->check(geo::app::positive());
   app.add_option("--threads", o.threads, "intra-op threads (0 = all cores)")->check(geo::app::non_negative());
-  app.add_option("--data-root", o.data_root, "also time the loader on this data (packed cache; PNG data in the OpenCV build)");
+  app.add_option("--data-root", o.data_root,
+                 "also time the loader on this data (packed cache; PNG data in the OpenCV build)");
   app.add_option("--loader-batches", o.loader_batches, "batches timed for the loader")->check(geo::app::positive());
   app.add_flag("--no-infer", o.no_infer, "skip the inference timings");
   app.add_flag("--no-train", o.no_train, "skip the training-step timings");
   app.add_flag("--no-comm", o.no_comm, "skip the gradient all-reduce timings (data-parallel training's cost per step)");
   app.add_flag("--int8", o.int8,
                "also time int8 inference (DepthNet, PoseNet, FlowNet, pipeline; calibrated on random frames; CPU)");
-  app.add_flag("--no-fold", o.no_fold, "inference with BatchNorm as separate layers (default: folded into the convolutions)");
+  app.add_flag("--no-fold", o.no_fold,
+               "inference with BatchNorm as separate layers (default: folded into the convolutions)");
   app.add_flag("--no-ceiling", o.no_ceiling, "skip the matrix-product ceiling (and the rows' share of it)");
   app.add_option("--ceiling-size", o.ceiling_size,
                  "side of the square matrices timed for the ceiling, 64..16384 (default: 2048 on CPU, 8192 on CUDA)")
@@ -184,7 +190,8 @@ void add_options(CLI::App& app, Options& o) {
                  "also write the table as markdown (machine, LibTorch version and command in its header)");
   app.add_option("--profile", o.profile_top,
                  "after timing, profile one more call of each inference/training row and print its N most costly "
-                 "operators (self time)")->check(geo::app::non_negative());
+                 "operators (self time)")
+      ->check(geo::app::non_negative());
   app.add_flag("--profile-shapes", o.profile_shapes, "--profile tells operators apart by input shapes too");
   app.add_flag("--summary", o.summary, "only parameter counts and FLOPs, no timings");
 }
@@ -289,7 +296,8 @@ std::vector<Row> inference_rows(const geo::Config& config, const std::vector<boo
         if (pose && made_fr[k] != made_fr[0]) continue;  // no FR in the PoseNet: once per precision
         const std::string& precision = made_precision[k];
         geo::Networks& nets = made[k].second;
-        Row row{"infer", what + (precision == "fp32" ? "" : " " + precision), pose ? "-" : (made_fr[k] ? "on" : "off"), b};
+        Row row{"infer", what + (precision == "fp32" ? "" : " " + precision), pose ? "-" : (made_fr[k] ? "on" : "off"),
+                b};
         row.bf16 = precision == "bf16";
         row.int8 = precision == "int8";
         row.gflops = gflops_at(params, what == "Model::depth" ? "DepthNet" : what, row.fr, b);
@@ -348,8 +356,8 @@ std::vector<Row> training_rows(const geo::Config& config, const std::vector<geo:
       geo::Config counting = t->config;
       counting.run.precision = geo::Precision::kFp32;
       t->row.gflops = 3.0 * geo::bench::gflops_of([&t, &tgt, &srcs, &K, &stage, &counting] {
-        geo::compute_losses(t->nets, tgt, srcs, K, stage, counting);
-      });
+                        geo::compute_losses(t->nets, tgt, srcs, K, stage, counting);
+                      });
       trainees.push_back(std::move(t));
     }
     spdlog::info("training step {} [{}], FR {}, batch {} ...", stage.name, geo::join_list(stage.train.names(), ","),
@@ -408,7 +416,8 @@ int bench(Options& o, const std::string& command_line) {
   reads.insert(reads.end(), {config_file, o.data_root});
   geo::check_outputs({{"--json", o.json_path}, {"--markdown", o.markdown_path}}, reads);
   const torch::Device device = geo::select_device(o.device_name);
-  if (o.int8 && !device.is_cpu()) throw std::runtime_error("--int8: int8 inference runs on the CPU, not on " + device.str());
+  if (o.int8 && !device.is_cpu())
+    throw std::runtime_error("--int8: int8 inference runs on the CPU, not on " + device.str());
   if (o.int8 && geo::select_int8_engine().empty())
     throw std::runtime_error("--int8: this LibTorch has no quantized engine (onednn, x86, fbgemm or qnnpack)");
   geo::RunConfig settings = config.run;  // as geo_train applies them, with --threads
@@ -455,14 +464,14 @@ int bench(Options& o, const std::string& command_line) {
 
   geo::bench::print_table(rows, ceiling);
   if (!o.markdown_path.empty()) {
-    geo::write_file_atomic(o.markdown_path, geo::bench::markdown_table(rows, ceiling, machine_of(device, nthreads),
-                                                                       command_line));
+    geo::write_file_atomic(o.markdown_path,
+                           geo::bench::markdown_table(rows, ceiling, machine_of(device, nthreads), command_line));
     spdlog::info("wrote {}", o.markdown_path);
   }
   if (!o.json_path.empty()) {
-    geo::write_file_atomic(o.json_path, geo::bench::json_report(rows, ceiling,
-                                                                {device.str(), nthreads, config.data.height,
-                                                                 config.data.width, !o.no_fold}));
+    geo::write_file_atomic(
+        o.json_path, geo::bench::json_report(
+                         rows, ceiling, {device.str(), nthreads, config.data.height, config.data.width, !o.no_fold}));
     spdlog::info("wrote {}", o.json_path);
   }
   return 0;
@@ -477,6 +486,5 @@ int main(int argc, char** argv) {
       argc, argv,
       "geo_bench: parameter counts, FLOPs, inference and training-step timings, loader throughput, "
       "and each as a share of the machine's matrix-product ceiling",
-      add_options,
-      [&](Options& o) { return bench(o, geo::join_list(args, " ")); });
+      add_options, [&](Options& o) { return bench(o, geo::join_list(args, " ")); });
 }

@@ -39,18 +39,24 @@ void add_options(CLI::App& app, EvalCommand& c) {
       "ground truth (000123_10.png); odometry = one KITTI pose file (3x4 camera-to-world a line, frame 0 first).\n"
       "Eigen protocol: Velodyne ground truth (pixel = round(x/z) - 1, depth = Velodyne x, nearest point kept),\n"
       "prediction resized bilinearly, 1e-3 < gt < 80, Garg crop, per-image median scaling, clamp [1e-3, 80].");
-  auto* split_opt = app.add_option("--split", o.split, "eigen, kitti2015 or odometry")->check(CLI::IsMember({"eigen", "kitti2015", "odometry"}));
+  auto* split_opt = app.add_option("--split", o.split, "eigen, kitti2015 or odometry")
+                        ->check(CLI::IsMember({"eigen", "kitti2015", "odometry"}));
   app.add_option("--data-root", o.data_root, "dataset root (default: $GEO_KITTI_ROOT, else ./data/kitti)");
-  auto* checkpoint_opt = app.add_option("--checkpoint", c.checkpoint, "checkpoint file or run folder (default: newest run in --runs)");
+  auto* checkpoint_opt =
+      app.add_option("--checkpoint", c.checkpoint, "checkpoint file or run folder (default: newest run in --runs)");
   app.add_option("--runs", c.runs, "where to look for the newest run when --checkpoint is not given");
-  auto* predictions_opt = app.add_option("--predictions", c.predictions, "evaluate precomputed predictions instead of a model");
-  auto* untrained_opt = app.add_option("--untrained", c.untrained, "evaluate an untrained model of this config (baseline)");
-  auto* trivial_opt = app.add_flag("--trivial", c.trivial, "evaluate the trivial baseline: constant depth, zero flow, zero motion");
+  auto* predictions_opt =
+      app.add_option("--predictions", c.predictions, "evaluate precomputed predictions instead of a model");
+  auto* untrained_opt =
+      app.add_option("--untrained", c.untrained, "evaluate an untrained model of this config (baseline)");
+  auto* trivial_opt =
+      app.add_flag("--trivial", c.trivial, "evaluate the trivial baseline: constant depth, zero flow, zero motion");
   // One source of predictions: a model, a predictions file, an untrained model or the trivial baseline.
   trivial_opt->excludes(checkpoint_opt)->excludes(predictions_opt)->excludes(untrained_opt);
   untrained_opt->excludes(checkpoint_opt)->excludes(predictions_opt);
   predictions_opt->excludes(checkpoint_opt);
-  app.add_option("--split-file", o.split_file, "subset or order: image paths, 'folder frame side' lines or flow pair paths");
+  app.add_option("--split-file", o.split_file,
+                 "subset or order: image paths, 'folder frame side' lines or flow pair paths");
   app.add_option("--sequence", o.sequence, "odometry sequence (default 09)");
   app.add_option("--output", c.output, "write the results as JSON here");
   app.add_option("--output-poses", o.output_poses, "odometry: write the predicted trajectory (KITTI pose file)");
@@ -59,26 +65,33 @@ void add_options(CLI::App& app, EvalCommand& c) {
                  "above the road fitted to the prediction (no ground truth), or none; odometry: camera-height also "
                  "scores the trajectory in metres (metric_t_err, metric_r_err, metric_scale_error)")
       ->check(CLI::IsMember({"median", "camera-height", "none"}));
-  app.add_option("--camera-height", o.camera_height,
-                 "eigen, odometry: the camera's height above the road in metres (default: the data root's camera_height.txt, "
-                 "which geo_synth writes, else KITTI's 1.65)")
+  app.add_option(
+         "--camera-height", o.camera_height,
+         "eigen, odometry: the camera's height above the road in metres (default: the data root's camera_height.txt, "
+         "which geo_synth writes, else KITTI's 1.65)")
       ->check(geo::app::above_zero());
-  app.add_option("--segment-lengths", o.segment_lengths,
-                 "odometry: segment lengths in metres of KITTI's t_err (%) and r_err (deg/100 m) (default 100 200 ... 800)")
+  app.add_option(
+         "--segment-lengths", o.segment_lengths,
+         "odometry: segment lengths in metres of KITTI's t_err (%) and r_err (deg/100 m) (default 100 200 ... 800)")
       ->expected(1, -1)
       ->check(geo::app::above_zero());
   app.add_option("--export-gt", c.export_gt, "eigen: write the ground-truth depth maps (uint16 PNG, depth x 256)");
   geo::app::add_device_option(app, c.device, "default: auto");
-  geo::app::add_precision_option(app, c.precision, {"fp32", "bf16", "auto", "int8"},
-                                 "what the model computes in: fp32 (default), bf16, auto (bf16 on CPUs with AVX512-BF16/AMX) "
-                                 "or int8 (CPU; calibrated on --calibration): its accuracy against fp32's");
+  geo::app::add_precision_option(
+      app, c.precision, {"fp32", "bf16", "auto", "int8"},
+      "what the model computes in: fp32 (default), bf16, auto (bf16 on CPUs with AVX512-BF16/AMX) "
+      "or int8 (CPU; calibrated on --calibration): its accuracy against fp32's");
   geo::app::add_calibration_options(app, c.calibration, c.calibration_frames, "--precision int8");
-  app.add_option("--flow-resize", c.flow_resize, "kitti2015: resize predicted flow to the ground truth by nearest (GeoNet) or bilinear")
+  app.add_option("--flow-resize", c.flow_resize,
+                 "kitti2015: resize predicted flow to the ground truth by nearest (GeoNet) or bilinear")
       ->check(CLI::IsMember({"nearest", "bilinear"}));
-  app.add_flag("--exact-pixels", c.exact_pixels, "eigen: project Velodyne points without the reference code's -1 pixel shift");
-  auto* compare_opt = app.add_option("--compare", c.compare, "print these results JSON files side by side and exit")->expected(1, -1);
+  app.add_flag("--exact-pixels", c.exact_pixels,
+               "eigen: project Velodyne points without the reference code's -1 pixel shift");
+  auto* compare_opt =
+      app.add_option("--compare", c.compare, "print these results JSON files side by side and exit")->expected(1, -1);
   // --compare only reads results: every option of an evaluation would be silently ignored beside it.
-  for (auto* other : {split_opt, checkpoint_opt, predictions_opt, untrained_opt, trivial_opt}) compare_opt->excludes(other);
+  for (auto* other : {split_opt, checkpoint_opt, predictions_opt, untrained_opt, trivial_opt})
+    compare_opt->excludes(other);
 }
 
 // --compare: earlier results side by side, columns named by file stem (trained.json -> trained).
@@ -135,6 +148,6 @@ int evaluate(EvalCommand& c) {
 
 int main(int argc, char** argv) {
   return geo::app::run_command<EvalCommand>(
-      argc, argv, "geo_eval: depth (Eigen split), optical flow (KITTI 2015) and pose (KITTI odometry) metrics", add_options,
-      [](EvalCommand& c) { return c.compare.empty() ? evaluate(c) : compare(c.compare); });
+      argc, argv, "geo_eval: depth (Eigen split), optical flow (KITTI 2015) and pose (KITTI odometry) metrics",
+      add_options, [](EvalCommand& c) { return c.compare.empty() ? evaluate(c) : compare(c.compare); });
 }

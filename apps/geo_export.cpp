@@ -42,13 +42,15 @@ std::vector<torch::Tensor> calibration_frames(const ExportCommand& c, const geo:
   return geo::first_frames(c.calibration, c.calibration_frames, s.height, s.width, "--calibration");
 #else
   (void)s;
-  throw std::runtime_error("--calibration '" + c.calibration + "': this geo_export was built without OpenCV and reads "
+  throw std::runtime_error("--calibration '" + c.calibration +
+                           "': this geo_export was built without OpenCV and reads "
                            "no frames (calibrate with geo::Model::quantize_int8 and save from C++ or Python)");
 #endif
 }
 
 int export_model(const ExportCommand& c) {
-  if (c.int8 && c.calibration.empty()) throw std::runtime_error("--int8 needs --calibration FRAMES (a folder or a video)");
+  if (c.int8 && c.calibration.empty())
+    throw std::runtime_error("--int8 needs --calibration FRAMES (a folder or a video)");
   if (!c.int8 && !c.calibration.empty())
     throw std::runtime_error("--calibration calibrates int8: it needs --int8 (or it would be ignored)");
   geo::Model model = geo::Model::load(c.checkpoint);
@@ -71,10 +73,12 @@ int export_model(const ExportCommand& c) {
   const auto in_size = fs::file_size(s.source), out_size = fs::file_size(c.out);
   spdlog::info("{} -> {}: {}x{} input, {}-frame PoseNet, ResNet-{}, FR {}, FlowNet {}, {} weights", s.source, c.out,
                s.height, s.width, s.seq_length, s.encoder_depth, s.feature_refinement ? "on" : "off",
-               s.has_flow ? "yes" : "no", std::string(c.half ? "float16" : "float32") + (c.int8 ? ", int8 calibration" : ""));
-  spdlog::info("{:.1f} MB -> {:.1f} MB ({:.0f}%); depth from the written file differs by at most {:.3g} ({:.2g} relative)",
-               static_cast<double>(in_size) / 1e6, static_cast<double>(out_size) / 1e6,
-               100.0 * static_cast<double>(out_size) / static_cast<double>(in_size), diff, diff / scale);
+               s.has_flow ? "yes" : "no",
+               std::string(c.half ? "float16" : "float32") + (c.int8 ? ", int8 calibration" : ""));
+  spdlog::info(
+      "{:.1f} MB -> {:.1f} MB ({:.0f}%); depth from the written file differs by at most {:.3g} ({:.2g} relative)",
+      static_cast<double>(in_size) / 1e6, static_cast<double>(out_size) / 1e6,
+      100.0 * static_cast<double>(out_size) / static_cast<double>(in_size), diff, diff / scale);
   return 0;
 }
 

@@ -51,7 +51,7 @@ struct InferOptions {
   std::vector<double> intrinsics;
   std::vector<int64_t> ply_frames;
   int64_t max_frames = 0, calibration_frames = 0;  // 0: 8 with --precision int8
-  int64_t refine = 0;                               // 0: off
+  int64_t refine = 0;                              // 0: off
   std::string refine_run;
   double camera_height = 0, ply_max_depth = 0;
   int threads = 0;
@@ -60,13 +60,15 @@ struct InferOptions {
 
 void add_options(CLI::App& app, InferOptions& o) {
   app.add_option("--checkpoint", o.checkpoint, "checkpoint file, run folder or geo_export model file")->required();
-  app.add_option("--input", o.input, "an image, a folder of frames (natural order: 2 before 10) or a video file")->required();
+  app.add_option("--input", o.input, "an image, a folder of frames (natural order: 2 before 10) or a video file")
+      ->required();
   app.add_option("--output", o.output, "output folder (created)")->required();
   geo::app::add_device_option(app, o.device, "default: auto");
-  geo::app::add_precision_option(app, o.precision, {"fp32", "bf16", "auto", "int8"},
-                                 "fp32, bf16 (faster on CPUs with AVX512-BF16/AMX, depth within ~1%), auto (bf16 on such a "
-                                 "CPU) or int8 (CPU: the networks in int8, with the calibration a geo_export --int8 file keeps, else "
-                                 "calibrated on the input's first frames)");
+  geo::app::add_precision_option(
+      app, o.precision, {"fp32", "bf16", "auto", "int8"},
+      "fp32, bf16 (faster on CPUs with AVX512-BF16/AMX, depth within ~1%), auto (bf16 on such a "
+      "CPU) or int8 (CPU: the networks in int8, with the calibration a geo_export --int8 file keeps, else "
+      "calibrated on the input's first frames)");
   app.add_option("--calibration-frames", o.calibration_frames,
                  "with --precision int8: calibrate on this many of the input's first frames, 1..1000 (default: 8, "
                  "and none for a model file that keeps its calibration)")
@@ -80,15 +82,19 @@ void add_options(CLI::App& app, InferOptions& o) {
       ->check(geo::app::above_zero());
   app.add_option("--ground-truth", o.ground_truth,
                  "KITTI pose file of the input's frames (odometry poses/XX.txt): drawn in trajectory.png beside the "
-                 "estimate, scale-aligned")->check(CLI::ExistingFile);
+                 "estimate, scale-aligned")
+      ->check(CLI::ExistingFile);
   app.add_flag("--videos", o.videos, "write disp.avi and flow.avi for a frame folder too (always for a video input)");
   app.add_option("--ply", o.ply_frames, "frame numbers (from 0) to write as coloured point clouds <name>.ply")
       ->check(geo::app::non_negative());
   app.add_option("--ply-max-depth", o.ply_max_depth,
                  "leave out points farther than this (default: 80 with --camera-height, else 20x the frame's median "
-                 "depth: the sky)")->check(geo::app::above_zero());
-  app.add_option("--threads", o.threads, "LibTorch's intra-op threads (0 = all cores)")->check(geo::app::non_negative());
-  app.add_flag("--timing", o.timing, "print the time of each step (reading, networks, colour maps, encoding, ...) per frame");
+                 "depth: the sky)")
+      ->check(geo::app::above_zero());
+  app.add_option("--threads", o.threads, "LibTorch's intra-op threads (0 = all cores)")
+      ->check(geo::app::non_negative());
+  app.add_flag("--timing", o.timing,
+               "print the time of each step (reading, networks, colour maps, encoding, ...) per frame");
   app.add_flag("--report", o.report,
                "also write report.html: input, disparity and flow side by side (up to 60 frames spread over the clip, "
                "each input as <name>-input.jpg), the trajectory, the camera, the scale and the time of each step; "
@@ -101,7 +107,9 @@ void add_options(CLI::App& app, InferOptions& o) {
   app.add_option("--refine-run", o.refine_run,
                  "with --refine: the refinement's run folder, kept (train.log, checkpoints, refined.pt: a model file "
                  "for later runs); default: a temporary folder, removed at the end");
-  app.add_flag("--force", o.force, "write into a non-empty --output: the files geo_infer wrote there before (geo_infer-outputs.txt lists them) are removed first, nothing else");
+  app.add_flag("--force", o.force,
+               "write into a non-empty --output: the files geo_infer wrote there before (geo_infer-outputs.txt lists "
+               "them) are removed first, nothing else");
 }
 
 // The input as geo_infer names its frames, known before any output is written: each frame's name
@@ -146,7 +154,8 @@ Input survey(const InferOptions& o, int64_t h, int64_t w, const std::function<vo
     const auto [it, fresh] = by_name.emplace(fs::path(f).stem().string(), f);
     if (!fresh)
       throw std::runtime_error("'" + std::min(it->second, f) + "' and '" + std::max(it->second, f) +
-                               "' would write the same outputs (" + it->first + "-*.png): keep one of them in '" + o.input + "'");
+                               "' would write the same outputs (" + it->first + "-*.png): keep one of them in '" +
+                               o.input + "'");
   }
   Input input;
   input.video = reader.stream().is_video();
@@ -157,7 +166,8 @@ Input survey(const InferOptions& o, int64_t h, int64_t w, const std::function<vo
     if (each) each(image);
     input.names.push_back(name);
   }
-  if (input.names.empty()) throw std::runtime_error("--input '" + o.input + "': no frame could be decoded (an empty or damaged video)");
+  if (input.names.empty())
+    throw std::runtime_error("--input '" + o.input + "': no frame could be decoded (an empty or damaged video)");
   return input;
 }
 
@@ -176,7 +186,8 @@ std::vector<std::string> planned_outputs(const InferOptions& o, const geo::Model
   if (sequence && three) names.insert(names.end(), {"trajectory.txt", "trajectory.png"});
   if (o.report) {
     names.push_back("report.html");
-    for (const size_t i : geo::infer::report_rows(frames.size())) names.push_back(geo::infer::input_image_name(frames.names[i]));
+    for (const size_t i : geo::infer::report_rows(frames.size()))
+      names.push_back(geo::infer::input_image_name(frames.names[i]));
   }
   if ((o.videos || frames.video) && sequence) {
     names.push_back("disp.avi");
@@ -196,9 +207,9 @@ std::vector<std::string> frame_folders(const InferOptions& o, bool video) {
 // folder of a single image), or when it holds something (unless --force, which removes what
 // geo_infer's manifest there says it wrote: an earlier, longer run's frames must not mix in).
 void prepare_output(const InferOptions& o, const geo::Model& model, const Input& frames) {
-  const int64_t removed = geo::prepare_output_folder(o.output, "--output", "geo_infer-outputs.txt",
-                                                     planned_outputs(o, model, frames), o.force,
-                                                     frame_folders(o, frames.video));
+  const int64_t removed =
+      geo::prepare_output_folder(o.output, "--output", "geo_infer-outputs.txt", planned_outputs(o, model, frames),
+                                 o.force, frame_folders(o, frames.video));
   if (o.force) spdlog::info("--force: {} earlier output file(s) of geo_infer removed from {}", removed, o.output);
 }
 
@@ -221,24 +232,30 @@ std::pair<int64_t, int64_t> input_size(const InferOptions& o) {
 
 // The camera [3,3] at the model's size: --intrinsics (pixels of the input) scaled, else the camera
 // a model that learns it predicts (the mean over the first pairs), else a KITTI-like one.
-torch::Tensor camera(const InferOptions& o, const geo::Model& model, int64_t height, int64_t width, int64_t h, int64_t w) {
+torch::Tensor camera(const InferOptions& o, const geo::Model& model, int64_t height, int64_t width, int64_t h,
+                     int64_t w) {
   const double W0 = static_cast<double>(width), H0 = static_cast<double>(height);
   if (o.intrinsics.size() == 4) {
     const auto& in = o.intrinsics;
     check_intrinsics(o, height, width);
     const double sx = w / W0, sy = h / H0;
-    return torch::tensor({in[0] * sx, 0.0, in[2] * sx, 0.0, in[1] * sy, in[3] * sy, 0.0, 0.0, 1.0}).view({3, 3}).to(torch::kFloat32);
+    return torch::tensor({in[0] * sx, 0.0, in[2] * sx, 0.0, in[1] * sy, in[3] * sy, 0.0, 0.0, 1.0})
+        .view({3, 3})
+        .to(torch::kFloat32);
   }
   if (!model.spec().learns_intrinsics) return geo::kitti_like_intrinsics(h, w).to(torch::kFloat32);
-  const auto first = geo::first_frames(o.input, o.max_frames > 0 ? std::min<int64_t>(o.max_frames, 11) : 11, h, w, "--input");
+  const auto first =
+      geo::first_frames(o.input, o.max_frames > 0 ? std::min<int64_t>(o.max_frames, 11) : 11, h, w, "--input");
   std::vector<torch::Tensor> Ks;
   for (size_t i = 0; i < std::min<size_t>(first.size(), 10); ++i)
     Ks.push_back(model.intrinsics(first[i], first[std::min(i + 1, first.size() - 1)]));
   const auto K = torch::stack(Ks).mean(0).to(torch::kFloat32);
   const double sx = W0 / w, sy = H0 / h;
-  spdlog::info("learned camera: fx {:.1f} fy {:.1f} cx {:.1f} cy {:.1f} (pixels of the {}x{} input; give --intrinsics to "
-               "use another)", K[0][0].item<double>() * sx, K[1][1].item<double>() * sy, K[0][2].item<double>() * sx,
-               K[1][2].item<double>() * sy, width, height);
+  spdlog::info(
+      "learned camera: fx {:.1f} fy {:.1f} cx {:.1f} cy {:.1f} (pixels of the {}x{} input; give --intrinsics to "
+      "use another)",
+      K[0][0].item<double>() * sx, K[1][1].item<double>() * sy, K[0][2].item<double>() * sx,
+      K[1][2].item<double>() * sy, width, height);
   return K;
 }
 
@@ -281,7 +298,8 @@ torch::Tensor ground_truth_of(const InferOptions& o, const Input& frames) {
     throw std::runtime_error("--ground-truth '" + o.ground_truth + "' has " + std::to_string(truth.size(0)) +
                              " poses for " + std::to_string(n) + " frames");
   if (n > 1 && !geo::trajectory_moves(truth.slice(0, 0, n)))
-    throw std::runtime_error("--ground-truth '" + o.ground_truth + "': no motion over the input's " + std::to_string(n) +
+    throw std::runtime_error("--ground-truth '" + o.ground_truth + "': no motion over the input's " +
+                             std::to_string(n) +
                              " frames (every position is the first): nothing to align the trajectory's scale to");
   return truth.slice(0, 0, n);
 }
@@ -300,8 +318,9 @@ class SurveyedFrames : public geo::FrameSource {
     const bool got = times_.time("read, decode, resize frames", [&] { return reader_->next(name, &image); });
     seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
     if (!got || name != frames_.names[i_])
-      throw std::runtime_error("--input '" + o_.input + "' changed while geo_infer read it: frame " + std::to_string(i_) +
-                               " was '" + frames_.names[i_] + "', now " + (got ? "'" + name + "'" : "none"));
+      throw std::runtime_error("--input '" + o_.input + "' changed while geo_infer read it: frame " +
+                               std::to_string(i_) + " was '" + frames_.names[i_] + "', now " +
+                               (got ? "'" + name + "'" : "none"));
     ++i_;
     return true;
   }
@@ -345,10 +364,13 @@ std::string write_outputs(const InferOptions& o, const geo::Model& model, const 
     });
     beyond_png += (f.depth > 255.99).sum().item<int64_t>();
     if (std::binary_search(rows.begin(), rows.end(), f.index))
-      times.time("report: input frames (JPEG)", [&] { geo::write_image(o.output + "/" + geo::infer::input_image_name(name), f.image); });
+      times.time("report: input frames (JPEG)",
+                 [&] { geo::write_image(o.output + "/" + geo::infer::input_image_name(name), f.image); });
     if (disp_video) times.time("video encode", [&] { disp_video->write(disp_colour); });
     if (std::find(o.ply_frames.begin(), o.ply_frames.end(), static_cast<int64_t>(f.index)) != o.ply_frames.end()) {
-      const double limit = o.ply_max_depth > 0 ? o.ply_max_depth : o.camera_height > 0 ? 80.0 : 20 * f.depth.median().item<double>();
+      const double limit = o.ply_max_depth > 0   ? o.ply_max_depth
+                           : o.camera_height > 0 ? 80.0
+                                                 : 20 * f.depth.median().item<double>();
       const auto n = geo::write_point_cloud_ply(o.output + "/" + name + ".ply", f.depth, f.image, K, limit);
       spdlog::info("{}/{}.ply: {} points (depth up to {:.3g})", o.output, name, n, limit);
     }
@@ -357,19 +379,20 @@ std::string write_outputs(const InferOptions& o, const geo::Model& model, const 
       times.time("PNG encode + write", [&] { geo::write_image(o.output + "/" + name + "-flow.png", flow_colour); });
       if (flow_video) times.time("video encode", [&] { flow_video->write(flow_colour); });
     }
-    if ((f.index + 1) % 10 == 0 || f.index + 1 == frames.size()) spdlog::info("  {}/{} frames", f.index + 1, frames.size());
+    if ((f.index + 1) % 10 == 0 || f.index + 1 == frames.size())
+      spdlog::info("  {}/{} frames", f.index + 1, frames.size());
     outside += std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   };
   SurveyedFrames source(o, frames, h, w, times);
   const auto started = std::chrono::steady_clock::now();
   auto poses = model.run_sequence(source, write, scales, K);
   const double all = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
-  times.add(three && sequence ? "depth, pose, flow" : "depth",
-            all - outside - source.seconds);
+  times.add(three && sequence ? "depth, pose, flow" : "depth", all - outside - source.seconds);
   const double beyond = static_cast<double>(beyond_png) / (static_cast<double>(frames.size()) * h * w);
   if (beyond > 0.01)
-    spdlog::warn("{:.0f}% of the depths are beyond 256, the most a KITTI depth PNG holds: *-depth.png saturates there{}",
-                 100 * beyond, o.camera_height > 0 ? fmt::format(" (is --camera-height {} in metres?)", o.camera_height) : "");
+    spdlog::warn(
+        "{:.0f}% of the depths are beyond 256, the most a KITTI depth PNG holds: *-depth.png saturates there{}",
+        100 * beyond, o.camera_height > 0 ? fmt::format(" (is --camera-height {} in metres?)", o.camera_height) : "");
   std::string written = "*-disp.png, *-depth.png";
   const auto finishing = std::chrono::steady_clock::now();
   if (poses.defined()) {
@@ -395,7 +418,8 @@ void write_report(const InferOptions& o, const geo::Model& model, const Input& f
   const bool sequence = frames.size() > 1, three = model.spec().seq_length == 3;
   geo::infer::Report r;
   r.input = o.input;
-  r.checkpoint = o.checkpoint + (o.refine > 0 ? " refined on the input (--refine " + std::to_string(o.refine) + ")" : "");
+  r.checkpoint =
+      o.checkpoint + (o.refine > 0 ? " refined on the input (--refine " + std::to_string(o.refine) + ")" : "");
   r.precision = model.spec().precision;
   r.device = model.device().str();
   r.frames = static_cast<int64_t>(frames.size());
@@ -404,10 +428,12 @@ void write_report(const InferOptions& o, const geo::Model& model, const Input& f
   std::tie(r.input_height, r.input_width) = input_size;
   const double sx = static_cast<double>(r.input_width) / w, sy = static_cast<double>(r.input_height) / h;
   const auto k = K.to(torch::kFloat64).cpu();
-  r.camera = {k[0][0].item<double>() * sx, k[1][1].item<double>() * sy, k[0][2].item<double>() * sx, k[1][2].item<double>() * sy};
-  r.camera_source = o.intrinsics.size() == 4          ? "--intrinsics"
-                    : model.spec().learns_intrinsics ? "learned by the model"
-                                                     : "KITTI-like default: fx 0.58 W, fy 1.92 H, centred; --intrinsics gives yours";
+  r.camera = {k[0][0].item<double>() * sx, k[1][1].item<double>() * sy, k[0][2].item<double>() * sx,
+              k[1][2].item<double>() * sy};
+  r.camera_source = o.intrinsics.size() == 4 ? "--intrinsics"
+                    : model.spec().learns_intrinsics
+                        ? "learned by the model"
+                        : "KITTI-like default: fx 0.58 W, fy 1.92 H, centred; --intrinsics gives yours";
   r.camera_height = o.camera_height;
   r.trajectory = sequence && three;
   r.ground_truth = ground_truth;
@@ -439,7 +465,8 @@ std::string refined_model(const InferOptions& o, geo::StepTimes& times, ScratchR
     throw std::runtime_error("--refine " + std::to_string(o.refine) + " trains on a clip: '" + o.input +
                              "' is a single image (give a video or a folder of frames)");
   geo::check_output_folder(o.output, "--output", o.force, frame_folders(o, video));
-  if (!o.refine_run.empty() && fs::exists(o.refine_run) && !(fs::is_directory(o.refine_run) && fs::is_empty(o.refine_run)))
+  if (!o.refine_run.empty() && fs::exists(o.refine_run) &&
+      !(fs::is_directory(o.refine_run) && fs::is_empty(o.refine_run)))
     throw std::runtime_error("--refine-run '" + o.refine_run + "' exists and is not an empty folder: give a new one");
   const auto [height, width] = input_size(o);
   geo::RefineOptions r;
@@ -458,8 +485,9 @@ std::string refined_model(const InferOptions& o, geo::StepTimes& times, ScratchR
   r.option = "--refine";
   if (o.refine_run.empty()) {
     const auto stamp = std::chrono::steady_clock::now().time_since_epoch().count();
-    scratch.path = (fs::temp_directory_path() / ("geo_infer-refine-" + std::to_string(::getpid()) + "-" +
-                                                 std::to_string(stamp))).string();
+    scratch.path =
+        (fs::temp_directory_path() / ("geo_infer-refine-" + std::to_string(::getpid()) + "-" + std::to_string(stamp)))
+            .string();
   }
   r.run_dir = o.refine_run.empty() ? scratch.path : o.refine_run;
   auto refined = times.time("refine: train on the input", [&] { return geo::refine(r); });
@@ -480,7 +508,8 @@ int infer(const InferOptions& o) {
   load.device = o.device;
   const bool int8 = o.precision == "int8";
   if (o.calibration_frames > 0 && !int8)
-    throw std::runtime_error("--calibration-frames calibrates int8: it needs --precision int8 (got " + o.precision + ")");
+    throw std::runtime_error("--calibration-frames calibrates int8: it needs --precision int8 (got " + o.precision +
+                             ")");
   const int64_t calibration_frames = o.calibration_frames > 0 ? o.calibration_frames : 8;
   load.precision = int8 ? "fp32" : o.precision;  // int8: calibrated on the input's frames once they are read
   load.threads = o.threads;
@@ -492,15 +521,18 @@ int infer(const InferOptions& o) {
                  o.checkpoint);
   } else if (int8) {
     const int64_t n = o.max_frames > 0 ? std::min(o.max_frames, calibration_frames) : calibration_frames;
-    const auto calibration = times.time("read, decode, resize frames", [&] { return geo::first_frames(o.input, n, h, w, "--input"); });
+    const auto calibration =
+        times.time("read, decode, resize frames", [&] { return geo::first_frames(o.input, n, h, w, "--input"); });
     if (model.spec().has_flow && calibration.size() < 2)
-      throw std::runtime_error("--precision int8: this model's FlowNet calibrates on pairs: give at least 2 frames "
-                               "(--calibration-frames, and an input of 2 or more frames)");
+      throw std::runtime_error(
+          "--precision int8: this model's FlowNet calibrates on pairs: give at least 2 frames "
+          "(--calibration-frames, and an input of 2 or more frames)");
     times.time("int8 calibration", [&] { model.quantize_int8(calibration); });
-    spdlog::info("int8: calibrated on the first {} frame(s) of the input{}", calibration.size(),
-                 model.has_int8_calibration() || o.calibration_frames > 0
-                     ? ""
-                     : " (on every run: geo_export --int8 --calibration FRAMES writes a model that keeps its calibration)");
+    spdlog::info(
+        "int8: calibrated on the first {} frame(s) of the input{}", calibration.size(),
+        model.has_int8_calibration() || o.calibration_frames > 0
+            ? ""
+            : " (on every run: geo_export --int8 --calibration FRAMES writes a model that keeps its calibration)");
   }
   // The input's size (its first frame), the camera, then its frames counted and named (with
   // --camera-height, each frame's metric scale on the way), all before anything is written.
@@ -512,16 +544,18 @@ int infer(const InferOptions& o) {
       throw std::runtime_error("--ply " + std::to_string(f) + ": the input has " + std::to_string(frames.size()) +
                                " frames (numbered from 0)");
   const auto truth = ground_truth_of(o, frames);
-  if (o.videos && frames.size() < 2)
-    spdlog::warn("--videos: the input is a single frame; no video is written");
+  if (o.videos && frames.size() < 2) spdlog::warn("--videos: the input is a single frame; no video is written");
   prepare_output(o, model, frames);
   spdlog::info("{} frame(s) from {} at {}x{} -> {}", frames.size(), o.input, w, h, o.output);
   if (frames.size() > 1 && model.spec().seq_length != 3)
-    spdlog::warn("this model's PoseNet takes {}-frame snippets: geo_infer writes flow and trajectory.txt for "
-                 "3-frame models only; depth is written for every frame", model.spec().seq_length);
+    spdlog::warn(
+        "this model's PoseNet takes {}-frame snippets: geo_infer writes flow and trajectory.txt for "
+        "3-frame models only; depth is written for every frame",
+        model.spec().seq_length);
   std::string written = write_outputs(o, model, frames, K, scales, truth, times);
-  const std::string table = times.table(static_cast<int64_t>(frames.size()), "frame",
-                                        std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
+  const std::string table =
+      times.table(static_cast<int64_t>(frames.size()), "frame",
+                  std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
   if (o.report) {
     write_report(o, model, frames, K, {height, width}, truth.defined(), table);
     written += ", report.html";

@@ -38,8 +38,8 @@ int prepare(const PrepareCommand& c) {
   // The cache is never written over what the config reads (a packed data.root among them).
   if (!c.throughput) geo::check_outputs({{"--out", c.out}}, geo::config_reads(cfg), true);
   const auto data = geo::open_training_data(cfg.data);
-  spdlog::info("{} data: {} training snippets ({} excluded, {} without neighbours), {} validation",
-               data.format, data.train->size(), data.excluded, data.dropped, data.val ? data.val->size() : 0);
+  spdlog::info("{} data: {} training snippets ({} excluded, {} without neighbours), {} validation", data.format,
+               data.train->size(), data.excluded, data.dropped, data.val ? data.val->size() : 0);
   if (c.throughput) {
     const auto lo = geo::loader_options(cfg.data, c.batch_size > 0 ? c.batch_size : cfg.stages.front().batch_size);
     spdlog::info("loader: {:.1f} samples/s ({} batches of {}, {}x{}, {} worker(s), augmentation {})",

@@ -44,14 +44,16 @@ void add_options(CLI::App& app, SynthCommand& c) {
       ->check(CLI::Range(uint64_t{0}, uint64_t{1} << 63));
   app.add_option("--out", c.out, "output root (created); holds raw/, kitti2015/, odometry/")->required();
   app.add_option("--drives", c.drives, "training drives, 1..1000 (default: preset's)")->check(CLI::Range(1, 1000));
-  app.add_option("--test-drives", c.test_drives, "held-out test drives, 1..1000 (default: preset's)")->check(CLI::Range(1, 1000));
+  app.add_option("--test-drives", c.test_drives, "held-out test drives, 1..1000 (default: preset's)")
+      ->check(CLI::Range(1, 1000));
   app.add_option("--frames", c.frames, "frames per drive (default: preset's)")->check(CLI::Range(3, 100000));
   app.add_option("--flow-pairs", c.flow_pairs, "KITTI-2015-style flow pairs, 0..100000 (default: preset's)")
       ->check(CLI::Range(0, 100000));
   app.add_option("--odometry-frames", c.odometry_frames, "frames of odometry sequence 09 (default: preset's)")
       ->check(CLI::Range(5, 100000));
   app.add_option("--threads", c.threads, "render threads (0 = all cores)")->check(geo::app::non_negative());
-  app.add_option("--turns", c.turns, "how winding the road is: 1 gentle (~1 degree of heading per frame), "
+  app.add_option("--turns", c.turns,
+                 "how winding the road is: 1 gentle (~1 degree of heading per frame), "
                  "2 four times the heading change (a learned camera needs rotation to pin its focal length)")
       ->check(CLI::Range(0.1, 10.0));
   app.add_flag("--traffic", c.traffic,
@@ -71,10 +73,11 @@ int synthesise(const SynthCommand& c) {
                (o.train_drives + o.test_drives) * o.frames_per_drive + 3 * o.flow_pairs + o.odometry_frames,
                geo::synth_world_bytes(o) / 1e9);
   if (geo::prepare_synth_root(out, o, c.force)) spdlog::info("--force: the earlier world in {} removed", out);
-  spdlog::info("geo_synth: preset {} ({}x{}), seed {}, {} training + {} test drives of {} frames, "
-               "{} flow pairs, {} odometry frames -> {}",
-               c.preset, o.width, o.height, o.seed, o.train_drives, o.test_drives, o.frames_per_drive, o.flow_pairs,
-               o.odometry_frames, out);
+  spdlog::info(
+      "geo_synth: preset {} ({}x{}), seed {}, {} training + {} test drives of {} frames, "
+      "{} flow pairs, {} odometry frames -> {}",
+      c.preset, o.width, o.height, o.seed, o.train_drives, o.test_drives, o.frames_per_drive, o.flow_pairs,
+      o.odometry_frames, out);
   const auto t0 = std::chrono::steady_clock::now();
   int last_pct = -1;
   geo::write_synth_world(out, o, [&](int64_t done, int64_t total, const std::string& what) {
@@ -85,14 +88,16 @@ int synthesise(const SynthCommand& c) {
     }
   });
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  spdlog::info("done in {:.1f} s: {}/raw (train with data.root={}/raw), {}/kitti2015, {}/odometry", s, out, out, out, out);
+  spdlog::info("done in {:.1f} s: {}/raw (train with data.root={}/raw), {}/kitti2015, {}/odometry", s, out, out, out,
+               out);
   if (!c.video.empty()) {
     const std::string frames = out + "/raw/" + geo::synth_drive_folder(1) + "/image_02/data";
     geo::write_video_file(geo::frame_files(frames), c.video, 10.0);
     const auto& k = o.intrinsics;
-    spdlog::info("video: {} ({} frames of {}, 10 fps): train with --set data.videos=[{}] "
-                 "--set data.camera.intrinsics=[{},{},{},{}]",
-                 c.video, o.frames_per_drive, frames, c.video, k.fx, k.fy, k.cx, k.cy);
+    spdlog::info(
+        "video: {} ({} frames of {}, 10 fps): train with --set data.videos=[{}] "
+        "--set data.camera.intrinsics=[{},{},{},{}]",
+        c.video, o.frames_per_drive, frames, c.video, k.fx, k.fy, k.cx, k.cy);
   }
   return 0;
 }

@@ -27,16 +27,18 @@ void add_options(CLI::App& app, TrainCommand& c) {
                                                "YAML config (stage1.yaml, stage2.yaml, smoke.yaml or a path)");
   auto* res_opt = app.add_option("--resume", c.resume, "continue the run in this folder from its latest checkpoint");
   cfg_opt->excludes(res_opt);
-  auto* dir_opt = app.add_option("--run-dir", c.train.run_dir, "run folder to create (default: <run.dir>/<run.name>-<time>)");
+  auto* dir_opt =
+      app.add_option("--run-dir", c.train.run_dir, "run folder to create (default: <run.dir>/<run.name>-<time>)");
   auto* init_opt = app.add_option("--init", c.train.init, "start the first stage from this checkpoint or run folder");
   res_opt->excludes(dir_opt)->excludes(init_opt);  // a resumed run keeps its folder and its weights
   geo::app::add_device_option(app, c.train.device, "default: run.device");
   app.add_option("--master-addr", c.train.master_addr,
                  "distributed under SLURM: the host of rank 0 when MASTER_ADDR is not set (torchrun sets it)");
-  app.footer("Distributed: launched by torchrun (RANK, WORLD_SIZE, LOCAL_RANK, MASTER_ADDR, MASTER_PORT) or srun "
-             "(SLURM_PROCID, SLURM_NTASKS, SLURM_LOCALID), geo_train is one process of a data-parallel group: "
-             "batch_size is per process, gradients are averaged, rank 0 writes the run folder. "
-             "run.distributed.{backend,timeout_s,shard_data,verify_interval} configure it.");
+  app.footer(
+      "Distributed: launched by torchrun (RANK, WORLD_SIZE, LOCAL_RANK, MASTER_ADDR, MASTER_PORT) or srun "
+      "(SLURM_PROCID, SLURM_NTASKS, SLURM_LOCALID), geo_train is one process of a data-parallel group: "
+      "batch_size is per process, gradients are averaged, rank 0 writes the run folder. "
+      "run.distributed.{backend,timeout_s,shard_data,verify_interval} configure it.");
 }
 
 int train(const TrainCommand& c) {

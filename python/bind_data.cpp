@@ -20,16 +20,18 @@ using namespace pybind11::literals;
 
 namespace {
 
-py::dict synth_world(int64_t frames, uint64_t seed, int drive, const std::string& preset, int64_t height,
-                     int64_t width, int supersample, double turns, bool traffic, bool flow, bool lidar) {
+py::dict synth_world(int64_t frames, uint64_t seed, int drive, const std::string& preset, int64_t height, int64_t width,
+                     int supersample, double turns, bool traffic, bool flow, bool lidar) {
   if (frames < 1 || frames > 10000) throw Error("frames must be in 1..10000 (got " + std::to_string(frames) + ")");
   if (drive < 0 || drive > 999) throw Error("drive must be in 0..999 (got " + std::to_string(drive) + ")");
-  if (supersample < 1 || supersample > 8) throw Error("supersample must be in 1..8 (got " + std::to_string(supersample) + ")");
+  if (supersample < 1 || supersample > 8)
+    throw Error("supersample must be in 1..8 (got " + std::to_string(supersample) + ")");
   if (!(turns > 0 && turns <= 10)) throw Error("turns must be in (0, 10] (got " + std::to_string(turns) + ")");
   SynthOptions base = SynthOptions::preset_named(preset);
   if ((height == 0) != (width == 0)) throw Error("give height and width together (or neither: the preset's size)");
   if (height && (height < 16 || height > 4096 || width < 16 || width > 4096))
-    throw Error("height and width must be in 16..4096 (got " + std::to_string(height) + "x" + std::to_string(width) + ")");
+    throw Error("height and width must be in 16..4096 (got " + std::to_string(height) + "x" + std::to_string(width) +
+                ")");
   SynthOptions o = height ? synth_world_at(preset, height, width) : base;
   o.seed = seed, o.supersample = supersample, o.turns = turns, o.traffic = traffic;
   torch::Tensor images, depths, objects, poses, flows, noc, occ, moving;
@@ -77,10 +79,13 @@ py::dict depth_metrics(py::handle gt, py::handle pred, py::object scaling, doubl
     const auto s = py::cast<std::string>(scaling);
     if (s == "median") o.median_scaling = true;
     else if (s == "none") o.median_scaling = false;
-    else throw Error("scaling must be 'median', 'none' or a number > 0 (a known scale, e.g. from road_scale()); got '" + s + "'");
+    else
+      throw Error("scaling must be 'median', 'none' or a number > 0 (a known scale, e.g. from road_scale()); got '" +
+                  s + "'");
   } else {
     const double s = py::cast<double>(scaling);
-    if (!(s > 0 && std::isfinite(s))) throw Error("scaling must be 'median', 'none' or a number > 0 (got " + std::to_string(s) + ")");
+    if (!(s > 0 && std::isfinite(s)))
+      throw Error("scaling must be 'median', 'none' or a number > 0 (got " + std::to_string(s) + ")");
     o.median_scaling = false, o.fixed_scale = s;
   }
   const auto g = tensor_arg(gt, "gt"), p = tensor_arg(pred, "pred");
@@ -101,7 +106,8 @@ py::dict depth_metrics(py::handle gt, py::handle pred, py::object scaling, doubl
 void bind_data(py::module_& m) {
   auto synth = m.def_submodule("synth", "geo's synthetic driving world, rendered in memory with exact ground truth.");
   synth.def("world", &synth_world, py::kw_only(), "frames"_a = 3, "seed"_a = 1, "drive"_a = 0, "preset"_a = "tiny",
-            "height"_a = 0, "width"_a = 0, "supersample"_a = 3, "turns"_a = 1.0, "traffic"_a = false, "flow"_a = true, "lidar"_a = false,
+            "height"_a = 0, "width"_a = 0, "supersample"_a = 3, "turns"_a = 1.0, "traffic"_a = false, "flow"_a = true,
+            "lidar"_a = false,
             "Renders `frames` consecutive frames of training drive `drive` of the world `seed` (geo_synth's\n"
             "drive drive+1, frames 0..frames-1) at the preset's size (tiny 64x208, kitti 375x1242) or height x width.\n"
             "traffic: stop-and-go traffic (the camera stands for stretches, a car ahead keeps its gap, trucks\n"
@@ -112,7 +118,8 @@ void bind_data(py::module_& m) {
             "(pixels, frame i -> i+1), flow_noc / flow_occ [N-1,H,W] bool; with lidar: lidar (N scans [M,4]),\n"
             "cam_from_velo [4,4].");
 
-  auto kitti = m.def_submodule("kitti", "KITTI's file formats (calibration, Velodyne scans, poses) and ground-truth depth.");
+  auto kitti =
+      m.def_submodule("kitti", "KITTI's file formats (calibration, Velodyne scans, poses) and ground-truth depth.");
   kitti.def(
       "read_calib",
       [](const std::string& path) {
@@ -136,7 +143,8 @@ void bind_data(py::module_& m) {
       "A KITTI raw date folder's calib_cam_to_cam.txt (and calib_velo_to_cam.txt) for colour camera 2 or 3:\n"
       "{P_rect [3,4], R_rect [4,4], K [3,3], width, height, cam_from_velo [4,4], img_from_velo [3,4]} (float64).");
   kitti.def("read_velodyne", &read_velodyne, "path"_a, "A Velodyne scan (.bin): [N,4] float32 x, y, z, reflectance.");
-  kitti.def("read_poses", &read_poses, "path"_a, "A KITTI pose file (a 3x4 camera-to-world matrix a line): [N,4,4] float64.");
+  kitti.def("read_poses", &read_poses, "path"_a,
+            "A KITTI pose file (a 3x4 camera-to-world matrix a line): [N,4,4] float64.");
   kitti.def(
       "write_poses", [](const std::string& path, py::handle poses) { write_poses(path, tensor_arg(poses, "poses")); },
       "path"_a, "poses"_a, "Writes [N,4,4] (or [N,3,4]) poses as a KITTI pose file.");
@@ -153,7 +161,9 @@ void bind_data(py::module_& m) {
       "The Eigen protocol's ground-truth depth [H,W] of a scan (0 = no point): depth = Velodyne x, pixel =\n"
       "round(x/z) - 1 as the reference code (exact_pixels: without the -1), the nearest point kept.");
 
-  auto metrics = m.def_submodule("eval", "The published protocols' metrics on arrays (as geo_eval computes them) and, with OpenCV, geo_eval's protocols.");
+  auto metrics = m.def_submodule(
+      "eval",
+      "The published protocols' metrics on arrays (as geo_eval computes them) and, with OpenCV, geo_eval's protocols.");
   metrics.def("depth_errors", &depth_metrics, "gt"_a, "pred"_a, py::kw_only(), "scaling"_a = py::str("median"),
               "min_depth"_a = 1e-3, "max_depth"_a = 80.0, "garg_crop"_a = true,
               "Eigen depth errors of one image: gt [H,W] (0 = no ground truth), pred [h,w] (resized bilinearly to\n"
@@ -177,7 +187,8 @@ void bind_data(py::module_& m) {
   metrics.def(
       "flow_errors",
       [](py::handle gt, py::handle valid, py::handle pred, const std::string& resize) {
-        if (resize != "nearest" && resize != "bilinear") throw Error("resize must be 'nearest' or 'bilinear' (got '" + resize + "')");
+        if (resize != "nearest" && resize != "bilinear")
+          throw Error("resize must be 'nearest' or 'bilinear' (got '" + resize + "')");
         const auto g = tensor_arg(gt, "gt"), v = tensor_arg(valid, "valid"), p = tensor_arg(pred, "pred");
         FlowErrors e;
         {
@@ -191,11 +202,18 @@ void bind_data(py::module_& m) {
       "KITTI flow errors: gt [2,H,W], valid [H,W] (bool or 0/1), pred [2,h,w] (resized to gt with u, v scaled;\n"
       "nearest as GeoNet). {epe: mean end-point error, fl: fraction with EPE > 3 px and > 5% of |gt|, pixels}.");
   metrics.def(
-      "snippet_ate", [](py::handle gt, py::handle pred) { return snippet_ate(tensor_arg(gt, "gt").to(torch::kFloat64), tensor_arg(pred, "pred").to(torch::kFloat64)); },
-      "gt"_a, "pred"_a, "SfMLearner's snippet ATE of positions [N,3]: first positions aligned, one least-squares scale.");
+      "snippet_ate",
+      [](py::handle gt, py::handle pred) {
+        return snippet_ate(tensor_arg(gt, "gt").to(torch::kFloat64), tensor_arg(pred, "pred").to(torch::kFloat64));
+      },
+      "gt"_a, "pred"_a,
+      "SfMLearner's snippet ATE of positions [N,3]: first positions aligned, one least-squares scale.");
   metrics.def(
       "trajectory_rmse",
-      [](py::handle gt, py::handle pred) { return aligned_trajectory_rmse(tensor_arg(gt, "gt").to(torch::kFloat64), tensor_arg(pred, "pred").to(torch::kFloat64)); },
+      [](py::handle gt, py::handle pred) {
+        return aligned_trajectory_rmse(tensor_arg(gt, "gt").to(torch::kFloat64),
+                                       tensor_arg(pred, "pred").to(torch::kFloat64));
+      },
       "gt"_a, "pred"_a, "RMS position error [N,3] after a Sim(3) (Umeyama) alignment.");
   metrics.def(
       "odometry_errors",

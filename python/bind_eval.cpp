@@ -29,7 +29,8 @@ class StreamFrames : public FrameSource {
     if (size_ && (size_->first < 1 || size_->second < 1))
       throw Error("geo.io.Frames: size must be (height, width) of at least 1, got (" + std::to_string(size_->first) +
                   ", " + std::to_string(size_->second) + ")");
-    if (max_frames_ < 0) throw Error("geo.io.Frames: max_frames must be >= 0 (0: all), got " + std::to_string(max_frames_));
+    if (max_frames_ < 0)
+      throw Error("geo.io.Frames: max_frames must be >= 0 (0: all), got " + std::to_string(max_frames_));
     restart();  // opens it now: a missing path is an error here
   }
   bool next(torch::Tensor& frame) override {
@@ -38,7 +39,8 @@ class StreamFrames : public FrameSource {
     std::string name;
     if (!stream_->next(name, &m)) return false;
     const std::string what = path_ + " [" + name + "]";
-    frame = size_ ? resized_mat_to_frame(m, size_->first, size_->second, what) : resized_mat_to_frame(m, m.rows, m.cols, what);
+    frame = size_ ? resized_mat_to_frame(m, size_->first, size_->second, what)
+                  : resized_mat_to_frame(m, m.rows, m.cols, what);
     if (read_ == names_.size()) names_.push_back(name);
     ++read_;
     return true;
@@ -109,10 +111,12 @@ void bind_eval(py::module_& m) {
       [](const std::vector<std::string>& files) {
         std::vector<EvalResult> results;
         std::vector<std::string> names;
-        for (const auto& f : files) results.push_back(read_result(f)), names.push_back(std::filesystem::path(f).stem().string());
+        for (const auto& f : files)
+          results.push_back(read_result(f)), names.push_back(std::filesystem::path(f).stem().string());
         return format_results(results, names);
       },
-      "files"_a, "geo_eval --compare: results JSON files side by side, with a note for every difference but the model.");
+      "files"_a,
+      "geo_eval --compare: results JSON files side by side, with a note for every difference but the model.");
 
   auto io = m.def_submodule("io", "Images, depth maps and flow fields in KITTI's file formats (OpenCV).");
   py::class_<StreamFrames, FrameSource>(io, "Frames",
@@ -120,11 +124,12 @@ void bind_eval(py::module_& m) {
                                         "one at a time as geo_infer reads them (RGB uint8 [3,H,W], 16-bit images as\n"
                                         "float [0,1]), resized to size=(h, w) when given (the model's: geo_infer's\n"
                                         "frames); max_frames > 0: the first that many. For Model.run_sequence.")
-      .def(py::init<std::string, std::optional<std::pair<int64_t, int64_t>>, int64_t>(), "path"_a, "size"_a = py::none(),
-           "max_frames"_a = 0)
-      .def_property_readonly("names", &StreamFrames::names,
-                             "The frames' names (a file's name without extension; a video frame's number), as read so far "
-                             "(all after a pass).");
+      .def(py::init<std::string, std::optional<std::pair<int64_t, int64_t>>, int64_t>(), "path"_a,
+           "size"_a = py::none(), "max_frames"_a = 0)
+      .def_property_readonly(
+          "names", &StreamFrames::names,
+          "The frames' names (a file's name without extension; a video frame's number), as read so far "
+          "(all after a pass).");
   io.def(
       "read_image",
       [](const std::string& path, std::optional<std::pair<int64_t, int64_t>> size) {
@@ -134,11 +139,16 @@ void bind_eval(py::module_& m) {
       "path"_a, "size"_a = py::none(),
       "An image as float32 [3,H,W] in [0,1] RGB (grey expanded, 16-bit scaled), resized to size=(h, w) when given\n"
       "(area when shrinking, linear otherwise: as geo_infer reads frames).");
-  io.def("write_image", [](const std::string& path, py::handle image) { write_image(path, image_arg(image, "image")); },
-         "path"_a, "image"_a, "Writes [3,H,W] (float in [0,1] or uint8) as PNG/JPEG by the file's extension.");
-  io.def("read_depth_png", [](const std::string& path) { return read_depth_png(path).squeeze(0); }, "path"_a, "A KITTI depth PNG (uint16, depth x 256, 0 = none): [H,W] float32 metres.");
-  io.def("write_depth_png", [](const std::string& path, py::handle depth) { write_depth_png(path, tensor_arg(depth, "depth")); },
-         "path"_a, "depth"_a, "Writes [H,W] depth as a KITTI depth PNG (uint16, depth x 256; geo_infer's <name>-depth.png).");
+  io.def(
+      "write_image", [](const std::string& path, py::handle image) { write_image(path, image_arg(image, "image")); },
+      "path"_a, "image"_a, "Writes [3,H,W] (float in [0,1] or uint8) as PNG/JPEG by the file's extension.");
+  io.def(
+      "read_depth_png", [](const std::string& path) { return read_depth_png(path).squeeze(0); }, "path"_a,
+      "A KITTI depth PNG (uint16, depth x 256, 0 = none): [H,W] float32 metres.");
+  io.def(
+      "write_depth_png",
+      [](const std::string& path, py::handle depth) { write_depth_png(path, tensor_arg(depth, "depth")); }, "path"_a,
+      "depth"_a, "Writes [H,W] depth as a KITTI depth PNG (uint16, depth x 256; geo_infer's <name>-depth.png).");
   io.def(
       "read_flow_png",
       [](const std::string& path) {

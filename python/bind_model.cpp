@@ -60,21 +60,24 @@ void bind_model(py::module_& m) {
         "The tensor geo sees for an image: torch tensors as they are ([3,H,W], [B,3,H,W]); numpy arrays\n"
         "([H,W,3], [B,H,W,3], uint8 0..255 or float 0..1) as a channels-first view of the same memory.");
   m.def("kitti_like_intrinsics", &kitti_like_intrinsics, "height"_a, "width"_a,
-        "KITTI's proportions at height x width (fx = 0.58 W, fy = 1.92 H, principal point at the centre): [3,3] float64.");
+        "KITTI's proportions at height x width (fx = 0.58 W, fy = 1.92 H, principal point at the centre): [3,3] "
+        "float64.");
 
   m.def(
       "chain_poses",
       [](const py::sequence& motions, std::vector<double> scales) {
         std::vector<torch::Tensor> ms;
-        for (size_t i = 0; i < motions.size(); ++i) ms.push_back(tensor_arg(motions[i], "motions[" + std::to_string(i) + "]"));
+        for (size_t i = 0; i < motions.size(); ++i)
+          ms.push_back(tensor_arg(motions[i], "motions[" + std::to_string(i) + "]"));
         return chain_poses(ms, scales);
       },
       "motions"_a, "scales"_a = std::vector<double>{},
       "Camera-to-world poses [N+1,4,4] float64 (the first the identity, KITTI's pose files) from N motions [4,4]\n"
       "(frame i's camera -> frame i+1's: relative_pose(), FlowParts.motion), each step's translation times scales[i].");
 
-  m.def("smooth_road_scales", &smooth_road_scales, "road_scales"_a,
-        "Model.sequence_scales() from each frame's Model.road_scale() (0: no road), for a sequence read frame by frame.");
+  m.def(
+      "smooth_road_scales", &smooth_road_scales, "road_scales"_a,
+      "Model.sequence_scales() from each frame's Model.road_scale() (0: no road), for a sequence read frame by frame.");
 
   py::class_<FrameSource>(m, "FrameSource",
                           "A sequence's frames read as they are needed (geo.io.Frames): for Model.run_sequence and\n"
@@ -91,14 +94,16 @@ void bind_model(py::module_& m) {
       .def_readonly("learns_intrinsics", &ModelSpec::learns_intrinsics)
       .def_readonly("precision", &ModelSpec::precision)
       .def("__repr__", [](const ModelSpec& s) {
-        return "ModelSpec(" + std::to_string(s.height) + "x" + std::to_string(s.width) + ", seq_length=" +
-               std::to_string(s.seq_length) + ", resnet" + std::to_string(s.encoder_depth) +
+        return "ModelSpec(" + std::to_string(s.height) + "x" + std::to_string(s.width) +
+               ", seq_length=" + std::to_string(s.seq_length) + ", resnet" + std::to_string(s.encoder_depth) +
                (s.feature_refinement ? ", FR" : "") + (s.has_flow ? ", FlowNet" : "") +
                (s.learns_intrinsics ? ", learned camera" : "") + ", " + s.precision + ", '" + s.source + "')";
       });
 
-  py::class_<Model::FlowParts>(m, "FlowParts", "flow_parts(): the full flow, the rigid flow of depth and motion alone, and that depth (of from_)\n"
-                                          "and motion (from_ -> to); unpacks as full, rigid.")
+  py::class_<Model::FlowParts>(
+      m, "FlowParts",
+      "flow_parts(): the full flow, the rigid flow of depth and motion alone, and that depth (of from_)\n"
+      "and motion (from_ -> to); unpacks as full, rigid.")
       .def_readonly("full", &Model::FlowParts::full)
       .def_readonly("rigid", &Model::FlowParts::rigid)
       .def_readonly("depth", &Model::FlowParts::depth)
@@ -214,7 +219,9 @@ void bind_model(py::module_& m) {
             py::gil_scoped_release release;
             return model.pose(xs);
           },
-          "frames"_a, "The PoseNet on a snippet of spec.seq_length frames: [L-1,4,4] from the middle frame's camera into each other's.")
+          "frames"_a,
+          "The PoseNet on a snippet of spec.seq_length frames: [L-1,4,4] from the middle frame's camera into each "
+          "other's.")
       .def(
           "flow",
           [](const Model& model, py::handle from, py::handle to, py::handle intrinsics, py::handle previous) {
@@ -257,8 +264,10 @@ void bind_model(py::module_& m) {
             if (!return_without_road) return py::cast(scales);
             return py::object(py::make_tuple(scales, without));
           },
-          "frames"_a, "camera_height"_a = 1.65, "intrinsics"_a = py::none(), py::kw_only(), "return_without_road"_a = false,
-          "Metres per unit of depth of each frame of a sequence (a list of images or a geo.io.Frames): metric_depth()'s\n"
+          "frames"_a, "camera_height"_a = 1.65, "intrinsics"_a = py::none(), py::kw_only(),
+          "return_without_road"_a = false,
+          "Metres per unit of depth of each frame of a sequence (a list of images or a geo.io.Frames): "
+          "metric_depth()'s\n"
           "factor smoothed over 11 frames (frames without a road take their neighbours'); return_without_road: also\n"
           "those frames' indices.")
       .def(
@@ -271,8 +280,8 @@ void bind_model(py::module_& m) {
             std::vector<torch::Tensor> depth, flow, rigid, motion;
             const auto as_dict = [](const SequenceFrame& f) {
               py::dict d("index"_a = f.index, "image"_a = f.image, "depth"_a = f.depth, "scale"_a = f.scale);
-              for (const auto& [key, t] : {std::pair{"flow", &f.flow}, std::pair{"rigid_flow", &f.rigid_flow},
-                                          std::pair{"motion", &f.motion}})
+              for (const auto& [key, t] :
+                   {std::pair{"flow", &f.flow}, std::pair{"rigid_flow", &f.rigid_flow}, std::pair{"motion", &f.motion}})
                 d[key] = t->defined() ? py::cast(*t) : py::none();
               return d;
             };

@@ -62,8 +62,9 @@ std::string run_training(const std::shared_ptr<CallbackSink>& sink, const std::s
     throw;
   }
   if (rc == 130) {
-    PyErr_SetString(PyExc_KeyboardInterrupt,
-                    ("training interrupted: checkpoint written in " + run_dir + "; geo.resume('" + run_dir + "') continues").c_str());
+    PyErr_SetString(PyExc_KeyboardInterrupt, ("training interrupted: checkpoint written in " + run_dir +
+                                              "; geo.resume('" + run_dir + "') continues")
+                                                 .c_str());
     throw py::error_already_set();
   }
   if (rc != 0) throw Error("training ended with code " + std::to_string(rc));
@@ -143,12 +144,14 @@ void bind_train(py::module_& m) {
           [](Networks& n, py::handle target, const py::sequence& sources) {
             const auto t = tensor_arg(target, "target");
             std::vector<torch::Tensor> srcs;
-            for (size_t i = 0; i < sources.size(); ++i) srcs.push_back(tensor_arg(sources[i], "sources[" + std::to_string(i) + "]"));
+            for (size_t i = 0; i < sources.size(); ++i)
+              srcs.push_back(tensor_arg(sources[i], "sources[" + std::to_string(i) + "]"));
             py::gil_scoped_release release;
             torch::NoGradGuard no_grad;
             return n.pose->forward(t, srcs);
           },
-          "target"_a, "sources"_a, "PoseNet: target and sources [B,3,H,W] in [0,1] -> [B,N,6] (tx, ty, tz, rx, ry, rz).")
+          "target"_a, "sources"_a,
+          "PoseNet: target and sources [B,3,H,W] in [0,1] -> [B,N,6] (tx, ty, tz, rx, ry, rz).")
       .def(
           "flow_net",
           [](Networks& n, py::handle input) {

@@ -29,9 +29,9 @@ torch::Tensor image_arg(py::handle object, const std::string& what);
 // Python's dict of a name -> number map.
 py::dict as_dict(const std::map<std::string, double>& values);
 
-void bind_model(py::module_& m);   // geo.Model (include/geo/geo.h), geo.image
-void bind_data(py::module_& m);    // geo.synth, geo.kitti (formats that need no OpenCV)
-void bind_eval(py::module_& m);    // geo.eval, geo.io (OpenCV builds)
-void bind_train(py::module_& m);   // geo.train, geo.resume, geo.state_dicts
+void bind_model(py::module_& m);  // geo.Model (include/geo/geo.h), geo.image
+void bind_data(py::module_& m);   // geo.synth, geo.kitti (formats that need no OpenCV)
+void bind_eval(py::module_& m);   // geo.eval, geo.io (OpenCV builds)
+void bind_train(py::module_& m);  // geo.train, geo.resume, geo.state_dicts
 
 }  // namespace geo::python

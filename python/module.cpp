@@ -22,7 +22,8 @@ torch::Tensor tensor_arg(py::handle object, const std::string& what) {
     throw Error(what + ": not a numeric array (numpy dtype " + std::string(py::str(array.attr("dtype"))) + ")");
   bool shareable = py::cast<bool>(array.attr("dtype").attr("isnative"));
   for (auto stride : array.attr("strides")) shareable = shareable && py::cast<int64_t>(stride) >= 0;
-  if (!shareable) array = np.attr("ascontiguousarray")(array, py::arg("dtype") = array.attr("dtype").attr("newbyteorder")("="));
+  if (!shareable)
+    array = np.attr("ascontiguousarray")(array, py::arg("dtype") = array.attr("dtype").attr("newbyteorder")("="));
   // Read-only arrays (PIL's np.asarray) are shared too: geo never writes into its inputs, so torch's
   // warning about writing through the tensor does not apply.
   py::module_ warnings = py::module_::import("warnings");
@@ -52,8 +53,10 @@ torch::Tensor image_arg(py::handle object, const std::string& what) {
   if (t.dim() == 4 && t.size(3) == 3) return t.permute({0, 3, 1, 2});
   std::string shape;
   for (auto s : t.sizes()) shape += (shape.empty() ? "" : "x") + std::to_string(s);
-  throw Error(what + ": an image array must be HxWx3 or BxHxWx3 RGB (channels last, as imageio, PIL and OpenCV give "
-              "them; torch tensors are 3xHxW), got " + (shape.empty() ? "a scalar" : shape));
+  throw Error(what +
+              ": an image array must be HxWx3 or BxHxWx3 RGB (channels last, as imageio, PIL and OpenCV give "
+              "them; torch tensors are 3xHxW), got " +
+              (shape.empty() ? "a scalar" : shape));
 }
 
 py::dict as_dict(const std::map<std::string, double>& values) {

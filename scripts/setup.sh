@@ -70,6 +70,7 @@ if [ "$TORCH" = system ]; then
     libopenblas0-pthread  # without it Debian's LibTorch uses the reference BLAS: 17-25x slower matmuls
     # The Python module (python/) on the same LibTorch, and its tests.
     python3-numpy python3-yaml python3-dev pybind11-dev python3-pytest python3-onnx
+    clang-format  # the style check of the suite (Format.SourcesFollowClangFormat; clang-format 14 here)
   )
 fi
 if [ "$OPENCV" = 1 ]; then PACKAGES+=(libopencv-dev); fi

@@ -14,8 +14,7 @@ inline SynthOptions tiny_options() {
   return o;
 }
 
-inline std::string write_small_world(const std::string& name, int64_t frames, int flow_pairs,
-                                     int64_t odometry_frames) {
+inline std::string write_small_world(const std::string& name, int64_t frames, int flow_pairs, int64_t odometry_frames) {
   auto o = SynthOptions::preset_named("tiny");
   o.train_drives = 1;
   o.test_drives = 1;

@@ -47,7 +47,8 @@ class ProtoReader {
     }
     throw std::runtime_error("varint too long");
   }
-  template <class T> T fixed() {
+  template <class T>
+  T fixed() {
     if (pos_ + sizeof(T) > b_.size()) throw std::runtime_error("truncated fixed field");
     T v;
     std::memcpy(&v, b_.data() + pos_, sizeof(T));
@@ -81,8 +82,10 @@ inline TbValue decode_value(const std::string& b) {
     const auto key = r.varint();
     const int field = static_cast<int>(key >> 3), wire = static_cast<int>(key & 7);
     if (field == 1 && wire == 2) v.tag = r.bytes();
-    else if (field == 2 && wire == 5) { v.has_simple = true; v.simple_value = r.fixed<float>(); }
-    else if (field == 4 && wire == 2) {
+    else if (field == 2 && wire == 5) {
+      v.has_simple = true;
+      v.simple_value = r.fixed<float>();
+    } else if (field == 4 && wire == 2) {
       v.has_image = true;
       const std::string img = r.bytes();
       ProtoReader ir(img);
@@ -136,17 +139,29 @@ inline std::vector<TbEvent> read_tensorboard_file(const std::string& path) {
   std::vector<TbEvent> events;
   size_t pos = 0;
   while (pos < data.size()) {
-    if (pos + 12 > data.size()) { ADD_FAILURE() << path << ": truncated record header at " << pos; break; }
+    if (pos + 12 > data.size()) {
+      ADD_FAILURE() << path << ": truncated record header at " << pos;
+      break;
+    }
     const std::string len_bytes = data.substr(pos, 8);
     uint64_t len;
     uint32_t len_crc, data_crc;
     std::memcpy(&len, len_bytes.data(), 8);
     std::memcpy(&len_crc, data.data() + pos + 8, 4);
-    if (len_crc != masked_crc32c(len_bytes)) { ADD_FAILURE() << path << ": length CRC mismatch at " << pos; break; }
-    if (pos + 12 + len + 4 > data.size()) { ADD_FAILURE() << path << ": truncated record at " << pos; break; }
+    if (len_crc != masked_crc32c(len_bytes)) {
+      ADD_FAILURE() << path << ": length CRC mismatch at " << pos;
+      break;
+    }
+    if (pos + 12 + len + 4 > data.size()) {
+      ADD_FAILURE() << path << ": truncated record at " << pos;
+      break;
+    }
     const std::string payload = data.substr(pos + 12, len);
     std::memcpy(&data_crc, data.data() + pos + 12 + len, 4);
-    if (data_crc != masked_crc32c(payload)) { ADD_FAILURE() << path << ": data CRC mismatch at " << pos; break; }
+    if (data_crc != masked_crc32c(payload)) {
+      ADD_FAILURE() << path << ": data CRC mismatch at " << pos;
+      break;
+    }
     try {
       events.push_back(decode_event(payload));
     } catch (const std::exception& e) {

@@ -30,8 +30,7 @@ inline void remove_made_dirs() {
 
 // A new empty folder under the system temp dir, unique per process and name.
 inline std::string fresh_dir(const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("geo_test_" + name + "_" + std::to_string(::getpid()));
+  const auto dir = std::filesystem::temp_directory_path() / ("geo_test_" + name + "_" + std::to_string(::getpid()));
   std::string error;
   if (!geo::remove_tree(dir.string(), &error)) throw std::runtime_error("fresh_dir: " + error);
   std::filesystem::create_directories(dir);
@@ -84,17 +83,16 @@ inline std::string apps_dir() {
 
 // Message check for EXPECT_THROW-style tests: runs `stmt`, expects a std::exception whose what()
 // contains every given fragment.
-#define GEO_EXPECT_THROW_WITH(stmt, ...)                                              \
-  do {                                                                                \
-    bool geo_thrown = false;                                                          \
-    try {                                                                             \
-      stmt;                                                                           \
-    } catch (const std::exception& geo_e) {                                           \
-      geo_thrown = true;                                                              \
-      const std::string geo_msg = geo_e.what();                                       \
-      for (const std::string& geo_f : std::initializer_list<std::string>{__VA_ARGS__}) \
-        EXPECT_NE(geo_msg.find(geo_f), std::string::npos)                             \
-            << "message '" << geo_msg << "' lacks '" << geo_f << "'";                 \
-    }                                                                                 \
-    EXPECT_TRUE(geo_thrown) << #stmt " did not throw";                                \
+#define GEO_EXPECT_THROW_WITH(stmt, ...)                                                                            \
+  do {                                                                                                              \
+    bool geo_thrown = false;                                                                                        \
+    try {                                                                                                           \
+      stmt;                                                                                                         \
+    } catch (const std::exception& geo_e) {                                                                         \
+      geo_thrown = true;                                                                                            \
+      const std::string geo_msg = geo_e.what();                                                                     \
+      for (const std::string& geo_f : std::initializer_list<std::string>{__VA_ARGS__})                              \
+        EXPECT_NE(geo_msg.find(geo_f), std::string::npos) << "message '" << geo_msg << "' lacks '" << geo_f << "'"; \
+    }                                                                                                               \
+    EXPECT_TRUE(geo_thrown) << #stmt " did not throw";                                                              \
   } while (0)

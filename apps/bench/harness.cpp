@@ -111,14 +111,21 @@ double gflops_of(const std::function<void()>& fn) {
 void print_profile(const std::string& title, const std::function<void()>& fn, int top, bool by_shape) {
   namespace prof = torch::autograd::profiler;
   prof::enableProfilerLegacy(torch::profiler::impl::ProfilerConfig(torch::profiler::impl::ProfilerState::CPU,
-                                                                   /*report_input_shapes=*/by_shape, false, false, false));
+                                                                   /*report_input_shapes=*/by_shape, false, false,
+                                                                   false));
   fn();
   const auto lists = prof::disableProfilerLegacy();
-  struct Stat { double self_us = 0, total_us = 0; int64_t calls = 0; };
+  struct Stat {
+    double self_us = 0, total_us = 0;
+    int64_t calls = 0;
+  };
   std::map<std::string, Stat> stats;
   double all_us = 0;
   for (const auto& list : lists) {  // one list per thread; ranges nest within a thread
-    struct Open { const prof::LegacyEvent* e; double child_us; };
+    struct Open {
+      const prof::LegacyEvent* e;
+      double child_us;
+    };
     std::vector<Open> stack;
     for (const auto& e : list) {
       if (e.kind() == prof::EventKind::PushRange) {
@@ -138,22 +145,24 @@ void print_profile(const std::string& title, const std::function<void()>& fn, in
         st.total_us += us;
         st.self_us += us - open.child_us;
         st.calls += 1;
-        if (!stack.empty()) stack.back().child_us += us; else all_us += us;
+        if (!stack.empty()) stack.back().child_us += us;
+        else all_us += us;
       }
     }
   }
   std::vector<std::pair<std::string, Stat>> sorted(stats.begin(), stats.end());
-  std::sort(sorted.begin(), sorted.end(), [](const auto& a, const auto& b) { return a.second.self_us > b.second.self_us; });
+  std::sort(sorted.begin(), sorted.end(),
+            [](const auto& a, const auto& b) { return a.second.self_us > b.second.self_us; });
   const int width = by_shape ? 90 : 52;
   std::printf("\nprofile: %s (one call, %.0f ms in operators)\n%-*s %7s %10s %10s %6s\n", title.c_str(), all_us / 1e3,
               width, "operator", "calls", "self ms", "total ms", "self%");
   for (int i = 0; i < top && i < static_cast<int>(sorted.size()); ++i) {
     const auto& [name, st] = sorted[i];
-    std::printf("%-*s %7lld %10.1f %10.1f %5.1f%%\n", width, name.substr(0, width).c_str(), static_cast<long long>(st.calls),
-                st.self_us / 1e3, st.total_us / 1e3, 100.0 * st.self_us / std::max(all_us, 1.0));
+    std::printf("%-*s %7lld %10.1f %10.1f %5.1f%%\n", width, name.substr(0, width).c_str(),
+                static_cast<long long>(st.calls), st.self_us / 1e3, st.total_us / 1e3,
+                100.0 * st.self_us / std::max(all_us, 1.0));
   }
 }
-
 
 std::string cpu_description() {
   std::ifstream in("/proc/cpuinfo");
@@ -178,11 +187,11 @@ std::vector<std::string> fr_overheads(const std::vector<Row>& rows) {
   return out;
 }
 
-
 namespace {
 
 // The fastest of `iters` calls of `f` after two warm-ups, in ms.
-template <class F> double best_ms(const torch::Device& device, int iters, F&& f) {
+template <class F>
+double best_ms(const torch::Device& device, int iters, F&& f) {
   std::vector<double> ms;
   for (int i = 0; i < iters + 2; ++i) {
     const auto t0 = std::chrono::steady_clock::now();
@@ -223,7 +232,8 @@ double int8_gops(int64_t n, int iters, std::string& engine) {
 }  // namespace
 
 std::string Ceiling::describe() const {
-  std::string d = fmt::format("{0}x{0} matrix product {1:.0f} GFLOP/s {2}, {3:.0f} GFLOP/s bf16", n, fp32, float_name(), bf16);
+  std::string d =
+      fmt::format("{0}x{0} matrix product {1:.0f} GFLOP/s {2}, {3:.0f} GFLOP/s bf16", n, fp32, float_name(), bf16);
   if (int8 > 0) d += fmt::format(", {:.0f} GOP/s int8 ({})", int8, int8_engine);
   return d;
 }
@@ -283,10 +293,12 @@ std::string markdown_table(const std::vector<Row>& rows, const Ceiling& ceiling,
   std::string md = fmt::format("Machine: {}; LibTorch {}; {}.\nCommand: `{}`\n\n", machine, TORCH_VERSION,
                                geo::local_date(), command);
   if (ceiling.fp32 > 0)
-    md += fmt::format("Ceiling (same threads): {}. A training step counts 3x its forward FLOPs.\n\n",
-                      ceiling.describe());
-  md += "| section | what | FR | batch | parameters | GFLOPs | ms/call | ms/sample | samples/s | peak MB | GFLOP/s | of ceiling |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    md +=
+        fmt::format("Ceiling (same threads): {}. A training step counts 3x its forward FLOPs.\n\n", ceiling.describe());
+  md +=
+      "| section | what | FR | batch | parameters | GFLOPs | ms/call | ms/sample | samples/s | peak MB | GFLOP/s | of "
+      "ceiling |\n"
+      "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& r : rows)
     md += fmt::format("| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n", r.section, r.name, r.fr,
                       r.batch, r.params > 0 ? std::to_string(r.params) : "-", fmt_num(r.gflops, "{:.2f}"),
@@ -307,17 +319,19 @@ std::string json_report(const std::vector<Row>& rows, const Ceiling& ceiling, co
      << ",\n  \"bn_folded\": " << (h.bn_folded ? "true" : "false") << ",\n  \"cpu_flags\": \"" << cpu_flags()
      << "\",\n  \"ceiling_gflops_fp32\": " << json_num(ceiling.fp32)
      << ",\n  \"ceiling_gflops_bf16\": " << json_num(ceiling.bf16)
-     << ",\n  \"ceiling_gops_int8\": " << json_num(ceiling.int8) << ",\n  \"int8_engine\": \"" << ceiling.int8_engine << "\""
+     << ",\n  \"ceiling_gops_int8\": " << json_num(ceiling.int8) << ",\n  \"int8_engine\": \"" << ceiling.int8_engine
+     << "\""
      << ",\n  \"ceiling_tf32\": " << (ceiling.tf32 ? "true" : "false") << ",\n  \"rows\": [\n";
   for (size_t i = 0; i < rows.size(); ++i) {
     const auto& r = rows[i];
     const double ceil = ceiling.of(r), achieved = r.gflops_per_s();
-    js << fmt::format("    {{\"section\": \"{}\", \"what\": \"{}\", \"fr\": \"{}\", \"batch\": {}, "
-                      "\"parameters\": {}, \"gflops\": {}, \"ms\": {}, \"ms_per_sample\": {}, "
-                      "\"samples_per_s\": {}, \"peak_mb\": {}, \"gflops_per_s\": {}, \"of_ceiling\": {}}}{}\n",
-                      r.section, r.name, r.fr, r.batch, r.params, json_num(r.gflops), json_num(r.ms),
-                      json_num(r.per_sample_ms), json_num(r.samples_per_s), json_num(r.peak_mb), json_num(achieved),
-                      json_num(achieved > 0 && ceil > 0 ? achieved / ceil : -1), i + 1 < rows.size() ? "," : "");
+    js << fmt::format(
+        "    {{\"section\": \"{}\", \"what\": \"{}\", \"fr\": \"{}\", \"batch\": {}, "
+        "\"parameters\": {}, \"gflops\": {}, \"ms\": {}, \"ms_per_sample\": {}, "
+        "\"samples_per_s\": {}, \"peak_mb\": {}, \"gflops_per_s\": {}, \"of_ceiling\": {}}}{}\n",
+        r.section, r.name, r.fr, r.batch, r.params, json_num(r.gflops), json_num(r.ms), json_num(r.per_sample_ms),
+        json_num(r.samples_per_s), json_num(r.peak_mb), json_num(achieved),
+        json_num(achieved > 0 && ceil > 0 ? achieved / ceil : -1), i + 1 < rows.size() ? "," : "");
   }
   js << "  ]\n}\n";
   return js.str();

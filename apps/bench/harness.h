@@ -15,15 +15,15 @@ namespace geo::bench {
 struct Row {
   std::string section;  // params | infer | train | comm | loader | ceiling
   std::string name;
-  std::string fr;       // on | off | -
+  std::string fr;  // on | off | -
   int64_t batch = 0;
   int64_t params = 0;
-  double ms = -1;       // median per call; < 0: not timed
+  double ms = -1;  // median per call; < 0: not timed
   double per_sample_ms = -1;
   double samples_per_s = -1;
   double peak_mb = -1;
-  double gflops = -1;   // per call: one forward pass (params, infer), forward + backward (train: 3x forward)
-  bool bf16 = false;    // which ceiling the row is measured against: bf16's, int8's, else fp32's
+  double gflops = -1;  // per call: one forward pass (params, infer), forward + backward (train: 3x forward)
+  bool bf16 = false;   // which ceiling the row is measured against: bf16's, int8's, else fp32's
   bool int8 = false;
 
   // Achieved GFLOP/s (gflops per call over its median time); < 0 when either is unknown.
@@ -43,7 +43,8 @@ struct Ceiling {
   bool tf32 = false;  // CUDA with TF32 allowed (run.precision tf32): the float32 product runs on TF32 tensor cores
   double of(const Row& r) const { return r.int8 ? int8 : r.bf16 ? bf16 : fp32; }
   const char* float_name() const { return tf32 ? "fp32 (TF32)" : "fp32"; }
-  std::string describe() const;  // "2048x2048 matrix product 205 GFLOP/s fp32, 420 GFLOP/s bf16, 850 GOP/s int8 (onednn)"
+  std::string describe()
+      const;  // "2048x2048 matrix product 205 GFLOP/s fp32, 420 GFLOP/s bf16, 850 GOP/s int8 (onednn)"
 };
 
 // Times a [n,n] x [n,n] product in fp32, bf16 and (CPU) int8 on `device`: the fastest of `iters`

@@ -12,12 +12,23 @@ std::string escaped(const std::string& text) {
   std::string out;
   for (const char c : text) {
     switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      case '\'': out += "&#39;"; break;
-      default: out += c;
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      case '\'':
+        out += "&#39;";
+        break;
+      default:
+        out += c;
     }
   }
   return out;
@@ -76,8 +87,8 @@ std::string report_html(const Report& r) {
     << ".frames td{border-top:1px solid #ddd}.frames img{width:" << r.width << "px;max-width:30vw}\n"
     << "pre{background:#f4f4f4;padding:.8em}\n</style>\n</head>\n<body>\n"
     << "<h1>geo_infer: " << escaped(r.input) << "</h1>\n<table class=\"facts\">\n"
-    << "<tr><th>input</th><td>" << escaped(r.input) << " (" << r.frames << " frame" << (r.frames == 1 ? "" : "s") << ", "
-    << r.input_width << "x" << r.input_height << ")</td></tr>\n"
+    << "<tr><th>input</th><td>" << escaped(r.input) << " (" << r.frames << " frame" << (r.frames == 1 ? "" : "s")
+    << ", " << r.input_width << "x" << r.input_height << ")</td></tr>\n"
     << "<tr><th>model</th><td>" << escaped(r.checkpoint) << " (" << r.width << "x" << r.height << ", "
     << escaped(r.precision) << ", " << escaped(r.device) << ")</td></tr>\n";
   if (r.camera.size() == 4)
@@ -89,18 +100,22 @@ std::string report_html(const Report& r) {
                             : std::string("the network's own (monocular: unknown); --camera-height gives metres"))
     << "</td></tr>\n</table>\n";
   if (r.trajectory)
-    h << "<h2>Trajectory</h2>\n<p>Top view" << (r.ground_truth ? "; the ground truth in black, the estimate scale-aligned to it" : "")
-      << " (trajectory.txt: KITTI pose file).</p>\n" << image("trajectory.png", "trajectory") << "\n";
+    h << "<h2>Trajectory</h2>\n<p>Top view"
+      << (r.ground_truth ? "; the ground truth in black, the estimate scale-aligned to it" : "")
+      << " (trajectory.txt: KITTI pose file).</p>\n"
+      << image("trajectory.png", "trajectory") << "\n";
   if (!r.rows.empty()) {
     h << "<h2>Frames</h2>\n";
     if (static_cast<int64_t>(r.rows.size()) < r.frames)
-      h << "<p>" << r.rows.size() << " of " << r.frames << " frames, spread over the clip; every frame's outputs are in this folder.</p>\n";
+      h << "<p>" << r.rows.size() << " of " << r.frames
+        << " frames, spread over the clip; every frame's outputs are in this folder.</p>\n";
     h << "<table class=\"frames\">\n<tr><th>frame</th><th>input</th><th>disparity</th><th>flow to the next</th></tr>\n";
     for (size_t i = 0; i < r.rows.size(); ++i) {
       const std::string& n = r.rows[i];
       h << "<tr><td>" << escaped(n) << "</td><td>" << image(input_image_name(n), n + " input") << "</td><td>"
         << image(n + "-disp.png", n + " disparity") << "</td><td>"
-        << (i < r.row_flow.size() && r.row_flow[i] ? image(n + "-flow.png", n + " flow") : std::string("-")) << "</td></tr>\n";
+        << (i < r.row_flow.size() && r.row_flow[i] ? image(n + "-flow.png", n + " flow") : std::string("-"))
+        << "</td></tr>\n";
     }
     h << "</table>\n";
   }

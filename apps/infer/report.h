@@ -18,9 +18,9 @@ struct Report {
   std::string camera_source;                  // where the camera came from, in words
   double camera_height = 0;                   // metres; 0: depth in the network's unknown scale
   bool trajectory = false, ground_truth = false;
-  std::vector<std::string> rows;              // names of the frames shown, in order
-  std::vector<bool> row_flow;                 // whether <name>-flow.png exists for each row
-  std::string timing;                         // StepTimes::table text; empty without one
+  std::vector<std::string> rows;  // names of the frames shown, in order
+  std::vector<bool> row_flow;     // whether <name>-flow.png exists for each row
+  std::string timing;             // StepTimes::table text; empty without one
 };
 
 // The frames a report shows: all of them up to `max_rows`, else `max_rows` spread evenly over the

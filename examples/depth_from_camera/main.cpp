@@ -45,7 +45,8 @@ int main(int argc, char** argv) {
           std::printf("  in metres: median %.2f m (x %.3f)\n", metres.flatten().median().item<float>(), scale.at(0));
           if (previous.defined()) {  // the step from the previous frame, at the previous frame's scale
             const torch::Tensor step = model.metric_relative_pose(previous, image, std::stod(argv[4])).cpu();
-            std::printf("  moved %.2f m since the previous frame\n", step.slice(0, 0, 3).select(1, 3).norm().item<float>());
+            std::printf("  moved %.2f m since the previous frame\n",
+                        step.slice(0, 0, 3).select(1, 3).norm().item<float>());
           }
         } catch (const geo::Error& e) {  // no road in front of the camera: said, not guessed
           std::printf("  in metres: %s\n", e.what());

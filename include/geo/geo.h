@@ -53,15 +53,15 @@ struct LoadOptions {
 
 // What a model expects and has (read from the file).
 struct ModelSpec {
-  int64_t height = 0, width = 0;   // network input size
-  int64_t seq_length = 0;          // frames the PoseNet takes (3 or 5)
-  int encoder_depth = 0;           // ResNet depth of DepthNet and FlowNet
-  bool feature_refinement = false; // FR attention blocks (the paper)
-  bool has_flow = false;           // a FlowNet (else flow() is the rigid flow of depth and motion)
-  std::string source;              // the file it was loaded from
-  bool learns_intrinsics = false;  // its PoseNet predicts the camera (intrinsics() and the default
-                                   // of every `intrinsics` argument below)
-  std::string precision = "fp32";  // fp32, bf16 or int8 (LoadOptions::precision resolved)
+  int64_t height = 0, width = 0;    // network input size
+  int64_t seq_length = 0;           // frames the PoseNet takes (3 or 5)
+  int encoder_depth = 0;            // ResNet depth of DepthNet and FlowNet
+  bool feature_refinement = false;  // FR attention blocks (the paper)
+  bool has_flow = false;            // a FlowNet (else flow() is the rigid flow of depth and motion)
+  std::string source;               // the file it was loaded from
+  bool learns_intrinsics = false;   // its PoseNet predicts the camera (intrinsics() and the default
+                                    // of every `intrinsics` argument below)
+  std::string precision = "fp32";   // fp32, bf16 or int8 (LoadOptions::precision resolved)
 };
 
 // [3,H,W] uint8 tensor from interleaved RGB bytes (row stride in bytes; 0 = 3 * width). Copies.
@@ -113,10 +113,10 @@ class TensorFrames : public FrameSource {
 
 // One frame of a sequence as Model::run_sequence hands it on, at the frame's size, on the CPU.
 struct SequenceFrame {
-  size_t index = 0;       // from 0
-  torch::Tensor image;    // the frame as the source gave it
-  torch::Tensor depth;    // [H,W] float: depth() times `scale`
-  double scale = 1.0;     // the frame's factor (Model::sequence_scales; 1 without one)
+  size_t index = 0;     // from 0
+  torch::Tensor image;  // the frame as the source gave it
+  torch::Tensor depth;  // [H,W] float: depth() times `scale`
+  double scale = 1.0;   // the frame's factor (Model::sequence_scales; 1 without one)
   // To the next frame, for models of 3-frame snippets (undefined for the last frame and for 5-frame
   // models): the full and the rigid flow [2,H,W] (Model::flow_parts, the previous frame as the
   // snippet's first) and the motion [4,4] of this frame's camera into the next one's.
@@ -237,7 +237,7 @@ class Model {
  private:
   explicit Model(std::shared_ptr<Impl> impl) : impl_(std::move(impl)) {}
   void check_int8_possible() const;  // throws geo::Error saying why this model cannot become int8
-  std::shared_ptr<Impl> impl_;  // shared by copies; the networks are only read after loading
+  std::shared_ptr<Impl> impl_;       // shared by copies; the networks are only read after loading
 };
 
 }  // namespace geo

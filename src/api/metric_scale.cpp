@@ -42,17 +42,19 @@ torch::Tensor Model::metric_depth(const torch::Tensor& image, double camera_heig
     const bool batched = depth.dim() == 3;
     const int64_t B = batched ? depth.size(0) : 1, H = depth.size(-2), W = depth.size(-1);
     // Not given: the learned camera (a batch's mean), else KITTI's proportions.
-    const auto K = intrinsics.defined()         ? checked_intrinsics(intrinsics, H, W, false)
-                   : spec().learns_intrinsics ? (batched ? this->intrinsics(image, image).mean(0) : this->intrinsics(image, image))
-                                              : kitti_like_intrinsics(H, W);
+    const auto K = intrinsics.defined() ? checked_intrinsics(intrinsics, H, W, false)
+                   : spec().learns_intrinsics
+                       ? (batched ? this->intrinsics(image, image).mean(0) : this->intrinsics(image, image))
+                       : kitti_like_intrinsics(H, W);
     auto out = depth.clone();
     if (scale) scale->clear();
     for (int64_t b = 0; b < B; ++b) {
       auto d = batched ? out[b] : out;
       const auto plane = fit_road_plane(d.cpu(), K);
       if (!plane.found)
-        throw Error("no road plane in the lower image" + std::string(batched ? " of batch item " + std::to_string(b) : "") +
-                    ": " + plane.why + " (metric depth needs a flat road in front of the camera)");
+        throw Error("no road plane in the lower image" +
+                    std::string(batched ? " of batch item " + std::to_string(b) : "") + ": " + plane.why +
+                    " (metric depth needs a flat road in front of the camera)");
       const double s = camera_height_scale(plane, camera_height);
       d.mul_(s);
       if (scale) scale->push_back(s);
@@ -91,7 +93,7 @@ double Model::road_scale(const torch::Tensor& frame, double camera_height, const
   const auto d = depth(frame);
   return guarded("geo::Model::road_scale", [&] {
     if (d.dim() != 2) throw Error("road_scale takes one image ([3,H,W]), got " + c10::str(frame.sizes()));
-    const auto K = intrinsics.defined()         ? checked_intrinsics(intrinsics, d.size(0), d.size(1), false)
+    const auto K = intrinsics.defined()       ? checked_intrinsics(intrinsics, d.size(0), d.size(1), false)
                    : spec().learns_intrinsics ? this->intrinsics(frame, frame)
                                               : kitti_like_intrinsics(d.size(0), d.size(1));
     const auto plane = fit_road_plane(d.cpu(), K);
@@ -99,7 +101,9 @@ double Model::road_scale(const torch::Tensor& frame, double camera_height, const
   });
 }
 
-std::vector<double> smooth_road_scales(const std::vector<double>& road_scales) { return smoothed_scales(road_scales, ""); }
+std::vector<double> smooth_road_scales(const std::vector<double>& road_scales) {
+  return smoothed_scales(road_scales, "");
+}
 
 torch::Tensor chain_poses(const std::vector<torch::Tensor>& motions, const std::vector<double>& scales) {
   return guarded("chain_poses", [&] {

@@ -24,16 +24,14 @@
 
 namespace geo {
 
-
 namespace {
 
 namespace fs = std::filesystem;
 namespace F = torch::nn::functional;
 
-
 ModelSpec public_spec(const NetworkSpec& s, bool has_flow, const std::string& source) {
-  return ModelSpec{s.height, s.width, s.seq_length, s.model.encoder_depth, s.model.use_fr, has_flow, source,
-                   s.model.learn_intrinsics};
+  return ModelSpec{s.height,       s.width,  s.seq_length, s.model.encoder_depth,
+                   s.model.use_fr, has_flow, source,       s.model.learn_intrinsics};
 }
 
 // LoadOptions::precision.
@@ -64,8 +62,10 @@ torch::Tensor prepare(const Model::Impl& m, const torch::Tensor& image, int64_t*
                       const char* what) {
   if (!image.defined()) throw Error(std::string(what) + ": the image tensor is undefined");
   if (!(image.dim() == 3 || image.dim() == 4) || image.size(-3) != 3)
-    throw Error(std::string(what) + ": expected an RGB image [3,H,W] or a batch [B,3,H,W], got " + c10::str(image.sizes()));
-  if (image.size(-1) < 1 || image.size(-2) < 1) throw Error(std::string(what) + ": the image is empty " + c10::str(image.sizes()));
+    throw Error(std::string(what) + ": expected an RGB image [3,H,W] or a batch [B,3,H,W], got " +
+                c10::str(image.sizes()));
+  if (image.size(-1) < 1 || image.size(-2) < 1)
+    throw Error(std::string(what) + ": the image is empty " + c10::str(image.sizes()));
   *batched = image.dim() == 4;
   auto x = *batched ? image : image.unsqueeze(0);
   *H = x.size(2);
@@ -84,8 +84,8 @@ torch::Tensor prepare(const Model::Impl& m, const torch::Tensor& image, int64_t*
       throw Error(std::string(what) + ": " + std::to_string((~torch::isfinite(x)).sum().item<int64_t>()) +
                   " pixel value(s) are NaN or infinite");
     if (lo < -1 || hi > 2)
-      throw Error(std::string(what) + ": floating-point pixels must lie in [0, 1], this image spans [" +
-                  c10::str(lo) + ", " + c10::str(hi) + "] (divide 0..255 values by 255, or pass uint8)");
+      throw Error(std::string(what) + ": floating-point pixels must lie in [0, 1], this image spans [" + c10::str(lo) +
+                  ", " + c10::str(hi) + "] (divide 0..255 values by 255, or pass uint8)");
   } else {
     throw Error(std::string(what) + ": pixels must be uint8 or floating point, got " + c10::toString(x.scalar_type()));
   }
@@ -103,7 +103,8 @@ struct PreparedPair {
   int64_t H = 0, W = 0;
   bool batched = false;
 };
-PreparedPair prepare_pair(const Model::Impl& m, const torch::Tensor& from, const torch::Tensor& to, const std::string& what) {
+PreparedPair prepare_pair(const Model::Impl& m, const torch::Tensor& from, const torch::Tensor& to,
+                          const std::string& what) {
   PreparedPair p;
   int64_t H2 = 0, W2 = 0;
   bool batched2 = false;
@@ -113,7 +114,6 @@ PreparedPair prepare_pair(const Model::Impl& m, const torch::Tensor& from, const
     throw Error("the two images differ in size: " + c10::str(from.sizes()) + " and " + c10::str(to.sizes()));
   return p;
 }
-
 
 // [B,3,3] intrinsics at the network's size from ones at H x W (or KITTI's proportions); undefined
 // when none are given to a model that learns them (predict_pair then uses the learned ones).
@@ -135,7 +135,8 @@ torch::Tensor network_K(const Model::Impl& m, const torch::Tensor& K, int64_t B,
 // [B,C,h,w] -> [B,C,H,W] (bilinear).
 torch::Tensor to_size(const torch::Tensor& x, int64_t H, int64_t W) {
   if (x.size(2) == H && x.size(3) == W) return x;
-  return F::interpolate(x, F::InterpolateFuncOptions().size(std::vector<int64_t>{H, W}).mode(torch::kBilinear).align_corners(false));
+  return F::interpolate(
+      x, F::InterpolateFuncOptions().size(std::vector<int64_t>{H, W}).mode(torch::kBilinear).align_corners(false));
 }
 
 }  // namespace
@@ -145,8 +146,9 @@ torch::Tensor to_size(const torch::Tensor& x, int64_t H, int64_t W) {
 torch::Tensor checked_intrinsics(const torch::Tensor& K, int64_t H, int64_t W, bool batch_allowed) {
   const bool ok = (K.dim() == 2 && K.size(0) == 3 && K.size(1) == 3) ||
                   (batch_allowed && K.dim() == 3 && K.size(1) == 3 && K.size(2) == 3);
-  if (!ok) throw Error(std::string("intrinsics must be [3,3]") + (batch_allowed ? " or [B,3,3]" : "") +
-                       " (pixels of the given image), got " + c10::str(K.sizes()));
+  if (!ok)
+    throw Error(std::string("intrinsics must be [3,3]") + (batch_allowed ? " or [B,3,3]" : "") +
+                " (pixels of the given image), got " + c10::str(K.sizes()));
   const auto k = K.to(torch::kCPU, torch::kFloat64).clone();
   if (!torch::isfinite(k).all().item<bool>()) throw Error("intrinsics hold NaN or infinity");
   const auto each = k.reshape({-1, 3, 3});
@@ -182,8 +184,9 @@ void make_ready(Model::Impl& impl, const LoadOptions& options, bool has_flow, co
 }
 
 Error needs_calibration() {
-  return Error("precision 'int8' needs calibration frames (LoadOptions::calibration): a few frames like those the "
-               "model will see (or a model file written in int8: geo_export --int8)");
+  return Error(
+      "precision 'int8' needs calibration frames (LoadOptions::calibration): a few frames like those the "
+      "model will see (or a model file written in int8: geo_export --int8)");
 }
 
 }  // namespace
@@ -238,7 +241,8 @@ const ModelSpec& Model::spec() const { return impl_->spec; }
 
 void Model::check_int8_possible() const {
   if (impl_->spec.precision == "int8") throw Error("the model is int8 already");
-  if (impl_->spec.precision != "fp32") throw Error("int8 starts from an fp32 model, this one is " + impl_->spec.precision);
+  if (impl_->spec.precision != "fp32")
+    throw Error("int8 starts from an fp32 model, this one is " + impl_->spec.precision);
   if (!impl_->device.is_cpu()) throw Error("int8 runs on the CPU, this model is on " + impl_->device.str());
   if (select_int8_engine().empty()) throw Error("this LibTorch has no quantized engine (onednn, x86, fbgemm, qnnpack)");
 }
@@ -249,9 +253,11 @@ void Model::quantize_int8(const std::vector<torch::Tensor>& frames) {
     if (frames.empty()) {  // the calibration the file keeps
       const std::string& file = impl_->spec.source;
       if (!impl_->depth_ranges) throw needs_calibration();
-      if (nets.flow && !impl_->flow_ranges) throw Error(file + " keeps int8 ranges of its DepthNet but not of its FlowNet");
+      if (nets.flow && !impl_->flow_ranges)
+        throw Error(file + " keeps int8 ranges of its DepthNet but not of its FlowNet");
       if (!impl_->pose_ranges)
-        throw Error(file + " keeps int8 ranges of its DepthNet but not of its PoseNet (an int8 file of an earlier geo): "
+        throw Error(file +
+                    " keeps int8 ranges of its DepthNet but not of its PoseNet (an int8 file of an earlier geo): "
                     "calibrate it again (geo_export --int8, or LoadOptions::calibration)");
       check_int8_possible();
       const int64_t H = impl_->spec.height, W = impl_->spec.width;
@@ -264,7 +270,8 @@ void Model::quantize_int8(const std::vector<torch::Tensor>& frames) {
     check_int8_possible();
     const size_t needed = nets.flow ? 2 : 1;
     if (frames.size() < needed)
-      throw Error(std::to_string(frames.size()) + " calibration frame(s): a model with a FlowNet needs at least 2 "
+      throw Error(std::to_string(frames.size()) +
+                  " calibration frame(s): a model with a FlowNet needs at least 2 "
                   "(consecutive), one without at least 1");
     std::vector<EncoderDecoderImpl*> nets_int8{nets.depth->net.get()};
     if (nets.flow) nets_int8.push_back(nets.flow->net.get());
@@ -315,7 +322,8 @@ torch::Tensor Model::pose(const std::vector<torch::Tensor>& frames) const {
   return guarded("geo::Model::pose", [&] {
     const auto L = static_cast<size_t>(impl_->spec.seq_length);
     if (frames.size() != L)
-      throw Error("the PoseNet of this model takes " + std::to_string(L) + " frames, got " + std::to_string(frames.size()));
+      throw Error("the PoseNet of this model takes " + std::to_string(L) + " frames, got " +
+                  std::to_string(frames.size()));
     torch::InferenceMode guard;
     std::vector<torch::Tensor> x;
     int64_t H = 0, W = 0;
@@ -325,7 +333,8 @@ torch::Tensor Model::pose(const std::vector<torch::Tensor>& frames) const {
       x.push_back(prepare(*impl_, frames[i], i == 0 ? &H : &h, i == 0 ? &W : &w, &batched, "pose"));
       if (i > 0 && (h != H || w != W || x[i].size(0) != x[0].size(0)))
         throw Error("frame " + std::to_string(i) + " is " + c10::str(frames[i].sizes()) + " but frame 0 is " +
-                    c10::str(frames[0].sizes()) + ": the frames of a snippet (or pair) must have one size, from one camera");
+                    c10::str(frames[0].sizes()) +
+                    ": the frames of a snippet (or pair) must have one size, from one camera");
     }
     const size_t k = L / 2;
     std::vector<torch::Tensor> srcs;
@@ -338,7 +347,8 @@ torch::Tensor Model::pose(const std::vector<torch::Tensor>& frames) const {
   });
 }
 
-torch::Tensor Model::relative_pose(const torch::Tensor& from, const torch::Tensor& to, const torch::Tensor& intrinsics) const {
+torch::Tensor Model::relative_pose(const torch::Tensor& from, const torch::Tensor& to,
+                                   const torch::Tensor& intrinsics) const {
   (void)intrinsics;  // the PoseNet sees images only; kept for symmetry with flow()
   return guarded("geo::Model::relative_pose", [&] {
     // A snippet with `from` as the target, repeated before it, and `to` after it.
@@ -405,7 +415,8 @@ Model::FlowParts Model::flow_parts(const torch::Tensor& from, const torch::Tenso
 torch::Tensor Model::intrinsics(const torch::Tensor& from, const torch::Tensor& to) const {
   return guarded("geo::Model::intrinsics", [&] {
     if (!impl_->spec.learns_intrinsics)
-      throw Error("this model does not learn the camera (trained with model.learn_intrinsics off): give the intrinsics");
+      throw Error(
+          "this model does not learn the camera (trained with model.learn_intrinsics off): give the intrinsics");
     torch::InferenceMode guard;
     const auto [a, b, H, W, batched] = prepare_pair(*impl_, from, to, "intrinsics");
     const auto L = impl_->spec.seq_length, k = L / 2;

@@ -33,28 +33,44 @@ struct ParseContext {
   }
 };
 
-template <class T> void read_value(const YAML::Node& node, const std::string& path, T& out,
-                                   ParseContext& ctx);
+template <class T>
+void read_value(const YAML::Node& node, const std::string& path, T& out, ParseContext& ctx);
 
-template <class T> const char* type_name();
-template <> const char* type_name<int>() { return "an integer"; }
-template <> const char* type_name<int64_t>() { return "an integer"; }
-template <> const char* type_name<double>() { return "a number"; }
-template <> const char* type_name<bool>() { return "a boolean (true/false)"; }
-template <> const char* type_name<std::string>() { return "a string"; }
+template <class T>
+const char* type_name();
+template <>
+const char* type_name<int>() {
+  return "an integer";
+}
+template <>
+const char* type_name<int64_t>() {
+  return "an integer";
+}
+template <>
+const char* type_name<double>() {
+  return "a number";
+}
+template <>
+const char* type_name<bool>() {
+  return "a boolean (true/false)";
+}
+template <>
+const char* type_name<std::string>() {
+  return "a string";
+}
 
-template <class T> void read_scalar(const YAML::Node& node, const std::string& path, T& out,
-                                    ParseContext& ctx) {
+template <class T>
+void read_scalar(const YAML::Node& node, const std::string& path, T& out, ParseContext& ctx) {
   std::string shown = node.IsScalar() ? "'" + node.Scalar() + "'" : "a list or map";
   if (!node.IsScalar())
-    throw ConfigError(ctx.where(path, node) + ": key '" + path + "' must be " + type_name<T>() +
-                      ", got " + shown);
+    throw ConfigError(ctx.where(path, node) + ": key '" + path + "' must be " + type_name<T>() + ", got " + shown);
   if constexpr (std::is_integral_v<T> && !std::is_same_v<T, bool>) {
     // Plain decimal only: yaml-cpp reads 010 as octal 8 and 0x10 as 16, which nobody means in a
     // count of iterations.
     const std::string& t = node.Scalar();
     const size_t digits = !t.empty() && (t[0] == '+' || t[0] == '-') ? 1 : 0;  // where the digits start
-    const bool decimal = !t.empty() && t.size() > digits && t.find_first_not_of("0123456789", digits) == std::string::npos &&
+    const bool decimal = !t.empty() && t.size() > digits &&
+                         t.find_first_not_of("0123456789", digits) == std::string::npos &&
                          (t.size() == digits + 1 || t[digits] != '0');
     if (!decimal)
       throw ConfigError(ctx.where(path, node) + ": key '" + path + "' must be " + type_name<T>() +
@@ -63,13 +79,11 @@ template <class T> void read_scalar(const YAML::Node& node, const std::string& p
   try {
     out = node.as<T>();
   } catch (const YAML::Exception&) {
-    throw ConfigError(ctx.where(path, node) + ": key '" + path + "' must be " + type_name<T>() +
-                      ", got " + shown);
+    throw ConfigError(ctx.where(path, node) + ": key '" + path + "' must be " + type_name<T>() + ", got " + shown);
   }
   if constexpr (std::is_floating_point_v<T>) {
     if (!std::isfinite(out))
-      throw ConfigError(ctx.where(path, node) + ": key '" + path + "' must be finite, got " +
-                        shown);
+      throw ConfigError(ctx.where(path, node) + ": key '" + path + "' must be finite, got " + shown);
   }
 }
 
@@ -79,7 +93,8 @@ struct ParseVisitor {
   ParseContext& ctx;
   std::vector<std::string> known;
 
-  template <class T> void operator()(const char* key, T& out) {
+  template <class T>
+  void operator()(const char* key, T& out) {
     known.emplace_back(key);
     const YAML::Node child = node[key];
     if (!child.IsDefined()) return;  // keep the default
@@ -88,8 +103,8 @@ struct ParseVisitor {
       // An empty section keeps its defaults; an empty value ("iterations:", "iterations: ~") is a
       // value left out by mistake, never silently the default.
       if constexpr (std::is_arithmetic_v<T> || std::is_same_v<T, std::string> || std::is_enum_v<T>)
-        throw ConfigError(ctx.where(path, child) + ": key '" + path + "' has no value (give one, or leave the key out " +
-                          "for the default)");
+        throw ConfigError(ctx.where(path, child) + ": key '" + path +
+                          "' has no value (give one, or leave the key out " + "for the default)");
       return;
     }
     ctx.record(path, child);
@@ -106,36 +121,26 @@ struct ParseVisitor {
       const int line = kv.first.Mark().line + 1;
       if (!seen.emplace(key, line).second)
         throw ConfigError(ctx.where(join(prefix, key), kv.first) + ": key '" + join(prefix, key) +
-                          "' is given twice (lines " + std::to_string(seen[key]) + " and " + std::to_string(line) + ")");
+                          "' is given twice (lines " + std::to_string(seen[key]) + " and " + std::to_string(line) +
+                          ")");
       if (std::find(known.begin(), known.end(), key) != known.end()) continue;
       std::string valid;
       for (const auto& k : known) valid += (valid.empty() ? "" : ", ") + k;
-      throw ConfigError(ctx.where(join(prefix, key), kv.first) + ": unknown key '" +
-                        join(prefix, key) + "' (valid keys here: " + valid + ")");
+      throw ConfigError(ctx.where(join(prefix, key), kv.first) + ": unknown key '" + join(prefix, key) +
+                        "' (valid keys here: " + valid + ")");
     }
   }
 };
 
-void read_value(const YAML::Node& n, const std::string& p, int& o, ParseContext& c) {
-  read_scalar(n, p, o, c);
-}
-void read_value(const YAML::Node& n, const std::string& p, int64_t& o, ParseContext& c) {
-  read_scalar(n, p, o, c);
-}
-void read_value(const YAML::Node& n, const std::string& p, double& o, ParseContext& c) {
-  read_scalar(n, p, o, c);
-}
-void read_value(const YAML::Node& n, const std::string& p, bool& o, ParseContext& c) {
-  read_scalar(n, p, o, c);
-}
-void read_value(const YAML::Node& n, const std::string& p, std::string& o, ParseContext& c) {
-  read_scalar(n, p, o, c);
-}
+void read_value(const YAML::Node& n, const std::string& p, int& o, ParseContext& c) { read_scalar(n, p, o, c); }
+void read_value(const YAML::Node& n, const std::string& p, int64_t& o, ParseContext& c) { read_scalar(n, p, o, c); }
+void read_value(const YAML::Node& n, const std::string& p, double& o, ParseContext& c) { read_scalar(n, p, o, c); }
+void read_value(const YAML::Node& n, const std::string& p, bool& o, ParseContext& c) { read_scalar(n, p, o, c); }
+void read_value(const YAML::Node& n, const std::string& p, std::string& o, ParseContext& c) { read_scalar(n, p, o, c); }
 
-template <class T> void read_value(const YAML::Node& node, const std::string& path,
-                                   std::vector<T>& out, ParseContext& ctx) {
-  if (!node.IsSequence())
-    throw ConfigError(ctx.where(path, node) + ": key '" + path + "' must be a list");
+template <class T>
+void read_value(const YAML::Node& node, const std::string& path, std::vector<T>& out, ParseContext& ctx) {
+  if (!node.IsSequence()) throw ConfigError(ctx.where(path, node) + ": key '" + path + "' must be a list");
   out.clear();
   for (size_t i = 0; i < node.size(); ++i) {
     T item{};
@@ -146,7 +151,8 @@ template <class T> void read_value(const YAML::Node& node, const std::string& pa
   }
 }
 
-template <class E> void read_enum(const YAML::Node& node, const std::string& path, E& out, ParseContext& ctx) {
+template <class E>
+void read_enum(const YAML::Node& node, const std::string& path, E& out, ParseContext& ctx) {
   std::string name;
   read_scalar(node, path, name, ctx);
   for (const auto& n : enum_names(E{}))
@@ -154,8 +160,8 @@ template <class E> void read_enum(const YAML::Node& node, const std::string& pat
       out = n.value;
       return;
     }
-  throw ConfigError(ctx.where(path, node) + ": key '" + path + "' must be one of " + valid_names<E>() +
-                    ", got '" + name + "'");
+  throw ConfigError(ctx.where(path, node) + ": key '" + path + "' must be one of " + valid_names<E>() + ", got '" +
+                    name + "'");
 }
 
 void read_value(const YAML::Node& node, const std::string& path, NetworkSet& out, ParseContext& ctx) {
@@ -173,8 +179,8 @@ void read_value(const YAML::Node& node, const std::string& path, NetworkSet& out
 }
 
 // Structs: anything with fields(); enumerations by name.
-template <class T> void read_value(const YAML::Node& node, const std::string& path, T& out,
-                                   ParseContext& ctx) {
+template <class T>
+void read_value(const YAML::Node& node, const std::string& path, T& out, ParseContext& ctx) {
   if constexpr (std::is_enum_v<T>) {
     read_enum(node, path, out, ctx);
   } else {
@@ -191,7 +197,8 @@ template <class T> void read_value(const YAML::Node& node, const std::string& pa
 
 struct EmitVisitor {
   YAML::Emitter& out;
-  template <class T> void operator()(const char* key, T& value) {
+  template <class T>
+  void operator()(const char* key, T& value) {
     out << YAML::Key << key << YAML::Value;
     emit(value);
   }
@@ -203,7 +210,8 @@ struct EmitVisitor {
     if (v.empty()) out << YAML::DoubleQuoted << v;
     else out << v;
   }
-  template <class T> void emit(std::vector<T>& v) {
+  template <class T>
+  void emit(std::vector<T>& v) {
     out << YAML::BeginSeq;
     for (auto& item : v) emit(item);
     out << YAML::EndSeq;
@@ -222,7 +230,8 @@ struct EmitVisitor {
     for (double item : v) out << format_double(item);
     out << YAML::EndSeq;
   }
-  template <class T> void emit(T& s) {
+  template <class T>
+  void emit(T& s) {
     if constexpr (std::is_enum_v<T>) {
       out << name_of(s);
     } else {
@@ -258,9 +267,11 @@ std::vector<std::string> split_key(const std::string& key) {
     }
     const auto end = key.find_first_of(".[]", i);
     const std::string name = key.substr(i, end == std::string::npos ? std::string::npos : end - i);
-    if (name.empty() || !std::all_of(name.begin(), name.end(), [](char c) { return std::isalnum(static_cast<unsigned char>(c)) || c == '_'; }))
+    if (name.empty() || !std::all_of(name.begin(), name.end(),
+                                     [](char c) { return std::isalnum(static_cast<unsigned char>(c)) || c == '_'; }))
       throw bad("'" + name + "' is not a key name");
-    if (std::all_of(name.begin(), name.end(), ::isdigit) && name.size() > 6) throw bad("index " + name + " is too large");
+    if (std::all_of(name.begin(), name.end(), ::isdigit) && name.size() > 6)
+      throw bad("index " + name + " is too large");
     parts.push_back(name);
     if (end == std::string::npos) break;
     if (key[end] == ']') throw bad("unexpected ']'");
@@ -281,8 +292,7 @@ std::string canonical_key(const std::vector<std::string>& parts) {
 
 void apply_override(YAML::Node& root, const std::string& text, ParseContext& ctx) {
   const auto eq = text.find('=');
-  if (eq == std::string::npos || eq == 0)
-    throw ConfigError("--set '" + text + "': expected key.path=value");
+  if (eq == std::string::npos || eq == 0) throw ConfigError("--set '" + text + "': expected key.path=value");
   const auto parts = split_key(text.substr(0, eq));
   if (parts.empty()) throw ConfigError("--set '" + text + "': empty key");
   if (text.find_first_not_of(" \t", eq + 1) == std::string::npos)
@@ -301,8 +311,8 @@ void apply_override(YAML::Node& root, const std::string& text, ParseContext& ctx
       const size_t k = std::stoul(part);
       if (!node.IsSequence() || k >= node.size())
         throw ConfigError("--set '" + text + "': '" + canonical_key({parts.begin(), parts.begin() + i + 1}) +
-                          "' does not exist (the list has " +
-                          std::to_string(node.IsSequence() ? node.size() : 0) + " entries)");
+                          "' does not exist (the list has " + std::to_string(node.IsSequence() ? node.size() : 0) +
+                          " entries)");
       node.reset(node[k]);
     } else {
       if (!node[part]) {
@@ -344,8 +354,7 @@ Config parse_config(const std::string& yaml_text, const std::string& source,
   try {
     root = YAML::Load(yaml_text);
   } catch (const YAML::ParserException& e) {
-    throw ConfigError(source + " line " + std::to_string(e.mark.line + 1) +
-                      ": malformed YAML: " + e.msg);
+    throw ConfigError(source + " line " + std::to_string(e.mark.line + 1) + ": malformed YAML: " + e.msg);
   }
   if (root.IsNull()) root = YAML::Node(YAML::NodeType::Map);
   if (!root.IsMap())
@@ -420,7 +429,6 @@ std::string to_yaml(const Config& config) {
   return std::string(out.c_str()) + "\n";
 }
 
-
 void Config::validate() const {
   Checker c(lines, source);
   {
@@ -440,8 +448,7 @@ void Config::validate() const {
   for (size_t i = 0; i < stages.size(); ++i) {
     Checker::Scope s(c, "stages[" + std::to_string(i) + "]");
     stages[i].validate(c);
-    c.require(names.insert(stages[i].name).second, "name", stages[i].name,
-              "stage names must be unique");
+    c.require(names.insert(stages[i].name).second, "name", stages[i].name, "stage names must be unique");
   }
   {
     Checker::Scope s(c, "optimizer");

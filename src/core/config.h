@@ -32,7 +32,8 @@ struct Config {
   LoggingConfig logging;
   RunConfig run;
 
-  template <class V> void fields(V& v) {
+  template <class V>
+  void fields(V& v) {
     v("model", model);
     v("data", data);
     v("loss", loss);

@@ -19,13 +19,15 @@ class Checker;  // collects validation failures with key paths and YAML lines (c
 // Enumerated keys: read from YAML by name once, at parsing (an unknown name is a ConfigError listing
 // the valid ones), written back by name, compared as values everywhere else. Each enumeration's
 // section declares enum_names(E) listing its names.
-template <class E> struct EnumName {
+template <class E>
+struct EnumName {
   E value;
   const char* name;
 };
 
 // The YAML name of an enumerated value ("nearest").
-template <class E> const char* name_of(E value) {
+template <class E>
+const char* name_of(E value) {
   for (const auto& n : enum_names(E{}))
     if (n.value == value) return n.name;
   return "?";

@@ -31,9 +31,7 @@ class Checker {
   // RAII prefix for nested structs: Checker::Scope s(c, "stages[0]");
   class Scope {
    public:
-    Scope(Checker& c, const std::string& name) : c_(c), saved_(c.prefix_) {
-      c_.prefix_ = join(saved_, name);
-    }
+    Scope(Checker& c, const std::string& name) : c_(c), saved_(c.prefix_) { c_.prefix_ = join(saved_, name); }
     ~Scope() { c_.prefix_ = saved_; }
 
    private:
@@ -41,15 +39,14 @@ class Checker {
     std::string saved_;
   };
 
-  template <class T> void require(bool ok, const char* key, const T& value, const std::string& rule) {
+  template <class T>
+  void require(bool ok, const char* key, const T& value, const std::string& rule) {
     if (ok) return;
     const std::string path = join(prefix_, key);
     std::string where;
     auto it = lines_.find(path);
-    if (it != lines_.end())
-      where = it->second > 0 ? " (line " + std::to_string(it->second) + ")" : " (from --set)";
-    else
-      where = " (default)";
+    if (it != lines_.end()) where = it->second > 0 ? " (line " + std::to_string(it->second) + ")" : " (from --set)";
+    else where = " (default)";
     errors_.push_back("key '" + path + "' = " + to_text(value) + where + ": " + rule);
   }
 
@@ -75,12 +72,14 @@ inline constexpr const char* kCountRange = "must be in 1..1000000000000";
 
 // The keys of a section (camera, video) whose values differ from the section's defaults, with
 // their values as the configuration shows them.
-template <class Section> std::vector<std::pair<std::string, std::string>> non_defaults(const Section& section) {
+template <class Section>
+std::vector<std::pair<std::string, std::string>> non_defaults(const Section& section) {
   Section given = section, plain;
   std::vector<std::pair<std::string, std::string>> a, b, out;
   auto into = [](std::vector<std::pair<std::string, std::string>>& list) {
     return [&list](const char* name, const auto& value) {
-      if constexpr (std::is_same_v<std::decay_t<decltype(value)>, bool>) list.emplace_back(name, value ? "true" : "false");
+      if constexpr (std::is_same_v<std::decay_t<decltype(value)>, bool>)
+        list.emplace_back(name, value ? "true" : "false");
       else list.emplace_back(name, to_text(value));
     };
   };

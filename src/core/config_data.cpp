@@ -10,9 +10,11 @@
 namespace geo {
 
 const std::vector<EnumName<DataFormat>>& enum_names(DataFormat) {
-  static const std::vector<EnumName<DataFormat>> n{
-      {DataFormat::kAuto, "auto"}, {DataFormat::kKittiRaw, "kitti_raw"}, {DataFormat::kPacked, "packed"},
-      {DataFormat::kSynthetic, "synthetic"}, {DataFormat::kVideo, "video"}};
+  static const std::vector<EnumName<DataFormat>> n{{DataFormat::kAuto, "auto"},
+                                                   {DataFormat::kKittiRaw, "kitti_raw"},
+                                                   {DataFormat::kPacked, "packed"},
+                                                   {DataFormat::kSynthetic, "synthetic"},
+                                                   {DataFormat::kVideo, "video"}};
   return n;
 }
 
@@ -33,7 +35,8 @@ void DataConfig::validate(Checker& c) const {
   c.require(one_of(val_split, {"list", "geonet"}), "val_split", val_split, "must be list or geonet");
   c.require(split != "odometry" || !sequences.empty(), "sequences", sequences,
             "must name at least one KITTI odometry sequence when data.split is odometry");
-  c.require(!split.empty(), "split", split, "must not be empty (eigen_zhou, kitti_raw_stereo, raw_minus_kitti2015, odometry, ...)");
+  c.require(!split.empty(), "split", split,
+            "must not be empty (eigen_zhou, kitti_raw_stereo, raw_minus_kitti2015, odometry, ...)");
   {
     Checker::Scope s(c, "augment");
     augment.validate(c);
@@ -67,9 +70,11 @@ void DataConfig::validate(Checker& c) const {
 
 void CameraConfig::validate(Checker& c) const {
   const int given = !intrinsics.empty() + !calib_file.empty() + (fov_deg != 0);
-  c.require(given <= 1, "intrinsics", intrinsics, "give one of camera.intrinsics, camera.calib_file or camera.fov_deg, not several");
+  c.require(given <= 1, "intrinsics", intrinsics,
+            "give one of camera.intrinsics, camera.calib_file or camera.fov_deg, not several");
   if (!intrinsics.empty()) {
-    c.require(intrinsics.size() == 4, "intrinsics", intrinsics, "must be [fx, fy, cx, cy] in pixels of the original frames");
+    c.require(intrinsics.size() == 4, "intrinsics", intrinsics,
+              "must be [fx, fy, cx, cy] in pixels of the original frames");
     if (intrinsics.size() == 4) {
       // The frames' size is known once a clip is opened (data/video/clip_camera.cpp checks again).
       const auto problem = camera_problem(intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]);
@@ -88,7 +93,8 @@ void VideoDataConfig::validate(Checker& c) const {
             static_threshold, "must be in [0, 1) (a fraction of changed pixels; 0 keeps every frame)");
   c.require(std::isfinite(standing_parallax) && standing_parallax >= 0 && standing_parallax <= 10, "standing_parallax",
             standing_parallax, "must be in [0, 10] pixels at a width of 416 (0 turns the standing-camera test off)");
-  c.require(std::isfinite(standing_share) && standing_share > 0 && standing_share <= 1, "standing_share", standing_share,
+  c.require(std::isfinite(standing_share) && standing_share > 0 && standing_share <= 1, "standing_share",
+            standing_share,
             "must be in (0, 1] (the share of tracked features a rotation alone explains when the camera stands)");
   c.require(std::isfinite(val_fraction) && val_fraction >= 0 && val_fraction <= 0.5, "val_fraction", val_fraction,
             "must be in [0, 0.5]");
@@ -106,14 +112,11 @@ void SynthDataConfig::validate(Checker& c) const {
 
 void AugmentConfig::validate(Checker& c) const {
   c.require(scale_max >= 1.0 && scale_max <= 2.0, "scale_max", scale_max, "must be in [1, 2] (GeoNet: 1.15)");
-  c.require(photometric_prob >= 0 && photometric_prob <= 1, "photometric_prob", photometric_prob,
-            "must be in [0, 1]");
-  c.require(gamma_min > 0 && gamma_min <= gamma_max, "gamma_min", gamma_min,
-            "must be > 0 and <= gamma_max");
-  c.require(brightness_min > 0 && brightness_min <= brightness_max, "brightness_min",
-            brightness_min, "must be > 0 and <= brightness_max");
-  c.require(color_min > 0 && color_min <= color_max, "color_min", color_min,
-            "must be > 0 and <= color_max");
+  c.require(photometric_prob >= 0 && photometric_prob <= 1, "photometric_prob", photometric_prob, "must be in [0, 1]");
+  c.require(gamma_min > 0 && gamma_min <= gamma_max, "gamma_min", gamma_min, "must be > 0 and <= gamma_max");
+  c.require(brightness_min > 0 && brightness_min <= brightness_max, "brightness_min", brightness_min,
+            "must be > 0 and <= brightness_max");
+  c.require(color_min > 0 && color_min <= color_max, "color_min", color_min, "must be > 0 and <= color_max");
 }
 
 }  // namespace geo

@@ -50,13 +50,16 @@ std::string resolve_config_path(const std::string& name) {
     spdlog::info("config {}", fs::absolute(name, ec).string());
     return name;
   }
-  if (fs::exists(name, ec)) throw ConfigError("config '" + name + "' " + unreadable_file_reason(name) + " (a YAML file is needed)");
+  if (fs::exists(name, ec))
+    throw ConfigError("config '" + name + "' " + unreadable_file_reason(name) + " (a YAML file is needed)");
   const fs::path dir = shipped_config_dir();
   // Only a bare name means a shipped config: a path with a folder that does not exist is a typo,
   // and silently training the shipped file of the same name would hide it.
   if (fs::path(name).has_parent_path())
-    throw ConfigError("config '" + name + "' not found (a path with a folder is used as given; bare names such as "
-                      "stage1.yaml are looked up in " + dir.string() + ")");
+    throw ConfigError("config '" + name +
+                      "' not found (a path with a folder is used as given; bare names such as "
+                      "stage1.yaml are looked up in " +
+                      dir.string() + ")");
   std::vector<fs::path> candidates{dir / name};
   if (fs::path(name).extension() != ".yaml") candidates.push_back(dir / (name + ".yaml"));
   for (const auto& candidate : candidates)

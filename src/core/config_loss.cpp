@@ -28,9 +28,8 @@ void LossConfig::validate(Checker& c) const {
   c.require(occ_alpha2 >= 0, "occ_alpha2", occ_alpha2, "must be >= 0");
   c.require(consistency_a >= 0, "consistency_a", consistency_a, "must be >= 0");
   c.require(consistency_b >= 0, "consistency_b", consistency_b, "must be >= 0");
-  const bool range_ok = image_range.size() == 2 &&
-                        ((image_range[0] == -1.0 && image_range[1] == 1.0) ||
-                         (image_range[0] == 0.0 && image_range[1] == 1.0));
+  const bool range_ok = image_range.size() == 2 && ((image_range[0] == -1.0 && image_range[1] == 1.0) ||
+                                                    (image_range[0] == 0.0 && image_range[1] == 1.0));
   c.require(range_ok, "image_range", image_range, "must be [-1, 1] (GeoNet) or [0, 1]");
 }
 

@@ -17,11 +17,11 @@ const std::vector<EnumName<FlowMask>>& enum_names(FlowMask);
 const std::vector<EnumName<FlowReduction>>& enum_names(FlowReduction);
 
 struct LossConfig {
-  double ssim_alpha = 0.85;          // alpha*(1-SSIM)/2 + (1-alpha)*L1 (paper, GeoNet)
-  double occ_alpha1 = 0.01;          // occlusion test, eq. 13 alpha1 (paper)
-  double occ_alpha2 = 0.5;           // occlusion test, eq. 13 alpha2 (paper)
-  double consistency_a = 3.0;        // geometric consistency bound a (eq. 15, GeoNet alpha)
-  double consistency_b = 0.05;       // geometric consistency bound b (eq. 15, GeoNet beta)
+  double ssim_alpha = 0.85;              // alpha*(1-SSIM)/2 + (1-alpha)*L1 (paper, GeoNet)
+  double occ_alpha1 = 0.01;              // occlusion test, eq. 13 alpha1 (paper)
+  double occ_alpha2 = 0.5;               // occlusion test, eq. 13 alpha2 (paper)
+  double consistency_a = 3.0;            // geometric consistency bound a (eq. 15, GeoNet alpha)
+  double consistency_b = 0.05;           // geometric consistency bound b (eq. 15, GeoNet beta)
   bool consistency_scale_factor = true;  // GeoNet multiplies the difference norm by 2^s
   // Range the images are mapped to before the photometric error, the smoothness edge weights and
   // the FlowNet's error channel: GeoNet computes them on its [-1,1] network input (so its L1 term
@@ -31,7 +31,7 @@ struct LossConfig {
   // Out-of-view samples of every warp: zeros (GeoNet's bilinear_sampler returns 0 outside
   // [0,W-1)x[0,H-1)) or border (clamped to the edge pixels).
   Sampler sampler = Sampler::kZeros;
-  bool mask_out_of_view = false;     // drop samples that leave the image from L_br and L_fr (off: GeoNet)
+  bool mask_out_of_view = false;  // drop samples that leave the image from L_br and L_fr (off: GeoNet)
   // Mask of the flow reconstruction L_fr: occlusion (paper eq. 13, alpha1/alpha2) or consistency
   // (GeoNet: the eq. 15 mask, consistency_a/consistency_b).
   FlowMask flow_mask = FlowMask::kOcclusion;
@@ -39,8 +39,8 @@ struct LossConfig {
   // sources: one bad source cannot dominate) or geonet (GeoNet's build_losses: one masked mean over
   // all sources pooled, times num_source / 2, and no mask at all when the stage's l_fg is 0).
   FlowReduction flow_reduction = FlowReduction::kPerSource;
-  bool min_reprojection = false;     // per-pixel minimum over sources (monodepth2; off)
-  bool automask = false;             // auto-mask static pixels (monodepth2; off)
+  bool min_reprojection = false;  // per-pixel minimum over sources (monodepth2; off)
+  bool automask = false;          // auto-mask static pixels (monodepth2; off)
   // GeoNet's L_br carries a factor num_source / 2 (geonet_model.py: build_losses): 1 for 3-frame
   // snippets, 2 for the 5-frame odometry snippets, where it weighs L_br twice against L_ds.
   bool rigid_source_factor = true;
@@ -49,7 +49,8 @@ struct LossConfig {
   // through them as well as through the rigid flow added to the residual); false: computed without.
   bool flow_input_gradient = true;
 
-  template <class V> void fields(V& v) {
+  template <class V>
+  void fields(V& v) {
     v("ssim_alpha", ssim_alpha);
     v("occ_alpha1", occ_alpha1);
     v("occ_alpha2", occ_alpha2);

@@ -10,14 +10,15 @@
 namespace geo {
 
 struct OptimizerConfig {
-  std::string type = "adam";   // Adam (paper Sec. 4.2)
-  double beta1 = 0.9;          // paper Sec. 4.2
-  double beta2 = 0.999;        // paper Sec. 4.2
-  double eps = 1e-8;           // PyTorch / TensorFlow default
-  double weight_decay = 0.0;   // none in the paper
-  double grad_clip = 0.0;      // max global gradient norm; 0 = off (not in the paper)
+  std::string type = "adam";  // Adam (paper Sec. 4.2)
+  double beta1 = 0.9;         // paper Sec. 4.2
+  double beta2 = 0.999;       // paper Sec. 4.2
+  double eps = 1e-8;          // PyTorch / TensorFlow default
+  double weight_decay = 0.0;  // none in the paper
+  double grad_clip = 0.0;     // max global gradient norm; 0 = off (not in the paper)
 
-  template <class V> void fields(V& v) {
+  template <class V>
+  void fields(V& v) {
     v("type", type);
     v("beta1", beta1);
     v("beta2", beta2);

@@ -12,8 +12,8 @@ const std::vector<EnumName<Precision>>& enum_names(Precision) {
 }
 
 bool is_device_name(const std::string& name) {
-  const bool cuda_n = name.rfind("cuda:", 0) == 0 && name.size() > 5 &&
-                      name.find_first_not_of("0123456789", 5) == std::string::npos;
+  const bool cuda_n =
+      name.rfind("cuda:", 0) == 0 && name.size() > 5 && name.find_first_not_of("0123456789", 5) == std::string::npos;
   return one_of(name, {"auto", "cpu", "cuda"}) || cuda_n;
 }
 

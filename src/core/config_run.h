@@ -27,7 +27,8 @@ struct DistributedConfig {
   // DistributedDataParallel); false: all after backward.
   bool overlap = true;
 
-  template <class V> void fields(V& v) {
+  template <class V>
+  void fields(V& v) {
     v("backend", backend);
     v("timeout_s", timeout_s);
     v("shard_data", shard_data);
@@ -58,7 +59,8 @@ struct RunConfig {
   bool deterministic = false;
   DistributedConfig distributed;
 
-  template <class V> void fields(V& v) {
+  template <class V>
+  void fields(V& v) {
     v("name", name);
     v("dir", dir);
     v("seed", seed);

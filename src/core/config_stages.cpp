@@ -34,9 +34,9 @@ void LossWeights::validate(Checker& c) const {
 
 void StageConfig::validate(Checker& c) const {
   // Stage names become file names (checkpoints/<name>-<iteration>.pt, summaries/<name>-...).
-  const bool plain = !name.empty() && name != "." && name != ".." &&
-                     name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_.-") ==
-                         std::string::npos;
+  const bool plain =
+      !name.empty() && name != "." && name != ".." &&
+      name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_.-") == std::string::npos;
   c.require(plain, "name", name, "must be a plain name of letters, digits, '_', '-' and '.' (it names files)");
   // best-<name>.pt must not read as a checkpoint <stage>-NNNNNNNN.pt.
   const bool numbered = name.size() >= 9 && name[name.size() - 9] == '-' &&
@@ -44,15 +44,16 @@ void StageConfig::validate(Checker& c) const {
   c.require(!numbered, "name", name, "must not end in '-' and eight digits (the checkpoints' numbering)");
   c.require(iterations > 0 && iterations <= kMaxCount, "iterations", iterations, kCountRange);
   c.require(!train.empty(), "train", train.names(), "must name at least one of depth, pose, flow");
-  c.require(learning_rate > 0 && learning_rate <= 1, "learning_rate", learning_rate, "must be in (0, 1] (GeoNet: 0.0002)");
+  c.require(learning_rate > 0 && learning_rate <= 1, "learning_rate", learning_rate,
+            "must be in (0, 1] (GeoNet: 0.0002)");
   c.require(batch_size >= 1 && batch_size <= 65536, "batch_size", batch_size, "must be in 1..65536");
   c.require(lr_schedule != LrScheduleKind::kStep || lr_step > 0, "lr_step", lr_step,
             "must be > 0 when lr_schedule is step");
   c.require(lr_step >= 0 && lr_step <= kMaxCount, "lr_step", lr_step, "must be in 0..1000000000000");
   c.require(lr_gamma > 0 && lr_gamma <= 1, "lr_gamma", lr_gamma, "must be in (0, 1]");
   if (uses_flow())
-    c.require(weights.flow > 0 || weights.flow_smooth > 0 || weights.flow_consistency > 0,
-              "train", train.names(), "trains flow, so at least one flow loss weight must be > 0");
+    c.require(weights.flow > 0 || weights.flow_smooth > 0 || weights.flow_consistency > 0, "train", train.names(),
+              "trains flow, so at least one flow loss weight must be > 0");
   Checker::Scope s(c, "weights");
   weights.validate(c);
 }

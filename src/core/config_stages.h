@@ -26,16 +26,17 @@ struct NetworkSet {
 
 // Weights of the total loss, eq. 16 (paper): l_br = 1, l_fr = 1, l_ds = 0.5, l_fs = 0.2, l_fg = 0.2.
 struct LossWeights {
-  double rigid = 1.0;              // l_br, rigid reconstruction
-  double flow = 1.0;               // l_fr, flow reconstruction
-  double disp_smooth = 0.5;        // l_ds, disparity smoothness
-  double flow_smooth = 0.2;        // l_fs, flow smoothness
-  double flow_consistency = 0.2;   // l_fg, geometric consistency
+  double rigid = 1.0;             // l_br, rigid reconstruction
+  double flow = 1.0;              // l_fr, flow reconstruction
+  double disp_smooth = 0.5;       // l_ds, disparity smoothness
+  double flow_smooth = 0.2;       // l_fs, flow smoothness
+  double flow_consistency = 0.2;  // l_fg, geometric consistency
   // Nothing standing on the road lies beyond it (losses/ground_prior.h): 0 in the paper's recipe;
   // configs/video.yaml turns it on for traffic (cars moving with the camera).
   double ground = 0.0;
 
-  template <class V> void fields(V& v) {
+  template <class V>
+  void fields(V& v) {
     v("rigid", rigid);
     v("flow", flow);
     v("disp_smooth", disp_smooth);
@@ -49,14 +50,14 @@ struct LossWeights {
 // One training stage (paper Sec. 4.2). Stages are data, not flags.
 struct StageConfig {
   std::string name = "stage1";
-  int64_t iterations = 350000;       // stage 1: 350k (paper); stage 2: 1500k
-  NetworkSet train = {true, true, false};  // networks updated: depth, pose, flow
-  double learning_rate = 2e-4;       // Adam lr (paper Sec. 4.2)
-  int batch_size = 4;                // paper Sec. 4.2
+  int64_t iterations = 350000;                             // stage 1: 350k (paper); stage 2: 1500k
+  NetworkSet train = {true, true, false};                  // networks updated: depth, pose, flow
+  double learning_rate = 2e-4;                             // Adam lr (paper Sec. 4.2)
+  int batch_size = 4;                                      // paper Sec. 4.2
   LrScheduleKind lr_schedule = LrScheduleKind::kConstant;  // constant | step
-  int64_t lr_step = 0;               // step schedule: multiply by lr_gamma every lr_step iterations
+  int64_t lr_step = 0;  // step schedule: multiply by lr_gamma every lr_step iterations
   double lr_gamma = 0.5;
-  std::string init;                  // checkpoint (or run folder) to start from; empty = scratch
+  std::string init;  // checkpoint (or run folder) to start from; empty = scratch
   // BatchNorm normalises with, and keeps, the running statistics of the init (eval mode) while the
   // weights train: fine-tuning on a few frames (geo_infer --refine), whose batch statistics would
   // replace what training on many frames measured.
@@ -66,7 +67,8 @@ struct StageConfig {
   bool trains(Net net) const { return train.has(net); }
   bool uses_flow() const { return train.flow; }  // flow terms are computed only in stages training flow
 
-  template <class V> void fields(V& v) {
+  template <class V>
+  void fields(V& v) {
     v("name", name);
     v("iterations", iterations);
     v("train", train);

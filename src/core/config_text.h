@@ -40,7 +40,8 @@ inline std::string format_double(double v) {
   return os.str();
 }
 
-template <class T> std::string to_text(const T& v) {
+template <class T>
+std::string to_text(const T& v) {
   if constexpr (std::is_enum_v<T>) {
     return std::string("'") + name_of(v) + "'";
   } else {
@@ -62,7 +63,8 @@ inline std::string to_text(const std::vector<double>& v) {
   return s + "]";
 }
 
-template <class E> std::string valid_names() {
+template <class E>
+std::string valid_names() {
   std::string all;
   for (const auto& n : enum_names(E{})) all += (all.empty() ? "" : ", ") + std::string(n.name);
   return all;

@@ -78,8 +78,8 @@ std::string link_target(const std::string& path) {
 int own_descriptor(const std::string& path) {
   if (path == "/dev/stdout") return 1;
   if (path == "/dev/stderr") return 2;
-  for (const std::string& prefix : {std::string("/dev/fd/"), std::string("/proc/self/fd/"),
-                                    "/proc/" + std::to_string(::getpid()) + "/fd/"}) {
+  for (const std::string& prefix :
+       {std::string("/dev/fd/"), std::string("/proc/self/fd/"), "/proc/" + std::to_string(::getpid()) + "/fd/"}) {
     if (path.rfind(prefix, 0) != 0) continue;
     const std::string n = path.substr(prefix.size());
     if (n.empty() || n.size() > 9 || n.find_first_not_of("0123456789") != std::string::npos) return -1;
@@ -174,14 +174,21 @@ std::string unreadable_file_reason(const std::string& path) {
   std::error_code ec;
   const auto status = std::filesystem::status(path, ec);
   switch (status.type()) {
-    case std::filesystem::file_type::regular: return "";
-    case std::filesystem::file_type::directory: return "is a folder, not a file";
-    case std::filesystem::file_type::fifo: return "is a FIFO (named pipe), not a file";
+    case std::filesystem::file_type::regular:
+      return "";
+    case std::filesystem::file_type::directory:
+      return "is a folder, not a file";
+    case std::filesystem::file_type::fifo:
+      return "is a FIFO (named pipe), not a file";
     case std::filesystem::file_type::character:
-    case std::filesystem::file_type::block: return "is a device, not a file";
-    case std::filesystem::file_type::socket: return "is a socket, not a file";
-    case std::filesystem::file_type::not_found: return "no such file";
-    default: return ec ? "cannot be read (" + ec.message() + ")" : "is not a regular file";
+    case std::filesystem::file_type::block:
+      return "is a device, not a file";
+    case std::filesystem::file_type::socket:
+      return "is a socket, not a file";
+    case std::filesystem::file_type::not_found:
+      return "no such file";
+    default:
+      return ec ? "cannot be read (" + ec.message() + ")" : "is not a regular file";
   }
 }
 
@@ -216,7 +223,8 @@ void check_outputs(const std::vector<NamedPath>& outputs, const std::vector<std:
     for (const auto& in : inputs) {
       if (in.empty() || !fs::exists(in, ec)) continue;
       if (fs::equivalent(path, in, ec))
-        throw std::runtime_error(option + " '" + path + "' is '" + in + "', which this command reads: refusing to replace it");
+        throw std::runtime_error(option + " '" + path + "' is '" + in +
+                                 "', which this command reads: refusing to replace it");
       if (fs::is_directory(in, ec)) {
         const auto dir = fs::weakly_canonical(in, ec);
         const auto rel = where.lexically_relative(dir);
@@ -226,7 +234,8 @@ void check_outputs(const std::vector<NamedPath>& outputs, const std::vector<std:
       }
     }
     if (!force && fs::is_regular_file(path, ec) && is_zip_archive(path))
-      throw std::runtime_error(option + " '" + path + "' is a model or checkpoint (a zip archive): refusing to replace it");
+      throw std::runtime_error(option + " '" + path +
+                               "' is a model or checkpoint (a zip archive): refusing to replace it");
   }
 }
 
@@ -240,7 +249,7 @@ int remove_entry(const char* path, const struct stat*, int, struct FTW*) {
 }  // namespace
 
 bool remove_tree(const std::string& path, std::string* error) {
-  struct stat st{};
+  struct stat st {};
   if (::lstat(path.c_str(), &st) != 0 && errno == ENOENT) return true;
   std::string why;
   remove_tree_error = &why;

@@ -94,7 +94,8 @@ std::string StepTimes::table(int64_t items, const char* unit, double wall) const
   const double n = static_cast<double>(std::max<int64_t>(items, 1));
   std::string out;
   char line[160];
-  std::snprintf(line, sizeof line, "%-28s %9s %12s %7s\n", "step", "total s", std::string(std::string("ms/") + unit).c_str(), "share");
+  std::snprintf(line, sizeof line, "%-28s %9s %12s %7s\n", "step", "total s",
+                std::string(std::string("ms/") + unit).c_str(), "share");
   out += line;
   for (const auto& [name, seconds] : steps_) {
     std::snprintf(line, sizeof line, "%-28s %9.2f %12.1f %6.1f%%\n", name.c_str(), seconds, 1000 * seconds / n,

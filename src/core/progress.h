@@ -40,7 +40,8 @@ class Progress {
 // order the steps first ran. Calls from one thread.
 class StepTimes {
  public:
-  template <class F> decltype(auto) time(const std::string& step, F&& f) {
+  template <class F>
+  decltype(auto) time(const std::string& step, F&& f) {
     const Scope scope(*this, step);
     return f();
   }

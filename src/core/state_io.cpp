@@ -36,8 +36,7 @@ void write_state(const torch::nn::Module& module, torch::serialize::OutputArchiv
   }
 }
 
-void read_state(torch::nn::Module& module, torch::serialize::InputArchive& archive,
-                const std::string& what) {
+void read_state(torch::nn::Module& module, torch::serialize::InputArchive& archive, const std::string& what) {
   auto state = state_of(module);
   const auto keys = archive.keys();
   const std::set<std::string> in_file(keys.begin(), keys.end());
@@ -124,7 +123,8 @@ torch::serialize::InputArchive open_archive(const std::string& path) {
   checked.get();
   if (other) std::rethrow_exception(other);
   if (!unreadable.empty())
-    throw std::runtime_error(path + ": not a readable geo/LibTorch file, truncated or of another kind (" + unreadable + ")");
+    throw std::runtime_error(path + ": not a readable geo/LibTorch file, truncated or of another kind (" + unreadable +
+                             ")");
   return archive;
 }
 

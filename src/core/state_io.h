@@ -29,7 +29,6 @@ torch::serialize::InputArchive open_archive(const std::string& path);
 // read_state converts them back to the module's type.
 void write_state(const torch::nn::Module& module, torch::serialize::OutputArchive& archive,
                  std::optional<torch::ScalarType> floating = std::nullopt);
-void read_state(torch::nn::Module& module, torch::serialize::InputArchive& archive,
-                const std::string& what);
+void read_state(torch::nn::Module& module, torch::serialize::InputArchive& archive, const std::string& what);
 
 }  // namespace geo

@@ -11,8 +11,7 @@ namespace geo {
 // Checks `t.dim() == expected.size()` and every size that is not -1.
 // Message: "depth must be [B,1,H,W] ... got [2, 3, 4]" style: "<name> must have shape
 // [-1, 1, -1, -1] (-1 = any), got [2, 3, 4, 5]".
-inline void check_shape(const torch::Tensor& t, const char* name,
-                        std::initializer_list<int64_t> expected) {
+inline void check_shape(const torch::Tensor& t, const char* name, std::initializer_list<int64_t> expected) {
   TORCH_CHECK(t.defined(), name, " is undefined");
   bool ok = t.dim() == static_cast<int64_t>(expected.size());
   int64_t i = 0;
@@ -21,8 +20,7 @@ inline void check_shape(const torch::Tensor& t, const char* name,
     ok = e < 0 || t.size(i) == e;
     ++i;
   }
-  TORCH_CHECK(ok, name, " must have shape ", c10::IntArrayRef(expected), " (-1 = any), got ",
-              t.sizes());
+  TORCH_CHECK(ok, name, " must have shape ", c10::IntArrayRef(expected), " (-1 = any), got ", t.sizes());
 }
 
 // Whether the hand-written CPU kernels (fused photometric error, FR pooling) take `t`: a CPU

@@ -99,8 +99,8 @@ bool verify_zip_checksums(const std::string& path) {
     // ZIP64: the locator just before the record points at the ZIP64 end record.
     const uint64_t eocd_at = f.size() - tail_len + eocd;
     unsigned char loc[20], end64[56];
-    if (eocd_at < 20 || !f.read(eocd_at - 20, loc, 20) || u32(loc) != 0x07064b50u ||
-        !f.read(u64(loc + 8), end64, 56) || u32(end64) != 0x06064b50u)
+    if (eocd_at < 20 || !f.read(eocd_at - 20, loc, 20) || u32(loc) != 0x07064b50u || !f.read(u64(loc + 8), end64, 56) ||
+        u32(end64) != 0x06064b50u)
       throw std::runtime_error(damaged + "its ZIP64 directory is unreadable" + advice);
     entries = u64(end64 + 32), cd_size = u64(end64 + 40), cd_offset = u64(end64 + 48);
   }
@@ -168,14 +168,16 @@ bool verify_zip_checksums(const std::string& path) {
         try {
           auto [data, n] = reader.getRecord(slash == std::string::npos ? r.name : r.name.substr(slash + 1));
           if (n != r.size || crc32(data.get(), n) != r.crc)
-            throw std::runtime_error(damaged + "record '" + r.name + "' fails its CRC-32 check: bytes were altered" + advice);
+            throw std::runtime_error(damaged + "record '" + r.name + "' fails its CRC-32 check: bytes were altered" +
+                                     advice);
         } catch (const c10::Error& e) {
-          throw std::runtime_error(damaged + "record '" + r.name + "' cannot be inflated: " + e.what_without_backtrace() +
-                                   advice);
+          throw std::runtime_error(damaged + "record '" + r.name +
+                                   "' cannot be inflated: " + e.what_without_backtrace() + advice);
         }
       }
     } catch (const c10::Error& e) {
-      throw std::runtime_error(damaged + "LibTorch cannot open it: " + std::string(e.what_without_backtrace()) + advice);
+      throw std::runtime_error(damaged + "LibTorch cannot open it: " + std::string(e.what_without_backtrace()) +
+                               advice);
     }
   }
   return true;

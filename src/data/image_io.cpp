@@ -21,10 +21,10 @@ cv::Mat read_raw(const std::string& path, int flags) {
   try {
     m = cv::imread(path, flags);
   } catch (const cv::Exception& e) {  // e.g. a header claiming more pixels than OpenCV accepts
-    throw std::runtime_error("cannot decode image '" + path + "': " + e.err + " (corrupt, or larger than OpenCV reads)");
+    throw std::runtime_error("cannot decode image '" + path + "': " + e.err +
+                             " (corrupt, or larger than OpenCV reads)");
   }
-  if (m.empty())
-    throw std::runtime_error("cannot decode image '" + path + "' (corrupt or not an image)");
+  if (m.empty()) throw std::runtime_error("cannot decode image '" + path + "' (corrupt or not an image)");
   return m;
 }
 
@@ -39,9 +39,8 @@ void write_raw(const std::string& path, const cv::Mat& m) {
   const auto dot = path.rfind('.');
   const std::string ext = dot == std::string::npos ? ".png" : path.substr(dot);
   const std::string bytes = encode(m, ext, path);
-  std::filesystem::create_directories(std::filesystem::path(path).parent_path().empty()
-                                          ? "."
-                                          : std::filesystem::path(path).parent_path());
+  std::filesystem::create_directories(
+      std::filesystem::path(path).parent_path().empty() ? "." : std::filesystem::path(path).parent_path());
   write_file_atomic(path, bytes);
 }
 
@@ -78,7 +77,9 @@ torch::Tensor mat_to_tensor(const cv::Mat& bgr_any, const std::string& path) {
   cv::Mat f;
   m.convertTo(f, CV_32FC3, m.depth() == CV_16U ? 1.0 / 65535.0 : 1.0 / 255.0);
   // A copy in any case (f's buffer is gone on return; contiguous() would not copy a 1x1 image).
-  return torch::from_blob(f.data, {f.rows, f.cols, 3}, torch::kFloat32).permute({2, 0, 1}).clone(at::MemoryFormat::Contiguous);
+  return torch::from_blob(f.data, {f.rows, f.cols, 3}, torch::kFloat32)
+      .permute({2, 0, 1})
+      .clone(at::MemoryFormat::Contiguous);
 }
 
 cv::Mat tensor_to_bgr8(const torch::Tensor& image) {
@@ -92,13 +93,10 @@ cv::Mat tensor_to_bgr8(const torch::Tensor& image) {
   return bgr;
 }
 
+torch::Tensor read_image(const std::string& path) { return mat_to_tensor(read_raw(path, cv::IMREAD_UNCHANGED), path); }
 
-torch::Tensor read_image(const std::string& path) {
-  return mat_to_tensor(read_raw(path, cv::IMREAD_UNCHANGED), path);
-}
-
-torch::Tensor read_image_resized(const std::string& path, int64_t height, int64_t width,
-                                 int64_t* original_height, int64_t* original_width) {
+torch::Tensor read_image_resized(const std::string& path, int64_t height, int64_t width, int64_t* original_height,
+                                 int64_t* original_width) {
   const cv::Mat m = read_raw(path, cv::IMREAD_UNCHANGED);
   if (original_height) *original_height = m.rows;
   if (original_width) *original_width = m.cols;
@@ -112,34 +110,41 @@ torch::Tensor resized_mat_to_tensor(const cv::Mat& bgr_any, int64_t height, int6
 torch::Tensor resized_mat_to_frame(const cv::Mat& bgr_any, int64_t height, int64_t width, const std::string& path) {
   if (bgr_any.depth() != CV_8U) return resized_mat_to_tensor(bgr_any, height, width, path);
   const cv::Mat m = to_rgb(resized(bgr_any, height, width), path);
-  return torch::from_blob(m.data, {m.rows, m.cols, 3}, torch::kUInt8).permute({2, 0, 1}).clone(at::MemoryFormat::Contiguous);
+  return torch::from_blob(m.data, {m.rows, m.cols, 3}, torch::kUInt8)
+      .permute({2, 0, 1})
+      .clone(at::MemoryFormat::Contiguous);
 }
 
-void write_image(const std::string& path, const torch::Tensor& image) {
-  write_raw(path, tensor_to_bgr8(image));
-}
+void write_image(const std::string& path, const torch::Tensor& image) { write_raw(path, tensor_to_bgr8(image)); }
 
 std::string encode_png(const torch::Tensor& image) { return encode(tensor_to_bgr8(image), ".png", "PNG"); }
 
 // "8-bit", "16-bit", "32-bit float", ...: what an image's pixels are, for error messages.
 static std::string pixel_depth_name(int depth) {
   switch (depth) {
-    case CV_8U: return "8-bit";
-    case CV_8S: return "8-bit signed";
-    case CV_16U: return "16-bit";
-    case CV_16S: return "16-bit signed";
-    case CV_32S: return "32-bit integer";
-    case CV_32F: return "32-bit float";
-    case CV_64F: return "64-bit float";
-    default: return "depth " + std::to_string(depth);
+    case CV_8U:
+      return "8-bit";
+    case CV_8S:
+      return "8-bit signed";
+    case CV_16U:
+      return "16-bit";
+    case CV_16S:
+      return "16-bit signed";
+    case CV_32S:
+      return "32-bit integer";
+    case CV_32F:
+      return "32-bit float";
+    case CV_64F:
+      return "64-bit float";
+    default:
+      return "depth " + std::to_string(depth);
   }
 }
 
 FlowMap read_flow_png(const std::string& path) {
   cv::Mat m = read_raw(path, cv::IMREAD_UNCHANGED);
   if (m.depth() != CV_16U || m.channels() != 3)
-    throw std::runtime_error("flow PNG '" + path +
-                             "' must be 16-bit with 3 channels (KITTI flow format), got " +
+    throw std::runtime_error("flow PNG '" + path + "' must be 16-bit with 3 channels (KITTI flow format), got " +
                              std::to_string(m.channels()) + " channel(s) of " + pixel_depth_name(m.depth()));
   FlowMap out;
   out.flow = torch::empty({2, m.rows, m.cols}, torch::kFloat32);
@@ -162,8 +167,9 @@ FlowMap read_flow_png(const std::string& path) {
 void write_flow_png(const std::string& path, const torch::Tensor& flow, const torch::Tensor& valid) {
   check_shape(flow, "flow", {2, -1, -1});
   auto fl = flow.detach().to(torch::kCPU, torch::kFloat32).contiguous();
-  auto va = valid.defined() ? valid.detach().to(torch::kCPU, torch::kFloat32).reshape({fl.size(1), fl.size(2)}).contiguous()
-                            : torch::ones({fl.size(1), fl.size(2)});
+  auto va = valid.defined()
+                ? valid.detach().to(torch::kCPU, torch::kFloat32).reshape({fl.size(1), fl.size(2)}).contiguous()
+                : torch::ones({fl.size(1), fl.size(2)});
   auto f = fl.accessor<float, 3>();
   auto v = va.accessor<float, 2>();
   cv::Mat m(static_cast<int>(fl.size(1)), static_cast<int>(fl.size(2)), CV_16UC3);
@@ -215,8 +221,8 @@ void write_object_map(const std::string& path, const torch::Tensor& objects) {
   check_shape(o, "object map", {-1, -1});
   const double lo = o.min().item<double>(), hi = o.max().item<double>();
   if (lo < 0 || hi > 255)
-    throw std::runtime_error("object map '" + path + "': values must lie in 0..255, got " + std::to_string(lo) +
-                             ".." + std::to_string(hi));
+    throw std::runtime_error("object map '" + path + "': values must lie in 0..255, got " + std::to_string(lo) + ".." +
+                             std::to_string(hi));
   o = o.to(torch::kUInt8).contiguous();
   const cv::Mat m(static_cast<int>(o.size(0)), static_cast<int>(o.size(1)), CV_8UC1, o.data_ptr<uint8_t>());
   write_raw(path, m);
@@ -238,8 +244,8 @@ torch::Tensor colorize_flow(const torch::Tensor& flow, double max_flow) {
   auto mag = f.pow(2).sum(0).sqrt();
   const double maxv = max_flow > 0 ? max_flow : std::max(mag.max().item<double>(), 1e-6);
   // HSV wheel: hue = direction, saturation = magnitude (Middlebury-style), value = 1.
-  auto angle = torch::atan2(-f[1], -f[0]) / M_PI;               // [-1,1]
-  auto hue = ((angle + 1) * 90).clamp(0, 179.999);              // OpenCV 8-bit hue range 0..180
+  auto angle = torch::atan2(-f[1], -f[0]) / M_PI;   // [-1,1]
+  auto hue = ((angle + 1) * 90).clamp(0, 179.999);  // OpenCV 8-bit hue range 0..180
   auto sat = (mag / maxv).clamp(0, 1) * 255;
   auto hsv = torch::stack({hue, sat, torch::full_like(hue, 255)}, 2).round().to(torch::kUInt8).contiguous();
   cv::Mat h(static_cast<int>(hsv.size(0)), static_cast<int>(hsv.size(1)), CV_8UC3, hsv.data_ptr<uint8_t>());

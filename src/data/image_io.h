@@ -14,8 +14,7 @@ torch::Tensor read_image(const std::string& path);
 // Same, resized to height x width (INTER_AREA when shrinking, linear otherwise); the original size
 // is returned through `original_hw` when given.
 torch::Tensor read_image_resized(const std::string& path, int64_t height, int64_t width,
-                                 int64_t* original_height = nullptr,
-                                 int64_t* original_width = nullptr);
+                                 int64_t* original_height = nullptr, int64_t* original_width = nullptr);
 // float [3,H,W] in [0,1] (or uint8) -> 8-bit PNG/JPEG by extension, written atomically.
 void write_image(const std::string& path, const torch::Tensor& image);
 // The same image as PNG file bytes (for TensorBoard summaries).
@@ -29,8 +28,7 @@ struct FlowMap {
 FlowMap read_flow_png(const std::string& path);
 // flow [2,H,W], valid [1,H,W] (or undefined = all valid). Values are rounded to 1/64 px and
 // clamped to the format's range of +-512 px.
-void write_flow_png(const std::string& path, const torch::Tensor& flow,
-                    const torch::Tensor& valid = {});
+void write_flow_png(const std::string& path, const torch::Tensor& flow, const torch::Tensor& valid = {});
 
 // 16-bit depth or disparity PNG: value / 256, 0 = invalid -> float32 [1,H,W].
 torch::Tensor read_depth_png(const std::string& path);
@@ -45,7 +43,7 @@ void write_object_map(const std::string& path, const torch::Tensor& objects);
 
 // 8-bit BGR visualisations written as PNG: disparity through a colour map, flow through the
 // Middlebury colour wheel (max_flow <= 0: the image's own maximum).
-torch::Tensor colorize_disparity(const torch::Tensor& disp);  // [1,H,W] -> [3,H,W] in [0,1]
+torch::Tensor colorize_disparity(const torch::Tensor& disp);                  // [1,H,W] -> [3,H,W] in [0,1]
 torch::Tensor colorize_flow(const torch::Tensor& flow, double max_flow = 0);  // [2,H,W] -> [3,H,W]
 
 }  // namespace geo

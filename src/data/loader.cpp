@@ -40,10 +40,9 @@ Batch augment(Batch b, const AugmentConfig& c, uint64_t seed) {
   auto all = torch::cat({b.tgt.unsqueeze(1), b.srcs}, 1).reshape({B * (N + 1), 3, H, W});
   if (Hs != H || Ws != W) {
     namespace F = torch::nn::functional;
-    all = F::interpolate(all, F::InterpolateFuncOptions()
-                                  .size(std::vector<int64_t>{Hs, Ws})
-                                  .mode(torch::kBilinear)
-                                  .align_corners(false));
+    all = F::interpolate(
+        all,
+        F::InterpolateFuncOptions().size(std::vector<int64_t>{Hs, Ws}).mode(torch::kBilinear).align_corners(false));
     all = all.slice(2, oy, oy + H).slice(3, ox, ox + W);
     // Exact for pixel centres at integers and align_corners=false: u' = (u + 0.5) s - 0.5 - offset,
     // with s the effective scale of the rounded size. GeoNet (data_loader.py: random_scaling) scales
@@ -59,8 +58,9 @@ Batch augment(Batch b, const AugmentConfig& c, uint64_t seed) {
   }
   if (U(0, 1) < c.photometric_prob) {  // GeoNet colour augmentation
     const double gamma = U(c.gamma_min, c.gamma_max), bright = U(c.brightness_min, c.brightness_max);
-    auto colour = torch::tensor({U(c.color_min, c.color_max), U(c.color_min, c.color_max),
-                                 U(c.color_min, c.color_max)}, all.options()).view({1, 3, 1, 1});
+    auto colour = torch::tensor({U(c.color_min, c.color_max), U(c.color_min, c.color_max), U(c.color_min, c.color_max)},
+                                all.options())
+                      .view({1, 3, 1, 1});
     all = (all.clamp_min(0).pow(gamma) * bright * colour).clamp(0, 1);
   }
   all = all.reshape({B, N + 1, 3, H, W});

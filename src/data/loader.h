@@ -22,8 +22,8 @@ struct Batch {
   torch::Tensor srcs;  // [B,L-1,3,H,W] in [0,1] (frames before the target, then after)
   torch::Tensor K;     // [B,3,3]
   std::vector<std::string> ids;
-  int64_t index = 0;   // batch number in the stream
-  int64_t skipped = 0; // bad samples replaced (on_bad_sample: skip)
+  int64_t index = 0;    // batch number in the stream
+  int64_t skipped = 0;  // bad samples replaced (on_bad_sample: skip)
 };
 
 // Stacks snippets into a batch (target = the middle frame).
@@ -40,8 +40,8 @@ size_t sample_at(uint64_t seed, size_t dataset_size, int64_t position);
 struct LoaderOptions {
   int64_t batch_size = 4;
   uint64_t seed = 0;
-  int workers = 2;          // 0 = load in the caller's thread
-  int prefetch = 4;         // batches kept ready ahead
+  int workers = 2;   // 0 = load in the caller's thread
+  int prefetch = 4;  // batches kept ready ahead
   bool shuffle = true;
   bool skip_bad = false;    // on_bad_sample: skip (log and use the next sample) vs stop (throw)
   AugmentConfig augment;    // augment.enabled = false: none
@@ -73,8 +73,8 @@ class BatchLoader {
   void work(int worker);
   std::shared_ptr<const SnippetSource> source_;
   LoaderOptions options_;
-  int64_t next_ = 0;       // next batch handed out
-  int64_t claimed_ = 0;    // next batch a worker will build
+  int64_t next_ = 0;     // next batch handed out
+  int64_t claimed_ = 0;  // next batch a worker will build
   std::map<int64_t, Batch> ready_;
   std::map<int64_t, std::exception_ptr> errors_;
   bool stop_ = false;

@@ -19,15 +19,21 @@ int64_t write_point_cloud_ply(const std::string& path, const torch::Tensor& dept
   auto keep = (d[0] > 0) & torch::isfinite(d[0]);
   if (max_depth > 0) keep &= d[0] <= max_depth;
   const auto xyz = points.flatten(1).t().index({keep.flatten()}).contiguous();  // [N,3]
-  const auto colour = (rgb.scalar_type() == torch::kUInt8
-                           ? rgb.detach().to(torch::kCPU)
-                           : (rgb.detach().to(torch::kCPU, torch::kFloat32).clamp(0, 1) * 255).round().to(torch::kUInt8))
-                          .flatten(1).t().index({keep.flatten()}).contiguous();  // [N,3]
+  const auto colour =
+      (rgb.scalar_type() == torch::kUInt8
+           ? rgb.detach().to(torch::kCPU)
+           : (rgb.detach().to(torch::kCPU, torch::kFloat32).clamp(0, 1) * 255).round().to(torch::kUInt8))
+          .flatten(1)
+          .t()
+          .index({keep.flatten()})
+          .contiguous();  // [N,3]
   const int64_t n = xyz.size(0);
-  std::string out = "ply\nformat binary_little_endian 1.0\ncomment written by geo (camera coordinates: x right, y down, "
-                    "z forward)\nelement vertex " + std::to_string(n) +
-                    "\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\n"
-                    "property uchar blue\nend_header\n";
+  std::string out =
+      "ply\nformat binary_little_endian 1.0\ncomment written by geo (camera coordinates: x right, y down, "
+      "z forward)\nelement vertex " +
+      std::to_string(n) +
+      "\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\n"
+      "property uchar blue\nend_header\n";
   const size_t header = out.size();
   out.resize(header + static_cast<size_t>(n) * 15);
   const uint32_t probe = 1;

@@ -66,13 +66,12 @@ torch::Tensor read_poses(const std::string& path) {
     const std::string where = path + " line " + std::to_string(line_no);
     auto v = parse_doubles(line, where);
     if (v.size() != 12)
-      throw std::runtime_error(where + ": expected 12 numbers (a 3x4 pose), got " +
-                               std::to_string(v.size()));
+      throw std::runtime_error(where + ": expected 12 numbers (a 3x4 pose), got " + std::to_string(v.size()));
     for (double x : v)
       if (!std::isfinite(x)) throw std::runtime_error(where + ": a pose holds NaN or infinity");
     // The 3x3 part must be a rotation: an all-zero or scaled one cannot be inverted or chained.
-    const double det = v[0] * (v[5] * v[10] - v[6] * v[9]) - v[1] * (v[4] * v[10] - v[6] * v[8]) +
-                       v[2] * (v[4] * v[9] - v[5] * v[8]);
+    const double det =
+        v[0] * (v[5] * v[10] - v[6] * v[9]) - v[1] * (v[4] * v[10] - v[6] * v[8]) + v[2] * (v[4] * v[9] - v[5] * v[8]);
     if (std::abs(det - 1.0) > 1e-2)
       throw std::runtime_error(where + ": the rotation part has determinant " + std::to_string(det) +
                                " (a rotation has 1): not a camera pose");
@@ -112,8 +111,7 @@ torch::Tensor read_velodyne(const std::string& path) {
 }
 
 void write_velodyne(const std::string& path, const torch::Tensor& points) {
-  TORCH_CHECK(points.dim() == 2 && points.size(1) == 4, "points must be [N,4], got ",
-              points.sizes());
+  TORCH_CHECK(points.dim() == 2 && points.size(1) == 4, "points must be [N,4], got ", points.sizes());
   auto p = points.to(torch::kFloat32).contiguous();
   write_file_atomic(path, std::string(reinterpret_cast<const char*>(p.data_ptr<float>()),
                                       static_cast<size_t>(p.numel()) * sizeof(float)));
@@ -129,7 +127,8 @@ torch::Tensor read_npy(const std::string& path) {
   auto byte = [&](size_t i) { return static_cast<size_t>(static_cast<unsigned char>(bytes[i])); };
   const size_t start = major == 1 ? 10 : 12;
   if (bytes.size() < start) throw std::runtime_error(path + ": truncated header");
-  const size_t hlen = major == 1 ? (byte(8) | byte(9) << 8) : (byte(8) | byte(9) << 8 | byte(10) << 16 | byte(11) << 24);
+  const size_t hlen =
+      major == 1 ? (byte(8) | byte(9) << 8) : (byte(8) | byte(9) << 8 | byte(10) << 16 | byte(11) << 24);
   if (hlen > bytes.size() - start)
     throw std::runtime_error(path + ": header of " + std::to_string(hlen) + " bytes runs past the end of the file");
   const std::string header = bytes.substr(start, hlen);
@@ -139,7 +138,8 @@ torch::Tensor read_npy(const std::string& path) {
     if (k == std::string::npos) k = header.find("\"" + key + "\"");
     if (k == std::string::npos) throw std::runtime_error(path + ": header has no '" + key + "'");
     size_t i = header.find_first_not_of(" \t", k + key.size() + 2);
-    if (i == std::string::npos || header[i] != ':') throw std::runtime_error(path + ": malformed header at '" + key + "'");
+    if (i == std::string::npos || header[i] != ':')
+      throw std::runtime_error(path + ": malformed header at '" + key + "'");
     i = header.find_first_not_of(" \t", i + 1);
     if (i == std::string::npos) throw std::runtime_error(path + ": malformed header at '" + key + "'");
     size_t j = i;
@@ -153,11 +153,14 @@ torch::Tensor read_npy(const std::string& path) {
   const std::string descr = field("descr"), order = field("fortran_order"), shape_text = field("shape");
   const bool f4 = descr == "'<f4'" || descr == "\"<f4\"", f8 = descr == "'<f8'" || descr == "\"<f8\"";
   if (!f4 && !f8)
-    throw std::runtime_error(path + ": 'descr' is " + descr + ": only little-endian float32/float64 arrays are supported ('<f4' or '<f8')");
-  if (order == "True") throw std::runtime_error(path + ": Fortran-order arrays are not supported (save with np.ascontiguousarray)");
+    throw std::runtime_error(path + ": 'descr' is " + descr +
+                             ": only little-endian float32/float64 arrays are supported ('<f4' or '<f8')");
+  if (order == "True")
+    throw std::runtime_error(path + ": Fortran-order arrays are not supported (save with np.ascontiguousarray)");
   if (order != "False") throw std::runtime_error(path + ": 'fortran_order' is '" + order + "' (True or False)");
   const auto a = shape_text.find('('), b = shape_text.rfind(')');
-  if (a != 0 || b != shape_text.size() - 1) throw std::runtime_error(path + ": 'shape' is '" + shape_text + "', not a tuple");
+  if (a != 0 || b != shape_text.size() - 1)
+    throw std::runtime_error(path + ": 'shape' is '" + shape_text + "', not a tuple");
   const std::string header_shape = shape_text;
   std::vector<int64_t> shape;
   std::istringstream dims(header_shape.substr(a + 1, b - a - 1));

@@ -41,8 +41,9 @@ TrainingData open_packed(const DataConfig& d, TrainingData out) {
     auto val = std::make_shared<PackedSnippets>(d.root + "/val");
     check(*val, "val");
     if (val->pack() != train->pack())
-      throw ConfigError("packed cache '" + d.root + "': val/ was written by another geo_prepare run than train/ (pack '" +
-                        val->pack() + "', train/ '" + train->pack() + "'): a stale validation set; re-run geo_prepare --out " +
+      throw ConfigError("packed cache '" + d.root +
+                        "': val/ was written by another geo_prepare run than train/ (pack '" + val->pack() +
+                        "', train/ '" + train->pack() + "'): a stale validation set; re-run geo_prepare --out " +
                         d.root + ", or remove " + d.root + "/val to train without validation");
     out.val = val;
   }
@@ -85,7 +86,8 @@ std::vector<SplitEntry> raw_training_entries(const DataConfig& d, const RawTrain
                                    : read_split(out.train_list);
   const size_t listed = entries.size();
   if (lists.from_drives && entries.empty())
-    throw ConfigError("data.split kitti_raw_stereo: no " + std::to_string(d.seq_length) + "-frame snippet under '" + d.root +
+    throw ConfigError("data.split kitti_raw_stereo: no " + std::to_string(d.seq_length) + "-frame snippet under '" +
+                      d.root +
                       "' (looked for <date>/<drive>_sync/image_02|03/data/*.png outside the KITTI 2015 scenes of " +
                       join_list(out.exclusions, ",") + ")");
   if (!lists.from_drives) out.excluded = exclude_entries(entries, lists.test_scenes, lists.static_frames);
@@ -93,9 +95,10 @@ std::vector<SplitEntry> raw_training_entries(const DataConfig& d, const RawTrain
     throw ConfigError("data.split " + d.split + ": all " + std::to_string(listed) + " entries of " + out.train_list +
                       " are excluded (test scenes or static frames listed in " + join_list(out.exclusions, ",") + ")");
   if (lists.from_drives && d.val_split == "list")
-    spdlog::warn("data.split kitti_raw_stereo with data.val_split list: the validation list's frames are in the "
-                 "drives trained on (most are training frames), so validation measures fit, not generalisation; "
-                 "data.val_split geonet holds GeoNet's 10% out of training (configs/rigid_geonet.yaml does)");
+    spdlog::warn(
+        "data.split kitti_raw_stereo with data.val_split list: the validation list's frames are in the "
+        "drives trained on (most are training frames), so validation measures fit, not generalisation; "
+        "data.val_split geonet holds GeoNet's 10% out of training (configs/rigid_geonet.yaml does)");
   if (d.val_split == "geonet") {
     std::vector<SplitEntry> kept;
     for (auto& e : entries) (in_geonet_validation(e) ? held_out : kept).push_back(std::move(e));
@@ -123,8 +126,8 @@ TrainingData open_kitti_raw(const DataConfig& d, TrainingData out) {
   out.dropped = train->dropped();
   if (train->size() == 0 && !lists.from_drives)
     throw ConfigError("data.root '" + d.root + "': none of the " + std::to_string(out.dropped) + " entries of " +
-                      out.train_list + " has all its " + std::to_string(d.seq_length) + " frames on disk (first missing: " +
-                      first_missing_frame(d, out.train_list) + ")");
+                      out.train_list + " has all its " + std::to_string(d.seq_length) +
+                      " frames on disk (first missing: " + first_missing_frame(d, out.train_list) + ")");
   out.train = train;
   if (d.val_split == "geonet") {
     auto val = std::make_shared<SequenceDataset>(std::move(held_out), so);
@@ -146,7 +149,8 @@ TrainingData open_at(const DataConfig& d, TrainingData out) {
   if (d.format == DataFormat::kPacked || (d.format == DataFormat::kAuto && has_packed_cache_files(d.root + "/train")))
     return open_packed(d, std::move(out));
 #ifndef GEO_WITH_OPENCV
-  throw ConfigError("data.root '" + d.root + "' is not a packed cache (no " + d.root + "/train/index.txt), and this "
+  throw ConfigError("data.root '" + d.root + "' is not a packed cache (no " + d.root +
+                    "/train/index.txt), and this "
                     "geo was built without OpenCV (-DGEO_WITH_OPENCV=OFF), so it cannot read KITTI's image files: "
                     "train from a packed cache (geo_prepare, on a machine with OpenCV) or from the built-in "
                     "synthetic world (data.format: synthetic)");
@@ -182,8 +186,9 @@ TrainingData open_synthetic(const DataConfig& d) {
 TrainingData open_videos(const DataConfig& d) {
 #ifndef GEO_WITH_OPENCV
   (void)d;
-  throw ConfigError("data.videos: this geo was built without OpenCV (-DGEO_WITH_OPENCV=OFF), so it cannot decode "
-                    "videos or image files: pack the clips into a cache with geo_prepare on a machine with OpenCV");
+  throw ConfigError(
+      "data.videos: this geo was built without OpenCV (-DGEO_WITH_OPENCV=OFF), so it cannot decode "
+      "videos or image files: pack the clips into a cache with geo_prepare on a machine with OpenCV");
 #else
   auto clips = open_video_clips(d);
   for (const auto& line : clips.report) spdlog::info("{}", line);
@@ -209,11 +214,11 @@ TrainingData open_training_data(const DataConfig& d) {
     return open_videos(d);
   }
   if (d.root.empty())
-    throw ConfigError("data.root is empty: set it in the config or with --set data.root=DIR "
-                      "(a KITTI raw folder, a geo_prepare cache or a geo_synth world's raw/ folder), or "
-                      "use the built-in synthetic world: --set data.format=synthetic");
-  if (!fs::is_directory(d.root))
-    throw ConfigError("data.root '" + d.root + "' is not a directory");
+    throw ConfigError(
+        "data.root is empty: set it in the config or with --set data.root=DIR "
+        "(a KITTI raw folder, a geo_prepare cache or a geo_synth world's raw/ folder), or "
+        "use the built-in synthetic world: --set data.format=synthetic");
+  if (!fs::is_directory(d.root)) throw ConfigError("data.root '" + d.root + "' is not a directory");
   TrainingData out;
   out.root = d.root;
   // A geo_synth --out folder holds raw/, kitti2015/ and odometry/: training reads raw/ (odometry/

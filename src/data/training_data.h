@@ -23,11 +23,11 @@ namespace geo {
 
 struct TrainingData {
   std::shared_ptr<SnippetSource> train, val;  // val may be null (no validation list)
-  std::string root;                            // data.root, or its raw/ for a geo_synth --out folder
+  std::string root;                           // data.root, or its raw/ for a geo_synth --out folder
   std::string format, train_list, val_list;
-  size_t excluded = 0, dropped = 0;            // test-scene/static entries, entries without neighbours
-  std::vector<std::string> exclusions;         // the lists that excluded entries (for the log)
-  std::vector<std::string> clip_records;       // data.videos: a line per clip (VideoData::records)
+  size_t excluded = 0, dropped = 0;       // test-scene/static entries, entries without neighbours
+  std::vector<std::string> exclusions;    // the lists that excluded entries (for the log)
+  std::vector<std::string> clip_records;  // data.videos: a line per clip (VideoData::records)
 };
 
 TrainingData open_training_data(const DataConfig& data);

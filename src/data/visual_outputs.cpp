@@ -20,8 +20,10 @@ struct VideoWriter::Impl {
   std::string tmp;
 };
 
-VideoWriter::VideoWriter(std::string path, double fps) : impl_(std::make_unique<Impl>()), path_(std::move(path)), fps_(fps) {
-  if (!(fps > 0)) throw std::runtime_error("video '" + path_ + "': frame rate must be positive, got " + std::to_string(fps));
+VideoWriter::VideoWriter(std::string path, double fps)
+    : impl_(std::make_unique<Impl>()), path_(std::move(path)), fps_(fps) {
+  if (!(fps > 0))
+    throw std::runtime_error("video '" + path_ + "': frame rate must be positive, got " + std::to_string(fps));
   impl_->tmp = path_ + ".tmp.avi";
 }
 
@@ -61,7 +63,10 @@ namespace {
 // Camera centres on the ground plane: (x, z) of each pose's translation -> [N,2] float64.
 torch::Tensor top_view(const torch::Tensor& poses, const char* what) {
   check_shape(poses, what, {-1, 4, 4});
-  return poses.detach().to(torch::kCPU, torch::kFloat64).select(2, 3).index({torch::indexing::Slice(), torch::tensor({0, 2})});
+  return poses.detach()
+      .to(torch::kCPU, torch::kFloat64)
+      .select(2, 3)
+      .index({torch::indexing::Slice(), torch::tensor({0, 2})});
 }
 
 double nice_step(double span) {  // 1, 2 or 5 x 10^k, about a tenth of the span
@@ -98,7 +103,8 @@ torch::Tensor trajectory_plot(const torch::Tensor& poses, const torch::Tensor& t
     cv::line(img, to_px(x0 - span, g), to_px(x0 + 2 * span, g), grid, 1);
   char label[64];
   std::snprintf(label, sizeof label, "grid %g (x right, z forward)", step);
-  cv::putText(img, label, cv::Point(8, size - 8), cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(90, 90, 90), 1, cv::LINE_AA);
+  cv::putText(img, label, cv::Point(8, size - 8), cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(90, 90, 90), 1,
+              cv::LINE_AA);
   const cv::Scalar colours[2] = {cv::Scalar(0, 120, 255), cv::Scalar(0, 0, 0)};  // BGR: orange estimate, black truth
   const char* names[2] = {"estimate", "ground truth"};
   for (size_t t = tracks.size(); t-- > 0;) {  // the truth first, the estimate on top
@@ -108,12 +114,16 @@ torch::Tensor trajectory_plot(const torch::Tensor& poses, const torch::Tensor& t
     for (int64_t i = 0; i < a.size(0); ++i) pts.push_back(to_px(v[2 * i], v[2 * i + 1]));
     if (pts.size() > 1) cv::polylines(img, pts, false, colours[t], 2, cv::LINE_AA);
     if (!pts.empty()) cv::circle(img, pts.front(), 4, colours[t], cv::FILLED, cv::LINE_AA);
-    cv::putText(img, names[t], cv::Point(8, 18 + 16 * static_cast<int>(t)), cv::FONT_HERSHEY_SIMPLEX, 0.45, colours[t], 1,
-                cv::LINE_AA);
+    cv::putText(img, names[t], cv::Point(8, 18 + 16 * static_cast<int>(t)), cv::FONT_HERSHEY_SIMPLEX, 0.45, colours[t],
+                1, cv::LINE_AA);
   }
   cv::Mat rgb;
   cv::cvtColor(img, rgb, cv::COLOR_BGR2RGB);
-  return torch::from_blob(rgb.data, {size, size, 3}, torch::kUInt8).permute({2, 0, 1}).to(torch::kFloat32).div(255).contiguous();
+  return torch::from_blob(rgb.data, {size, size, 3}, torch::kUInt8)
+      .permute({2, 0, 1})
+      .to(torch::kFloat32)
+      .div(255)
+      .contiguous();
 }
 
 }  // namespace geo

@@ -42,8 +42,10 @@ struct FlowScores {
   }
   void put(EvalResult& r, const std::string& prefix, int64_t pairs) const {
     const double n = static_cast<double>(pairs);
-    r.metrics.insert(r.metrics.end(), {{prefix + "epe_all", epe_occ / n}, {prefix + "epe_noc", epe_noc / n},
-                                       {prefix + "fl_all", fl_occ / n}, {prefix + "fl_noc", fl_noc / n}});
+    r.metrics.insert(r.metrics.end(), {{prefix + "epe_all", epe_occ / n},
+                                       {prefix + "epe_noc", epe_noc / n},
+                                       {prefix + "fl_all", fl_occ / n},
+                                       {prefix + "fl_noc", fl_noc / n}});
     if (!with_objects) return;
     const double none = std::numeric_limits<double>::quiet_NaN();  // no such pixel: null in the JSON
     r.metrics.insert(r.metrics.end(), {{prefix + "epe_bg", bg.pixels ? bg.epe() : none},
@@ -54,7 +56,8 @@ struct FlowScores {
 };
 
 torch::Tensor flow_calib_K(const std::string& root, const std::string& name) {
-  for (const auto& dir : {root + "/training/calib_cam_to_cam", root + "/../data_scene_flow_calib/training/calib_cam_to_cam"}) {
+  for (const auto& dir :
+       {root + "/training/calib_cam_to_cam", root + "/../data_scene_flow_calib/training/calib_cam_to_cam"}) {
     const std::string p = dir + "/" + name + ".txt";
     if (fs::exists(p)) return read_key_values(p).projection("P_rect_02").slice(1, 0, 3);
   }
@@ -70,7 +73,8 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
     for (const auto& line : read_lines(o.split_file)) {
       const auto base = fs::path(line).filename().string();  // 000123_10.png
       if (base.size() < 10 || base.substr(6) != "_10.png")
-        throw std::runtime_error(o.split_file + ": expected lines like training/image_2/000123_10.png, got '" + line + "'");
+        throw std::runtime_error(o.split_file + ": expected lines like training/image_2/000123_10.png, got '" + line +
+                                 "'");
       names.push_back(base.substr(0, 6));
     }
   } else {
@@ -98,9 +102,8 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
     const std::string gnoc = root + "/training/flow_noc/" + names[i] + "_10.png";
     const std::string objects = root + "/training/obj_map/" + names[i] + "_10.png";
     for (const auto* p : {&t, &s, &gocc, &gnoc}) require_file(*p, "pair " + names[i]);
-    const FlowAnswer answer =
-        source.flow(FlowQuery{names[i], t, s, root + "/training/image_2/" + names[i] + "_09.png",
-                              source.model() ? flow_calib_K(root, names[i]) : torch::Tensor()});
+    const FlowAnswer answer = source.flow(FlowQuery{names[i], t, s, root + "/training/image_2/" + names[i] + "_09.png",
+                                                    source.model() ? flow_calib_K(root, names[i]) : torch::Tensor()});
     const torch::Tensor& flow = answer.full;
     const torch::Tensor& rigid_flow = answer.rigid;
     const int64_t frame_h = answer.frame_height, frame_w = answer.frame_width;
@@ -146,30 +149,37 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
   const int64_t scored = static_cast<int64_t>(names.size() - without_gt.size());
   if (scored == 0) throw std::runtime_error("no flow pair under " + root + " has valid ground-truth pixels");
   if (!without_gt.empty())
-    spdlog::warn("{} of {} pairs have no valid ground-truth pixel (flow_occ or flow_noc) and are left out of the "
-                 "means; first: {}", without_gt.size(), names.size(), without_gt.front());
+    spdlog::warn(
+        "{} of {} pairs have no valid ground-truth pixel (flow_occ or flow_noc) and are left out of the "
+        "means; first: {}",
+        without_gt.size(), names.size(), without_gt.front());
   if (predictions_resized > 0)
-    spdlog::warn("{} of {} flow predictions differ in size from their ground truth and were resized ({}, vectors "
-                 "scaled); first: {}", predictions_resized, names.size(),
-                 o.flow_resize == FlowResize::kNearest ? "nearest" : "bilinear", resized);
+    spdlog::warn(
+        "{} of {} flow predictions differ in size from their ground truth and were resized ({}, vectors "
+        "scaled); first: {}",
+        predictions_resized, names.size(), o.flow_resize == FlowResize::kNearest ? "nearest" : "bilinear", resized);
   if (with_objects > 0 && with_objects < scored)
-    spdlog::warn("{} of {} pairs have no object map (training/obj_map/<pair>_10.png): background and foreground "
-                 "errors are over the other {} only", scored - with_objects, scored, with_objects);
+    spdlog::warn(
+        "{} of {} pairs have no object map (training/obj_map/<pair>_10.png): background and foreground "
+        "errors are over the other {} only",
+        scored - with_objects, scored, with_objects);
   EvalResult r;
   full.put(r, "", scored);
   if (split_stages) rigid.put(r, "rigid_", scored);
-  r.counts = {{"pairs", scored}, {"pixels_all", px_occ}, {"pixels_noc", px_noc},
+  r.counts = {{"pairs", scored},
+              {"pixels_all", px_occ},
+              {"pixels_noc", px_noc},
               {"pairs_without_ground_truth", static_cast<int64_t>(without_gt.size())},
               {"pairs_with_object_map", with_objects}};
-  if (with_objects > 0)
-    r.counts.insert(r.counts.end(), {{"pixels_bg", full.bg.pixels}, {"pixels_fg", full.fg.pixels}});
+  if (with_objects > 0) r.counts.insert(r.counts.end(), {{"pixels_bg", full.bg.pixels}, {"pixels_fg", full.fg.pixels}});
   if (from_files) r.counts.emplace_back("predictions_resized", predictions_resized);
   if (source.model()) {
     r.counts.emplace_back("pairs_with_frame_09", with_previous);
     if (with_previous < static_cast<int64_t>(names.size()))
-      spdlog::warn("{} of {} pairs have no previous frame (training/image_2/<pair>_09.png, KITTI 2015's multi-view "
-                   "extension): the PoseNet saw the duplicate-frame snippet (tgt, tgt, src) for them",
-                   static_cast<int64_t>(names.size()) - with_previous, names.size());
+      spdlog::warn(
+          "{} of {} pairs have no previous frame (training/image_2/<pair>_09.png, KITTI 2015's multi-view "
+          "extension): the PoseNet saw the duplicate-frame snippet (tgt, tgt, src) for them",
+          static_cast<int64_t>(names.size()) - with_previous, names.size());
   }
   return r;
 }

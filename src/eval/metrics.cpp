@@ -38,8 +38,8 @@ double numpy_median(const torch::Tensor& values) {
   return n % 2 ? v[n / 2].item<double>() : 0.5 * (v[n / 2 - 1].item<double>() + v[n / 2].item<double>());
 }
 
-DepthErrors eigen_image_errors(const torch::Tensor& gt_in, const torch::Tensor& pred_in,
-                               const EigenOptions& o, double* scale, double* median_ratio) {
+DepthErrors eigen_image_errors(const torch::Tensor& gt_in, const torch::Tensor& pred_in, const EigenOptions& o,
+                               double* scale, double* median_ratio) {
   check_shape(gt_in, "ground-truth depth", {-1, -1});
   check_shape(pred_in, "predicted depth", {-1, -1});
   const int64_t H = gt_in.size(0), W = gt_in.size(1);
@@ -47,8 +47,9 @@ DepthErrors eigen_image_errors(const torch::Tensor& gt_in, const torch::Tensor& 
   auto pred = pred_in.to(torch::kFloat64);
   if (pred.size(0) != H || pred.size(1) != W) {
     namespace F = torch::nn::functional;
-    pred = F::interpolate(pred.view({1, 1, pred.size(0), pred.size(1)}),
-                          F::InterpolateFuncOptions().size(std::vector<int64_t>{H, W}).mode(torch::kBilinear).align_corners(false))
+    pred = F::interpolate(
+               pred.view({1, 1, pred.size(0), pred.size(1)}),
+               F::InterpolateFuncOptions().size(std::vector<int64_t>{H, W}).mode(torch::kBilinear).align_corners(false))
                .view({H, W});
   }
   auto mask = (gt > o.min_depth) & (gt < o.max_depth);
@@ -158,7 +159,8 @@ OdometryErrors kitti_odometry_errors(const torch::Tensor& gt_in, const torch::Te
   // Path length along the ground truth up to each frame.
   std::vector<double> dist(static_cast<size_t>(n), 0.0);
   const auto steps = (gt.slice(0, 1).select(2, 3).slice(1, 0, 3) - gt.slice(0, 0, n - 1).select(2, 3).slice(1, 0, 3))
-                         .norm(2, 1).contiguous();
+                         .norm(2, 1)
+                         .contiguous();
   for (int64_t i = 1; i < n; ++i) dist[i] = dist[i - 1] + steps[i - 1].item<double>();
   OdometryErrors out;
   double t_sum = 0, r_sum = 0;
@@ -187,7 +189,8 @@ OdometryErrors kitti_odometry_errors(const torch::Tensor& gt_in, const torch::Te
   return out;
 }
 
-std::pair<torch::Tensor, torch::Tensor> align_trajectory_scale(const torch::Tensor& gt_in, const torch::Tensor& pred_in) {
+std::pair<torch::Tensor, torch::Tensor> align_trajectory_scale(const torch::Tensor& gt_in,
+                                                               const torch::Tensor& pred_in) {
   check_shape(gt_in, "gt poses", {-1, 4, 4});
   check_shape(pred_in, "predicted poses", {gt_in.size(0), 4, 4});
   const auto gt0 = gt_in.to(torch::kFloat64), pred0 = pred_in.to(torch::kFloat64);

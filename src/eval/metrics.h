@@ -34,13 +34,12 @@ struct EigenOptions {
 // truth, as GeoNet does), gt [H,W] with 0 = no point. Returns the image's errors (pixels = 0 when
 // nothing is valid), the scale applied through `scale` and median(gt)/median(pred) through
 // `median_ratio` when given.
-DepthErrors eigen_image_errors(const torch::Tensor& gt, const torch::Tensor& pred,
-                               const EigenOptions& options = {}, double* scale = nullptr,
-                               double* median_ratio = nullptr);
+DepthErrors eigen_image_errors(const torch::Tensor& gt, const torch::Tensor& pred, const EigenOptions& options = {},
+                               double* scale = nullptr, double* median_ratio = nullptr);
 
 struct FlowErrors {
-  double epe = 0;      // mean end-point error over valid pixels
-  double fl = 0;       // fraction of valid pixels with EPE > 3 px and > 5% of |gt|
+  double epe = 0;  // mean end-point error over valid pixels
+  double fl = 0;   // fraction of valid pixels with EPE > 3 px and > 5% of |gt|
   int64_t pixels = 0;
 };
 // How a predicted flow is resized to the ground truth: nearest (GeoNet's flowlib, cv2 INTER_NEAREST:

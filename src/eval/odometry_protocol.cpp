@@ -29,7 +29,8 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicti
   // Ground truth without motion: the whole sequence is refused; a static snippet (a stopped car)
   // scores ATE 0 whatever the prediction (the scale alignment scales it to nothing): counted, warned.
   if (!trajectory_moves(gt))
-    throw std::runtime_error(gt_path + ": the ground truth has no motion (every position is the first): a trajectory "
+    throw std::runtime_error(gt_path +
+                             ": the ground truth has no motion (every position is the first): a trajectory "
                              "error means nothing; nothing was scored");
   const bool metric = source.model() && o.scaling == DepthScaling::kCameraHeight;
   const TrajectoryAnswer answer =
@@ -51,7 +52,7 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicti
   int64_t static_snippets = 0;
   std::vector<double> ates;
   for (int64_t c : centres) {
-    if (c < 2 || c + 2 >= n) continue;  // snippets need two neighbours on each side
+    if (c < 2 || c + 2 >= n) continue;                       // snippets need two neighbours on each side
     auto rel = [&](const torch::Tensor& P, int64_t first) {  // positions in the snippet's first frame
       return positions(torch::inverse(P[first]).unsqueeze(0).matmul(P.slice(0, first, first + 5)));
     };
@@ -68,21 +69,25 @@ EvalResult eval_odometry(const EvalOptions& o, const std::string& root, Predicti
                {"ate_std", ates.size() > 1 ? t.std(false).item<double>() : 0.0},
                {"trajectory_rmse_sim3", aligned_trajectory_rmse(positions(gt), positions(traj))}};
   if (static_snippets > 0)
-    spdlog::warn("{} of {} snippets have no ground-truth motion: they score ATE 0 whatever the prediction", static_snippets,
-                 ates.size());
+    spdlog::warn("{} of {} snippets have no ground-truth motion: they score ATE 0 whatever the prediction",
+                 static_snippets, ates.size());
   // KITTI's own measures on the whole trajectory at the ground truth's scale (kitti-odom-eval's
   // --align scale: one least-squares factor, what a monocular trajectory needs).
   const auto [gt_aligned, traj_aligned] = align_trajectory_scale(gt, traj);
   const auto kitti = kitti_odometry_errors(gt_aligned, traj_aligned, o.segment_lengths);
   if (kitti.segments > 0) {
-    r.metrics.emplace_back("t_err", kitti.t_err * 100);                  // %
-    r.metrics.emplace_back("r_err", kitti.r_err * 180 / M_PI * 100);     // deg / 100 m
+    r.metrics.emplace_back("t_err", kitti.t_err * 100);               // %
+    r.metrics.emplace_back("r_err", kitti.r_err * 180 / M_PI * 100);  // deg / 100 m
   } else {
-    spdlog::warn("sequence {} is shorter than the shortest segment length ({} m): KITTI's t_err / r_err are not "
-                 "computed (geo_eval --segment-lengths)", o.sequence,
-                 o.segment_lengths.empty() ? 0.0 : *std::min_element(o.segment_lengths.begin(), o.segment_lengths.end()));
+    spdlog::warn(
+        "sequence {} is shorter than the shortest segment length ({} m): KITTI's t_err / r_err are not "
+        "computed (geo_eval --segment-lengths)",
+        o.sequence,
+        o.segment_lengths.empty() ? 0.0 : *std::min_element(o.segment_lengths.begin(), o.segment_lengths.end()));
   }
-  r.counts = {{"snippets", static_cast<int64_t>(ates.size())}, {"frames", n}, {"static_snippets", static_snippets},
+  r.counts = {{"snippets", static_cast<int64_t>(ates.size())},
+              {"frames", n},
+              {"static_snippets", static_snippets},
               {"segments", kitti.segments}};
   if (metric_traj.defined()) {
     // Metres without ground truth: KITTI's measures on the trajectory as predicted (first frames

@@ -50,7 +50,7 @@ torch::Tensor Predictor::pose(const torch::Tensor& tgt, const std::vector<torch:
 }
 
 Model::FlowParts Predictor::flow(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& K,
-                              const torch::Tensor& prev) {
+                                 const torch::Tensor& prev) {
   return model_->flow_parts(tgt, src, K, prev);
 }
 

@@ -16,7 +16,6 @@ namespace fs = std::filesystem;
 namespace geo {
 namespace {
 
-
 // A geo_synth world (its README.txt at `data_root` or above `root`): its kitti2015/ and odometry/
 // scenes are rendered for them alone, none of them a raw drive.
 bool is_synth_world(const std::string& data_root, const std::string& root) {
@@ -40,7 +39,8 @@ void check_training_drives(EvalResult& r, const Predictor& pred) {
     std::string what;  // "the model's training data (data.split X)" or "init 1 (data.split Y)"
     TrainingDrives drives;
   };
-  std::vector<Link> links{{"the model's training data (data.split " + config->data.split + ")", training_drives(config->data)}};
+  std::vector<Link> links{
+      {"the model's training data (data.split " + config->data.split + ")", training_drives(config->data)}};
   const auto& chain = pred.init_configs();
   for (size_t i = 0; i < chain.size(); ++i) {
     Link l;
@@ -49,8 +49,8 @@ void check_training_drives(EvalResult& r, const Predictor& pred) {
       l.drives.unknown = "its weights started from a checkpoint whose training data is unknown: " + chain[i].substr(9);
     } else {
       const Config c = parse_config(chain[i], "init " + std::to_string(i + 1) + " of " + pred.path());
-      l.what = "the data of the checkpoint it was initialised from" + std::string(i ? " (" + std::to_string(i + 1) + " links up)" : "") +
-               " (data.split " + c.data.split + ")";
+      l.what = "the data of the checkpoint it was initialised from" +
+               std::string(i ? " (" + std::to_string(i + 1) + " links up)" : "") + " (data.split " + c.data.split + ")";
       l.drives = training_drives(c.data);
     }
     links.push_back(std::move(l));
@@ -68,9 +68,10 @@ void check_training_drives(EvalResult& r, const Predictor& pred) {
     for (const auto& d : r.test_drives)
       if (l.drives.drives.count(d)) here.push_back(d), leaked.insert(d);
     if (!here.empty())
-      spdlog::warn("{} holds {} of the {} drives of this test set: {}. These results are measured on training drives; "
-                   "train on data disjoint from the test set (README, KITTI)",
-                   l.what, here.size(), r.test_drives.size(), join_list(here, ", "));
+      spdlog::warn(
+          "{} holds {} of the {} drives of this test set: {}. These results are measured on training drives; "
+          "train on data disjoint from the test set (README, KITTI)",
+          l.what, here.size(), r.test_drives.size(), join_list(here, ", "));
   }
   for (const auto& d : r.test_drives)
     if (leaked.count(d)) r.test_drives_in_training.push_back(d);
@@ -109,7 +110,8 @@ void check_eval_options(const EvalOptions& o) {
 
 EvalResult evaluate(const EvalOptions& o, PredictionSource& source) {
   Predictor* pred = source.model();
-  if (!fs::is_directory(o.data_root)) throw std::runtime_error("data root '" + o.data_root + "' is not a directory (--data-root)");
+  if (!fs::is_directory(o.data_root))
+    throw std::runtime_error("data root '" + o.data_root + "' is not a directory (--data-root)");
   const std::string root = split_root(o.split, o.data_root);
   EvalResult r;
   if (o.split == "eigen") r = eval_eigen(o, root, source);
@@ -119,8 +121,9 @@ EvalResult evaluate(const EvalOptions& o, PredictionSource& source) {
   r.split = o.split;
   if (o.split == "eigen" || (o.split == "odometry" && pred && o.scaling == DepthScaling::kCameraHeight))
     r.scaling = o.scaling == DepthScaling::kMedian ? "median"
-                : o.scaling == DepthScaling::kNone ? "none"
-                                                   : "camera-height " + std::to_string(camera_height_of(o, root)) + " m";
+                : o.scaling == DepthScaling::kNone
+                    ? "none"
+                    : "camera-height " + std::to_string(camera_height_of(o, root)) + " m";
   r.source = source.name();
   if (pred) r.precision = pred->precision();
   r.data_root = root;

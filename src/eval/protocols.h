@@ -33,7 +33,7 @@ struct EvalOptions {
   std::string output_poses;     // odometry: write the predicted trajectory here
   bool matlab_offset = true;    // eigen: pixel = round(x/z) - 1 as in the reference code
   FlowResize flow_resize = FlowResize::kNearest;  // kitti2015: prediction -> ground-truth size (GeoNet: nearest)
-  DepthScaling scaling = DepthScaling::kMedian;  // eigen
+  DepthScaling scaling = DepthScaling::kMedian;   // eigen
   // Metres above the road for --scaling camera-height; 0: the height the data root records
   // (<root>/camera_height.txt, which geo_synth writes), else KITTI's 1.65.
   double camera_height = 0;
@@ -42,7 +42,7 @@ struct EvalOptions {
 
 struct EvalResult {
   std::string split, source, data_root;
-  std::string scaling;  // eigen: median, camera-height (at camera_height m) or none
+  std::string scaling;    // eigen: median, camera-height (at camera_height m) or none
   std::string precision;  // of a model's predictions: fp32, bf16 or int8 (none for files and baselines)
   // What of the split was scored when not all of it: "sequence 09" (odometry), "list FILE" (a
   // split file other than the standard one).

@@ -67,7 +67,8 @@ EvalResult read_result(const std::string& path) {
     r.scaling = n["scaling"].as<std::string>("");
     r.precision = n["precision"].as<std::string>("");
     r.subset = n["subset"].as<std::string>("");
-    if (!n["metrics"].IsMap() || !n["counts"].IsMap()) throw std::runtime_error("'metrics' and 'counts' must be objects");
+    if (!n["metrics"].IsMap() || !n["counts"].IsMap())
+      throw std::runtime_error("'metrics' and 'counts' must be objects");
     for (const auto& kv : n["metrics"])
       r.metrics.emplace_back(kv.first.as<std::string>(),
                              kv.second.IsNull() ? std::numeric_limits<double>::quiet_NaN() : kv.second.as<double>());
@@ -90,7 +91,9 @@ std::string format_results(const std::vector<EvalResult>& results, const std::ve
   for (const auto& r : results)
     for (const auto& m : r.metrics)
       if (std::find(keys.begin(), keys.end(), m.first) == keys.end()) keys.push_back(m.first);
-  const auto column = [](const std::string& n) { return fmt::format(" {:>14}", n.size() > 14 ? n.substr(n.size() - 14) : n); };
+  const auto column = [](const std::string& n) {
+    return fmt::format(" {:>14}", n.size() > 14 ? n.substr(n.size() - 14) : n);
+  };
   s << fmt::format("{:<22}", "metric");
   for (const auto& n : names) s << column(n);
   s << "\n";
@@ -103,7 +106,9 @@ std::string format_results(const std::vector<EvalResult>& results, const std::ve
     s << "\n";
   }
   // What each column scored: the protocol's first count (images, pairs, snippets).
-  const auto scored = [](const EvalResult& r) { return r.counts.empty() ? std::string("-") : std::to_string(r.counts[0].second) + " " + r.counts[0].first; };
+  const auto scored = [](const EvalResult& r) {
+    return r.counts.empty() ? std::string("-") : std::to_string(r.counts[0].second) + " " + r.counts[0].first;
+  };
   s << fmt::format("{:<22}", "scored");
   for (const auto& r : results) s << column(scored(r));
   s << "\n";
@@ -111,8 +116,8 @@ std::string format_results(const std::vector<EvalResult>& results, const std::ve
     s << names[i] << ":";
     for (const auto& c : results[i].counts) s << " " << c.first << " " << c.second;
     if (!results[i].test_drives_in_training.empty())
-      s << " -- trained on " << results[i].test_drives_in_training.size() << " of the "
-        << results[i].test_drives.size() << " test drives: " << join_list(results[i].test_drives_in_training, ", ");
+      s << " -- trained on " << results[i].test_drives_in_training.size() << " of the " << results[i].test_drives.size()
+        << " test drives: " << join_list(results[i].test_drives_in_training, ", ");
     if (!results[i].training_drives_unknown.empty())
       s << " -- whether it trained on test drives is unknown: " << results[i].training_drives_unknown;
     s << "\n";

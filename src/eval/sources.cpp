@@ -37,7 +37,8 @@ void require_finite(const torch::Tensor& t, const std::string& what) {
 void require_same_size(const std::string& a, int64_t ha, int64_t wa, const std::string& b, int64_t hb, int64_t wb) {
   if (ha != hb || wa != wb)
     throw std::runtime_error(a + " is " + std::to_string(wa) + "x" + std::to_string(ha) + " but " + b + " is " +
-                             std::to_string(wb) + "x" + std::to_string(hb) + ": they must have one size; nothing was scored");
+                             std::to_string(wb) + "x" + std::to_string(hb) +
+                             ": they must have one size; nothing was scored");
 }
 
 namespace {
@@ -96,7 +97,8 @@ class ModelSource : public PredictionSource {
     auto frame = [&](int64_t f) {
       f = std::clamp<int64_t>(f, 0, n - 1);
       while (first + static_cast<int64_t>(window.size()) <= f) {
-        const std::string p = q.folder + "/image_2/" + zero_padded(first + static_cast<int64_t>(window.size()), 6) + ".png";
+        const std::string p =
+            q.folder + "/image_2/" + zero_padded(first + static_cast<int64_t>(window.size()), 6) + ".png";
         require_file(p, "odometry image");
         window.push_back(input(p, &image_h, &image_w));
       }
@@ -189,7 +191,8 @@ class FileSource : public PredictionSource {
     // KITTI's format marks each pixel valid or not: a prediction with no valid pixel holds no flow
     // (its vectors decode as zero) and is refused, never scored as zero flow.
     if (!(map.valid > 0.5).any().item<bool>())
-      throw std::runtime_error(p + ": no pixel of the flow prediction is marked valid (the third channel is 0 "
+      throw std::runtime_error(p +
+                               ": no pixel of the flow prediction is marked valid (the third channel is 0 "
                                "everywhere): nothing to score; write valid = 1 where the flow is predicted");
     a.full = map.flow;
     a.meant_at_ground_truth_size = true;
@@ -243,10 +246,12 @@ ChosenSource choose_source(const SourceChoice& c) {
   ChosenSource out;
   const bool int8 = c.precision == "int8";
   if (int8 && c.calibration.empty())
-    throw std::runtime_error("--precision int8 needs --calibration FRAMES: a folder of frames or a video like those "
-                             "evaluated (its first --calibration-frames frames)");
+    throw std::runtime_error(
+        "--precision int8 needs --calibration FRAMES: a folder of frames or a video like those "
+        "evaluated (its first --calibration-frames frames)");
   if (c.calibration_frames < 1 || c.calibration_frames > 1000)
-    throw std::runtime_error("--calibration-frames must be in 1..1000 (got " + std::to_string(c.calibration_frames) + ")");
+    throw std::runtime_error("--calibration-frames must be in 1..1000 (got " + std::to_string(c.calibration_frames) +
+                             ")");
   if (!int8 && !c.calibration.empty())
     throw std::runtime_error("--calibration calibrates int8: it needs --precision int8 (or it would be ignored)");
   LoadOptions load;
@@ -271,7 +276,8 @@ ChosenSource choose_source(const SourceChoice& c) {
     out.reads = out.predictor->path();
   }
   if (!out.predictor && c.precision != "fp32")
-    throw std::runtime_error("--precision " + c.precision + " is a model's (--checkpoint, --untrained): there is none to run");
+    throw std::runtime_error("--precision " + c.precision +
+                             " is a model's (--checkpoint, --untrained): there is none to run");
   if (out.predictor && int8) {
     const auto frames = first_frames(c.calibration, c.calibration_frames, out.predictor->height(),
                                      out.predictor->width(), "--calibration");

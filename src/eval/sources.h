@@ -19,9 +19,9 @@ struct DepthQuery {
   std::string list, image;
 };
 struct DepthAnswer {
-  torch::Tensor depth;             // [h,w], positive, in any scale (the protocol scales it)
-  int64_t height = 0, width = 0;   // the test image's size (the ground truth's)
-  bool from_file = false;          // a prediction file: meant at the image's size (a model's is resized by design)
+  torch::Tensor depth;            // [h,w], positive, in any scale (the protocol scales it)
+  int64_t height = 0, width = 0;  // the test image's size (the ground truth's)
+  bool from_file = false;         // a prediction file: meant at the image's size (a model's is resized by design)
 };
 
 // One KITTI 2015 pair: its name (000123), its frames _10 (target) and _11 (source), the frame before
@@ -31,11 +31,11 @@ struct FlowQuery {
   torch::Tensor K;
 };
 struct FlowAnswer {
-  torch::Tensor full;              // [2,h,w], pixels of its own size
-  torch::Tensor rigid;             // the rigid flow alone where the source tells it apart (a model with a FlowNet)
+  torch::Tensor full;   // [2,h,w], pixels of its own size
+  torch::Tensor rigid;  // the rigid flow alone where the source tells it apart (a model with a FlowNet)
   int64_t frame_height = 0, frame_width = 0;  // the frames' size, where the source read them (0: not read)
-  bool used_previous = false;      // the PoseNet saw the frame before the pair
-  bool meant_at_ground_truth_size = false;  // files: a size that differs is resized, loudly
+  bool used_previous = false;                 // the PoseNet saw the frame before the pair
+  bool meant_at_ground_truth_size = false;    // files: a size that differs is resized, loudly
 };
 
 // One odometry sequence: its folder (image_2/, calib.txt), name ("09"), its ground-truth pose file
@@ -89,7 +89,7 @@ struct SourceChoice {
 struct ChosenSource {
   std::unique_ptr<Predictor> predictor;  // the model a model source reads (kept alive with it)
   std::unique_ptr<PredictionSource> source;
-  std::string reads;                     // the file or folder it reads ("" for baselines)
+  std::string reads;  // the file or folder it reads ("" for baselines)
 };
 ChosenSource choose_source(const SourceChoice& choice);
 // Every file and folder an evaluation of `chosen` reads besides the data root: the source's files,

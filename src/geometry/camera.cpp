@@ -96,8 +96,7 @@ torch::Tensor transform_points(const torch::Tensor& b_from_a, const torch::Tenso
   return (R.matmul(points.view({B, 3, H * W})) + t).view({B, 3, H, W});
 }
 
-torch::Tensor rigid_flow(const torch::Tensor& depth_tgt, const torch::Tensor& src_from_tgt,
-                         const torch::Tensor& K) {
+torch::Tensor rigid_flow(const torch::Tensor& depth_tgt, const torch::Tensor& src_from_tgt, const torch::Tensor& K) {
   check_shape(depth_tgt, "depth_tgt", {-1, 1, -1, -1});
   check_shape(src_from_tgt, "src_from_tgt", {depth_tgt.size(0), 4, 4});
   check_shape(K, "K", {depth_tgt.size(0), 3, 3});

@@ -51,7 +51,6 @@ torch::Tensor transform_points(const torch::Tensor& b_from_a, const torch::Tenso
 //   p_s = K T_{s<-t} D_t(p_t) K^-1 p_t,  flow = p_s - p_t.
 // depth_tgt [B,1,H,W], src_from_tgt [B,4,4], K [B,3,3] (at this scale) -> [B,2,H,W].
 // The backward flow (source into target) is rigid_flow(depth_src, inverse_transform(T), K).
-torch::Tensor rigid_flow(const torch::Tensor& depth_tgt, const torch::Tensor& src_from_tgt,
-                         const torch::Tensor& K);
+torch::Tensor rigid_flow(const torch::Tensor& depth_tgt, const torch::Tensor& src_from_tgt, const torch::Tensor& K);
 
 }  // namespace geo

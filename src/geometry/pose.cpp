@@ -13,8 +13,7 @@ torch::Tensor euler_to_rotation(const torch::Tensor& angles) {
   auto mat = [](std::initializer_list<torch::Tensor> e) {
     return torch::stack(std::vector<torch::Tensor>(e), 1).view({-1, 3, 3});
   };
-  const auto cx = rx.cos(), sx = rx.sin(), cy = ry.cos(), sy = ry.sin(), cz = rz.cos(),
-             sz = rz.sin();
+  const auto cx = rx.cos(), sx = rx.sin(), cy = ry.cos(), sy = ry.sin(), cz = rz.cos(), sz = rz.sin();
   const auto Rx = mat({one, zero, zero, zero, cx, -sx, zero, sx, cx});
   const auto Ry = mat({cy, zero, sy, zero, one, zero, -sy, zero, cy});
   const auto Rz = mat({cz, -sz, zero, sz, cz, zero, zero, zero, one});
@@ -53,13 +52,12 @@ torch::Tensor matrix_to_pose_vec(const torch::Tensor& T) {
 torch::Tensor axisangle_to_matrix(const torch::Tensor& axisangle, const torch::Tensor& translation) {
   check_shape(axisangle, "axisangle", {-1, 3});
   check_shape(translation, "translation", {axisangle.size(0), 3});
-  const auto angle = axisangle.norm(2, 1, /*keepdim=*/true);                 // [B,1]
-  const auto axis = axisangle / angle.clamp_min(1e-12);                     // [B,3]
+  const auto angle = axisangle.norm(2, 1, /*keepdim=*/true);  // [B,1]
+  const auto axis = axisangle / angle.clamp_min(1e-12);       // [B,3]
   const auto x = axis.select(1, 0), y = axis.select(1, 1), z = axis.select(1, 2);
   const auto c = angle.squeeze(1).cos(), s = angle.squeeze(1).sin(), C = 1 - c;
-  const auto R = torch::stack({c + x * x * C, x * y * C - z * s, x * z * C + y * s,
-                               y * x * C + z * s, c + y * y * C, y * z * C - x * s,
-                               z * x * C - y * s, z * y * C + x * s, c + z * z * C},
+  const auto R = torch::stack({c + x * x * C, x * y * C - z * s, x * z * C + y * s, y * x * C + z * s, c + y * y * C,
+                               y * z * C - x * s, z * x * C - y * s, z * y * C + x * s, c + z * z * C},
                               1)
                      .view({-1, 3, 3});
   return assemble(R, translation);

@@ -18,8 +18,8 @@ Vec3 cross(const Vec3& a, const Vec3& b) {
 double dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
 struct Plane {
-  Vec3 n{};       // unit, n[1] > 0 (down)
-  double h = 0;   // n.X = h on the plane (the camera's distance from it)
+  Vec3 n{};      // unit, n[1] > 0 (down)
+  double h = 0;  // n.X = h on the plane (the camera's distance from it)
 };
 
 // Points within band x h of the plane.
@@ -59,7 +59,8 @@ bool refit(const std::vector<Vec3>& pts, const std::vector<size_t>& in, Plane* o
 RoadPlane fit_road_plane(const torch::Tensor& depth_in, const torch::Tensor& K_in, const RoadPlaneOptions& o) {
   auto depth = depth_in.detach().to(torch::kCPU, torch::kFloat64);
   if (depth.dim() == 3 && depth.size(0) == 1) depth = depth[0];
-  if (depth.dim() != 2) throw std::invalid_argument("fit_road_plane: depth must be [H,W], got " + c10::str(depth.sizes()));
+  if (depth.dim() != 2)
+    throw std::invalid_argument("fit_road_plane: depth must be [H,W], got " + c10::str(depth.sizes()));
   const auto K = K_in.detach().to(torch::kCPU, torch::kFloat64);
   if (K.sizes() != torch::IntArrayRef{3, 3}) throw std::invalid_argument("fit_road_plane: K must be [3,3]");
   const double fx = K[0][0].item<double>(), fy = K[1][1].item<double>(), cx = K[0][2].item<double>(),
@@ -137,7 +138,8 @@ RoadPlane fit_road_plane(const torch::Tensor& depth_in, const torch::Tensor& K_i
     if (count > best_count) best = p, best_count = count;
   }
   if (best_count == 0) {
-    out.why = "no plane within " + std::to_string(static_cast<int>(o.max_tilt_deg)) + " degrees of horizontal below the camera";
+    out.why = "no plane within " + std::to_string(static_cast<int>(o.max_tilt_deg)) +
+              " degrees of horizontal below the camera";
     return out;
   }
   Plane fitted = best;

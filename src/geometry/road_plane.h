@@ -21,21 +21,21 @@ struct RoadPlaneOptions {
   // normal is the camera's y axis and only the height is fitted. Off: the normal is fitted too
   // (a pitched camera), which a predicted depth map's bent near field can tilt.
   bool level_camera = true;
-  double bottom_fraction = 0.4;    // rows used: the lowest 40% of the image (the road ahead)
-  double max_tilt_deg = 20.0;      // the plane's normal within this angle of the camera's down axis
-  double inlier_band = 0.05;       // inliers lie within this fraction of the plane's height of it
+  double bottom_fraction = 0.4;      // rows used: the lowest 40% of the image (the road ahead)
+  double max_tilt_deg = 20.0;        // the plane's normal within this angle of the camera's down axis
+  double inlier_band = 0.05;         // inliers lie within this fraction of the plane's height of it
   double min_inlier_fraction = 0.2;  // of the candidate points, or no plane is found
-  int iterations = 300;            // RANSAC samples of three points
-  int64_t max_points = 20000;      // candidate points, evenly subsampled
-  uint64_t seed = 1;               // the samples are drawn from this seed (a fit is reproducible)
+  int iterations = 300;              // RANSAC samples of three points
+  int64_t max_points = 20000;        // candidate points, evenly subsampled
+  uint64_t seed = 1;                 // the samples are drawn from this seed (a fit is reproducible)
 };
 
 struct RoadPlane {
   bool found = false;
-  double height = 0;           // the camera's distance from the plane, in the depth map's unit
+  double height = 0;             // the camera's distance from the plane, in the depth map's unit
   double normal[3] = {0, 0, 0};  // unit normal, camera coordinates, pointing down (towards the road)
   int64_t inliers = 0, points = 0;
-  std::string why;             // when !found: what was missing
+  std::string why;  // when !found: what was missing
 };
 
 // The points of the image's lower part, back-projected. Level camera: RANSAC over single points for

@@ -13,8 +13,8 @@ void TrajectoryChain::add_step(const torch::Tensor& next_from_this) {
 }
 
 torch::Tensor TrajectoryChain::poses(const std::vector<double>& scales) const {
-  TORCH_CHECK(scales.empty() || scales.size() >= steps_.size(), "a trajectory of ", steps_.size(), " steps needs as many scales, got ",
-              scales.size());
+  TORCH_CHECK(scales.empty() || scales.size() >= steps_.size(), "a trajectory of ", steps_.size(),
+              " steps needs as many scales, got ", scales.size());
   std::vector<torch::Tensor> out = {torch::eye(4, torch::kFloat64)};
   for (size_t j = 0; j < steps_.size(); ++j) {
     auto step = steps_[j];
@@ -27,7 +27,8 @@ torch::Tensor TrajectoryChain::poses(const std::vector<double>& scales) const {
   return torch::stack(out);
 }
 
-std::vector<double> metric_scales(const std::vector<double>& per_frame, const std::function<std::string(size_t)>& no_road) {
+std::vector<double> metric_scales(const std::vector<double>& per_frame,
+                                  const std::function<std::string(size_t)>& no_road) {
   auto scales = smooth_scales(per_frame, 5);
   // A longer stretch without a road (the car ahead hiding it, a turn) takes the scale of the nearest
   // frame that has one (the earlier on a tie): the scene's scale does not jump there.

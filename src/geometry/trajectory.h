@@ -30,6 +30,7 @@ class TrajectoryChain {
 // found), smoothed over 11 frames (smooth_scales); a frame with no estimate within 5 frames takes the
 // smoothed scale of the nearest frame that has one. Throws std::runtime_error with `no_road(0)` when
 // no frame has an estimate.
-std::vector<double> metric_scales(const std::vector<double>& per_frame, const std::function<std::string(size_t)>& no_road);
+std::vector<double> metric_scales(const std::vector<double>& per_frame,
+                                  const std::function<std::string(size_t)>& no_road);
 
 }  // namespace geo

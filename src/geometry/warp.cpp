@@ -17,11 +17,9 @@ Warped warp(const torch::Tensor& image, const torch::Tensor& flow, OutOfView out
   const auto grid = torch::stack({x * sx - 1.0, y * sy - 1.0}, 3);  // [B,H,W,2]
   namespace F = torch::nn::functional;
   Warped out;
-  out.image = F::grid_sample(image, grid.to(image.dtype()),
-                             F::GridSampleFuncOptions()
-                                 .mode(torch::kBilinear)
-                                 .padding_mode(torch::kBorder)
-                                 .align_corners(true));
+  out.image = F::grid_sample(
+      image, grid.to(image.dtype()),
+      F::GridSampleFuncOptions().mode(torch::kBilinear).padding_mode(torch::kBorder).align_corners(true));
   {
     torch::NoGradGuard no_grad;
     // GeoNet's sampler: the upper bounds are exclusive (a 1-pixel side keeps its one pixel).

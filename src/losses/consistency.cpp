@@ -15,14 +15,13 @@ void check_flow_pair(const torch::Tensor& fw, const torch::Tensor& bw, const cha
 torch::Tensor l2_norm(const torch::Tensor& x) { return channel_l2_norm(x.abs() + 1e-10); }
 }  // namespace
 
-torch::Tensor backward_at_forward(const torch::Tensor& flow_fw, const torch::Tensor& flow_bw,
-                                  OutOfView out_of_view) {
+torch::Tensor backward_at_forward(const torch::Tensor& flow_fw, const torch::Tensor& flow_bw, OutOfView out_of_view) {
   check_flow_pair(flow_fw, flow_bw, "flow_bw");
   return warp(flow_bw, flow_fw, out_of_view).image;
 }
 
-torch::Tensor visibility_mask(const torch::Tensor& flow_fw, const torch::Tensor& bw_at_fw,
-                              double alpha1, double alpha2) {
+torch::Tensor visibility_mask(const torch::Tensor& flow_fw, const torch::Tensor& bw_at_fw, double alpha1,
+                              double alpha2) {
   check_flow_pair(flow_fw, bw_at_fw, "bw_at_fw");
   torch::NoGradGuard no_grad;
   const auto sq = [](const torch::Tensor& f) { return (f * f).sum(1, true); };
@@ -31,8 +30,8 @@ torch::Tensor visibility_mask(const torch::Tensor& flow_fw, const torch::Tensor&
   return (lhs < rhs).to(flow_fw.dtype());
 }
 
-Consistency geometric_consistency(const torch::Tensor& flow_fw, const torch::Tensor& bw_at_fw,
-                                  double a, double b, int scale, bool scale_factor) {
+Consistency geometric_consistency(const torch::Tensor& flow_fw, const torch::Tensor& bw_at_fw, double a, double b,
+                                  int scale, bool scale_factor) {
   check_flow_pair(flow_fw, bw_at_fw, "bw_at_fw");
   const double k = scale_factor ? static_cast<double>(int64_t{1} << scale) : 1.0;
   const auto diff = (flow_fw + bw_at_fw).abs();

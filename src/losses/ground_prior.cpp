@@ -18,7 +18,7 @@ torch::Tensor ground_prior(const torch::Tensor& disp, const torch::Tensor& K, do
   // (v - cy) / fy per image and row: the road's height below the camera per unit of depth.
   const auto rows = torch::arange(H, opts).view({1, H});
   const auto slope = (rows - Kd.select(1, 1).select(1, 2).view({B, 1})) / Kd.select(1, 1).select(1, 1).view({B, 1});
-  const auto below = slope > 1.0 / max_heights;                                // [B,H] rows bounded
+  const auto below = slope > 1.0 / max_heights;  // [B,H] rows bounded
   const auto top = static_cast<double>(std::floor(static_cast<double>(H) * (1.0 - kGroundRows)));
   const auto lower = (rows >= top).expand({B, H}) & below;
   // The camera's height in the prediction's unit: the median of slope x depth over the lower rows
@@ -31,8 +31,8 @@ torch::Tensor ground_prior(const torch::Tensor& disp, const torch::Tensor& K, do
                                      torch::full_like(y, std::numeric_limits<double>::quiet_NaN()));
     height = std::get<0>(masked.flatten(1).nanmedian(1));  // [B]; NaN where no lower row is bounded
   }
-  const auto has_rows = lower.any(1);  // [B]
-  height = torch::where(has_rows, height, torch::ones_like(height));  // no NaN into the gradient
+  const auto has_rows = lower.any(1);                                  // [B]
+  height = torch::where(has_rows, height, torch::ones_like(height));   // no NaN into the gradient
   const auto road = (slope / height.view({B, 1})).view({B, 1, H, 1});  // the road's disparity per row
   const auto bounded = (below & has_rows.view({B, 1})).view({B, 1, H, 1}).expand_as(disp);
   const auto penalty = torch::relu(1.0 - tolerance - disp / road.clamp_min(1e-12));

@@ -86,11 +86,8 @@ template <typename T>
 struct SsimTerms {
   T A, B, C, D, S;
   SsimTerms(T m1, T m2, T m11, T m22, T m12)
-      : A(2 * m1 * m2 + T(kC1)),
-        B(2 * (m12 - m1 * m2) + T(kC2)),
-        C(m1 * m1 + m2 * m2 + T(kC1)),
-        D((m11 - m1 * m1) + (m22 - m2 * m2) + T(kC2)),
-        S(A * B / (C * D)) {}
+      : A(2 * m1 * m2 + T(kC1)), B(2 * (m12 - m1 * m2) + T(kC2)), C(m1 * m1 + m2 * m2 + T(kC1)),
+        D((m11 - m1 * m1) + (m22 - m2 * m2) + T(kC2)), S(A * B / (C * D)) {}
 };
 
 template <typename T>
@@ -192,8 +189,7 @@ torch::Tensor photometric_error_channels(const torch::Tensor& x, const torch::Te
   TORCH_CHECK(alpha >= 0 && alpha <= 1, "alpha must be in [0,1], got ", alpha);
   TORCH_CHECK(x.dim() == 4, "x must be [B,C,H,W], got ", x.sizes());
   TORCH_CHECK(x.sizes() == y.sizes(), "x ", x.sizes(), " and y ", y.sizes(), " must match");
-  const bool fused =
-      fused_cpu_kernel_applies(x) && fused_cpu_kernel_applies(y) && x.scalar_type() == y.scalar_type();
+  const bool fused = fused_cpu_kernel_applies(x) && fused_cpu_kernel_applies(y) && x.scalar_type() == y.scalar_type();
   return fused ? FusedPhotometric::apply(x, y, alpha) : photometric_error_channels_reference(x, y, alpha);
 }
 
@@ -216,8 +212,7 @@ std::vector<torch::Tensor> image_pyramid(const torch::Tensor& image, int num_sca
               ": height and width must be divisible by ", f, " for ", num_scales, " scales");
   std::vector<torch::Tensor> out{image};
   for (int s = 1; s < num_scales; ++s)
-    out.push_back(torch::nn::functional::avg_pool2d(out.back(),
-                                                    torch::nn::functional::AvgPool2dFuncOptions(2)));
+    out.push_back(torch::nn::functional::avg_pool2d(out.back(), torch::nn::functional::AvgPool2dFuncOptions(2)));
   return out;
 }
 

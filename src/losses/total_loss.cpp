@@ -13,8 +13,8 @@ namespace geo {
 namespace {
 
 // Per-pixel mask for one direction and source: ones, times the in-view mask and the auto-mask.
-torch::Tensor loss_mask(const torch::Tensor& error, const torch::Tensor& valid,
-                        const torch::Tensor& identity_error, const LossConfig& cfg) {
+torch::Tensor loss_mask(const torch::Tensor& error, const torch::Tensor& valid, const torch::Tensor& identity_error,
+                        const LossConfig& cfg) {
   auto mask = torch::ones_like(error);
   if (cfg.mask_out_of_view) mask = mask * valid;
   if (cfg.automask) mask = mask * (error < identity_error).to(error.dtype());
@@ -23,8 +23,7 @@ torch::Tensor loss_mask(const torch::Tensor& error, const torch::Tensor& valid,
 
 // Photometric term of one direction at one scale over all sources. With auto-masking, `masked`
 // (when given) receives the share of pixels a still frame explained better (no gradient).
-torch::Tensor direction_loss(const std::vector<torch::Tensor>& errors,
-                             const std::vector<torch::Tensor>& valids,
+torch::Tensor direction_loss(const std::vector<torch::Tensor>& errors, const std::vector<torch::Tensor>& valids,
                              const std::vector<torch::Tensor>& identity, const LossConfig& cfg,
                              torch::Tensor* masked = nullptr) {
   const auto share = [&](const torch::Tensor& err, const torch::Tensor& ident) {
@@ -40,8 +39,8 @@ torch::Tensor direction_loss(const std::vector<torch::Tensor>& errors,
   if (cfg.automask) share(torch::stack(errors), torch::stack(identity));
   std::vector<torch::Tensor> per_source;
   for (size_t i = 0; i < errors.size(); ++i)
-    per_source.push_back(masked_mean(
-        errors[i], loss_mask(errors[i], valids[i], cfg.automask ? identity[i] : errors[i], cfg)));
+    per_source.push_back(
+        masked_mean(errors[i], loss_mask(errors[i], valids[i], cfg.automask ? identity[i] : errors[i], cfg)));
   return torch::stack(per_source).mean();
 }
 
@@ -56,13 +55,12 @@ RigidTerms rigid_terms(const LossInputs& in, const LossConfig& cfg) {
   TORCH_CHECK(S >= 1, "tgt_disp must hold at least one scale");
   check_shape(in.K, "K", {B, 3, 3});
   check_shape(in.poses, "poses", {B, N, 6});
-  TORCH_CHECK(static_cast<int64_t>(in.src_disp.size()) == N, "src_disp must hold ", N,
-              " sources, got ", in.src_disp.size());
+  TORCH_CHECK(static_cast<int64_t>(in.src_disp.size()) == N, "src_disp must hold ", N, " sources, got ",
+              in.src_disp.size());
   for (int64_t i = 0; i < N; ++i) {
-    TORCH_CHECK(in.srcs[i].sizes() == in.tgt.sizes(), "srcs[", i, "] ", in.srcs[i].sizes(),
-                " must match tgt ", in.tgt.sizes());
-    TORCH_CHECK(static_cast<int>(in.src_disp[i].size()) == S, "src_disp[", i, "] must hold ", S,
-                " scales");
+    TORCH_CHECK(in.srcs[i].sizes() == in.tgt.sizes(), "srcs[", i, "] ", in.srcs[i].sizes(), " must match tgt ",
+                in.tgt.sizes());
+    TORCH_CHECK(static_cast<int>(in.src_disp[i].size()) == S, "src_disp[", i, "] must hold ", S, " scales");
   }
   for (int s = 0; s < S; ++s) {
     const int64_t h = in.tgt.size(2) >> s, w = in.tgt.size(3) >> s;
@@ -76,8 +74,7 @@ RigidTerms rigid_terms(const LossInputs& in, const LossConfig& cfg) {
   std::vector<torch::Tensor> rigid_per_scale, smooth_per_scale;
   for (int64_t i = 0; i < N; ++i) {
     out.src_pyr.push_back(image_pyramid(to_loss_range(in.srcs[i], cfg), S));
-    for (auto* v : {&out.fwd_flow, &out.bwd_flow, &out.fwd_warp, &out.bwd_warp, &out.fwd_error,
-                    &out.bwd_error})
+    for (auto* v : {&out.fwd_flow, &out.bwd_flow, &out.fwd_warp, &out.bwd_warp, &out.fwd_error, &out.bwd_error})
       v->emplace_back(S);
   }
   std::vector<torch::Tensor> src_from_tgt, tgt_from_src;
@@ -127,8 +124,7 @@ RigidTerms rigid_terms(const LossInputs& in, const LossConfig& cfg) {
       disps.push_back(in.src_disp[i][s]);
       images.push_back(out.src_pyr[i][s]);
     }
-    const auto sm = edge_aware_smoothness(torch::cat(disps), torch::cat(images)) /
-                    static_cast<double>(int64_t{1} << s);
+    const auto sm = edge_aware_smoothness(torch::cat(disps), torch::cat(images)) / static_cast<double>(int64_t{1} << s);
     smooth = smooth.defined() ? smooth + sm : sm;
   }
   // GeoNet's factor num_source / 2 (its L_br is the mean over the sources stacked on the batch, times it).
@@ -142,8 +138,8 @@ FlowTerms flow_terms(const RigidTerms& rigid, const PerSourceScale<torch::Tensor
                      double flow_consistency_weight) {
   const size_t N = rigid.src_pyr.size();
   const int S = static_cast<int>(rigid.tgt_pyr.size());
-  TORCH_CHECK(fwd_full.size() == N && bwd_full.size() == N, "full flows must hold ", N,
-              " sources, got ", fwd_full.size(), " and ", bwd_full.size());
+  TORCH_CHECK(fwd_full.size() == N && bwd_full.size() == N, "full flows must hold ", N, " sources, got ",
+              fwd_full.size(), " and ", bwd_full.size());
   const OutOfView sampler = out_of_view(cfg);
   const bool consistency_mask = cfg.flow_mask == FlowMask::kConsistency;
   FlowTerms out;
@@ -169,10 +165,10 @@ FlowTerms flow_terms(const RigidTerms& rigid, const PerSourceScale<torch::Tensor
       const auto fw_at_bw = backward_at_forward(bf, ff, sampler);
       out.fwd_visible[i][s] = visibility_mask(ff, bw_at_fw, cfg.occ_alpha1, cfg.occ_alpha2);
       out.bwd_visible[i][s] = visibility_mask(bf, fw_at_bw, cfg.occ_alpha1, cfg.occ_alpha2);
-      const auto cf = geometric_consistency(ff, bw_at_fw, cfg.consistency_a, cfg.consistency_b, s,
-                                            cfg.consistency_scale_factor);
-      const auto cb = geometric_consistency(bf, fw_at_bw, cfg.consistency_a, cfg.consistency_b, s,
-                                            cfg.consistency_scale_factor);
+      const auto cf =
+          geometric_consistency(ff, bw_at_fw, cfg.consistency_a, cfg.consistency_b, s, cfg.consistency_scale_factor);
+      const auto cb =
+          geometric_consistency(bf, fw_at_bw, cfg.consistency_a, cfg.consistency_b, s, cfg.consistency_scale_factor);
       const auto fw = warp(src, ff, sampler), bw = warp(tgt, bf, sampler);
       auto fmask = consistency_mask ? cf.mask : out.fwd_visible[i][s];
       auto bmask = consistency_mask ? cb.mask : out.bwd_visible[i][s];
@@ -187,7 +183,8 @@ FlowTerms flow_terms(const RigidTerms& rigid, const PerSourceScale<torch::Tensor
         bmask = torch::ones_like(bmask);
       }
       if (geonet) {
-        pooled_fe[s].push_back(fe), pooled_fm[s].push_back(fmask), pooled_be[s].push_back(be), pooled_bm[s].push_back(bmask);
+        pooled_fe[s].push_back(fe), pooled_fm[s].push_back(fmask), pooled_be[s].push_back(be),
+            pooled_bm[s].push_back(bmask);
       } else {
         fr.push_back(masked_mean(fe, fmask) + masked_mean(be, bmask));
       }
@@ -226,8 +223,7 @@ LossTerms total_loss(const RigidTerms& rigid, const FlowTerms* flow, const LossW
     t.flow = flow->flow;
     t.flow_smooth = flow->flow_smooth;
     t.flow_consistency = flow->flow_consistency;
-    t.total = t.total + w.flow * t.flow + w.flow_smooth * t.flow_smooth +
-              w.flow_consistency * t.flow_consistency;
+    t.total = t.total + w.flow * t.flow + w.flow_smooth * t.flow_smooth + w.flow_consistency * t.flow_consistency;
   }
   return t;
 }
@@ -235,10 +231,14 @@ LossTerms total_loss(const RigidTerms& rigid, const FlowTerms* flow, const LossW
 std::vector<std::pair<std::string, double>> LossTerms::values() const {
   std::vector<const char*> names;
   std::vector<torch::Tensor> scalars;
-  for (const auto& [name, v] : {std::pair<const char*, const torch::Tensor&>{"rigid", rigid}, {"flow", flow},
-                                {"disp_smooth", disp_smooth}, {"flow_smooth", flow_smooth},
-                                {"flow_consistency", flow_consistency}, {"ground", ground},
-                                {"automasked", automasked}, {"total", total}})
+  for (const auto& [name, v] : {std::pair<const char*, const torch::Tensor&>{"rigid", rigid},
+                                {"flow", flow},
+                                {"disp_smooth", disp_smooth},
+                                {"flow_smooth", flow_smooth},
+                                {"flow_consistency", flow_consistency},
+                                {"ground", ground},
+                                {"automasked", automasked},
+                                {"total", total}})
     if (v.defined()) {
       names.push_back(name);
       scalars.push_back(v.detach().reshape({}).to(torch::kFloat64));

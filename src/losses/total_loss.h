@@ -16,16 +16,16 @@
 
 namespace geo {
 
-
-template <class T> using PerSourceScale = std::vector<std::vector<T>>;  // [source][scale]
+template <class T>
+using PerSourceScale = std::vector<std::vector<T>>;  // [source][scale]
 
 struct LossInputs {
-  torch::Tensor tgt;                        // [B,3,H,W], RGB in [0,1]
-  std::vector<torch::Tensor> srcs;          // N x [B,3,H,W]
-  torch::Tensor K;                          // [B,3,3] intrinsics at full resolution
-  std::vector<torch::Tensor> tgt_disp;      // S x [B,1,H>>s,W>>s], disparity (1/depth)
-  PerSourceScale<torch::Tensor> src_disp;   // N x S, same shapes (for the backward direction)
-  torch::Tensor poses;                      // [B,N,6] pose vectors src_from_tgt (pose.h)
+  torch::Tensor tgt;                       // [B,3,H,W], RGB in [0,1]
+  std::vector<torch::Tensor> srcs;         // N x [B,3,H,W]
+  torch::Tensor K;                         // [B,3,3] intrinsics at full resolution
+  std::vector<torch::Tensor> tgt_disp;     // S x [B,1,H>>s,W>>s], disparity (1/depth)
+  PerSourceScale<torch::Tensor> src_disp;  // N x S, same shapes (for the backward direction)
+  torch::Tensor poses;                     // [B,N,6] pose vectors src_from_tgt (pose.h)
 };
 
 // Images in RigidTerms are in the loss range (loss.image_range), not [0,1].
@@ -48,7 +48,6 @@ struct RigidTerms {
                               // better (left out; mean of both directions; no gradient), else undefined
 };
 
-
 // Computes L_br and L_ds. Throws on inconsistent shapes, naming the argument.
 RigidTerms rigid_terms(const LossInputs& in, const LossConfig& cfg);
 
@@ -70,7 +69,7 @@ FlowTerms flow_terms(const RigidTerms& rigid, const PerSourceScale<torch::Tensor
 struct LossTerms {
   // Unweighted terms; undefined when the stage does not compute them (never zero-filled).
   torch::Tensor rigid, flow, disp_smooth, flow_smooth, flow_consistency, ground;
-  torch::Tensor total;  // eq. 16: the weighted sum of the defined terms
+  torch::Tensor total;       // eq. 16: the weighted sum of the defined terms
   torch::Tensor automasked;  // not a loss: RigidTerms::automasked, reported beside the terms
 
   // (name, value) of every defined term, the auto-masked share when defined, and the total last, for

@@ -44,9 +44,7 @@ thread_local bool g_uninitialised = false;
 
 // `o` with one input and one output channel: a placeholder whose initialisation draws next to
 // nothing, given the real shapes right after (UninitialisedWeights).
-torch::nn::Conv2dOptions placeholder(torch::nn::Conv2dOptions o) {
-  return o.in_channels(1).out_channels(1).groups(1);
-}
+torch::nn::Conv2dOptions placeholder(torch::nn::Conv2dOptions o) { return o.in_channels(1).out_channels(1).groups(1); }
 }  // namespace
 
 UninitialisedWeights::UninitialisedWeights() : previous_(g_uninitialised) { g_uninitialised = true; }

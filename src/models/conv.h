@@ -53,7 +53,8 @@ class UninitialisedWeights {
 // outside UninitialisedWeights, the same initial values from the same random numbers).
 struct Conv2dImpl : torch::nn::Conv2dImpl {
   explicit Conv2dImpl(const torch::nn::Conv2dOptions& options);
-  Conv2dImpl(int64_t in, int64_t out, torch::ExpandingArray<2> kernel) : Conv2dImpl(torch::nn::Conv2dOptions(in, out, kernel)) {}
+  Conv2dImpl(int64_t in, int64_t out, torch::ExpandingArray<2> kernel)
+      : Conv2dImpl(torch::nn::Conv2dOptions(in, out, kernel)) {}
   torch::Tensor forward(const torch::Tensor& x) { return conv2d(*this, x); }
 };
 TORCH_MODULE(Conv2d);

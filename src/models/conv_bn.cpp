@@ -10,10 +10,8 @@ namespace geo {
 
 ConvBnImpl::ConvBnImpl(int64_t in, int64_t out, int64_t kernel, int64_t stride, bool relu_, bool upsampled_)
     : relu(relu_), upsampled(upsampled_) {
-  conv = register_module("conv", Conv2d(torch::nn::Conv2dOptions(in, out, kernel)
-                                                       .stride(stride)
-                                                       .padding(kernel / 2)
-                                                       .bias(false)));
+  conv = register_module(
+      "conv", Conv2d(torch::nn::Conv2dOptions(in, out, kernel).stride(stride).padding(kernel / 2).bias(false)));
   bn = register_module("bn", SyncBatchNorm2d(out));
 }
 
@@ -61,9 +59,9 @@ torch::Tensor ConvBnImpl::forward(const torch::Tensor& x) {
 
 torch::Tensor ConvBnImpl::forward_upsampled(const torch::Tensor& x) {
   const auto& o = conv->options;
-  TORCH_CHECK((*o.kernel_size())[0] == 3 && (*o.kernel_size())[1] == 3 && (*o.stride())[0] == 1 &&
-                  (*o.stride())[1] == 1,
-              "forward_upsampled needs a 3x3 stride-1 ConvBn");
+  TORCH_CHECK(
+      (*o.kernel_size())[0] == 3 && (*o.kernel_size())[1] == 3 && (*o.stride())[0] == 1 && (*o.stride())[1] == 1,
+      "forward_upsampled needs a 3x3 stride-1 ConvBn");
   if (x.size(2) * x.size(3) < kMinSubpixelArea) return forward(upsample2(x, UpsampleMode::kNearest));
   if (uses_packed(x, packed_phase_weight_)) {
     const int64_t B = x.size(0), Co = conv->weight.size(0), h = x.size(2), w = x.size(3);
@@ -82,7 +80,7 @@ void ConvBnImpl::fold_batchnorm(torch::Dtype dtype) {
   folded_weight_ = weight.to(dtype).contiguous();
   folded_bias_ = bias.to(dtype);
   if (conv->weight.device().is_cpu() && at::hasMKLDNN() && at::globalContext().userEnabledMkldnn())
-    prepack(weight, bias.to(torch::kFloat32));  // oneDNN adds a float32 bias to bf16 products
+    prepack(weight, bias.to(torch::kFloat32));        // oneDNN adds a float32 bias to bf16 products
   if (prepacked()) folded_weight_ = torch::Tensor();  // folded_weight() computes it again when asked
 }
 
@@ -107,8 +105,8 @@ void ConvBnImpl::prepack(const torch::Tensor& w32, const torch::Tensor& b32) {
       packed_phase_bias_ = b32.repeat({4});
     }
     // A CPU without oneDNN's kernels for this type (bf16 without AVX-512) fails here, not later.
-    packed_conv(torch::zeros({1, w.size(1), k[0], k[1]}, folded_weight_.options()), packed_weight_,
-                packed_bias_, pad, *o.stride());
+    packed_conv(torch::zeros({1, w.size(1), k[0], k[1]}, folded_weight_.options()), packed_weight_, packed_bias_, pad,
+                *o.stride());
   } catch (const c10::Error&) {
     packed_weight_ = packed_phase_weight_ = packed_bias_ = packed_phase_bias_ = torch::Tensor();
   }

@@ -24,8 +24,8 @@ namespace geo {
 
 struct EncoderDecoderOptions {
   ResNetEncoderOptions encoder;
-  int64_t out_channels = 1;          // 1 (disparity) or 2 (flow)
-  bool fr_decoder = true;            // FR after each decoder stage (paper)
+  int64_t out_channels = 1;                        // 1 (disparity) or 2 (flow)
+  bool fr_decoder = true;                          // FR after each decoder stage (paper)
   UpsampleMode upsample = UpsampleMode::kNearest;  // GeoNet
 };
 
@@ -39,9 +39,9 @@ struct EncoderDecoderImpl : torch::nn::Module {
   EncoderDecoderOptions options;
   Head head;
   ResNetEncoder encoder{nullptr};
-  std::vector<ConvBn> upconv, iconv;        // index 0 = stage 6 (coarsest) ... 5 = stage 1
-  std::vector<FeatureRefinement> refine;    // empty when decoder FR is off
-  std::vector<Conv2d> pred;      // index 0 = 1/8 ... 3 = full
+  std::vector<ConvBn> upconv, iconv;      // index 0 = stage 6 (coarsest) ... 5 = stage 1
+  std::vector<FeatureRefinement> refine;  // empty when decoder FR is off
+  std::vector<Conv2d> pred;               // index 0 = 1/8 ... 3 = full
   // Set by observe_int8 (models/int8.h): forward calibrates, then (quantize_int8) runs in int8.
   std::shared_ptr<Int8EncoderDecoder> int8;
 };

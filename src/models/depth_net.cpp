@@ -17,15 +17,14 @@ EncoderDecoderOptions encoder_decoder_options(const DepthNetOptions& o, int64_t 
 
 DepthNetImpl::DepthNetImpl(const DepthNetOptions& o) : options(o) {
   const double scale = o.disp_scale, min_disp = o.min_disp;
-  net = register_module("net", EncoderDecoder(encoder_decoder_options(o, 3, 1),
-                                              [scale, min_disp](const torch::Tensor& x) {
-                                                return scale * torch::sigmoid(x) + min_disp;
-                                              }));
+  net = register_module("net",
+                        EncoderDecoder(encoder_decoder_options(o, 3, 1), [scale, min_disp](const torch::Tensor& x) {
+                          return scale * torch::sigmoid(x) + min_disp;
+                        }));
 }
 
 DepthOutput DepthNetImpl::forward(const torch::Tensor& image) {
-  TORCH_CHECK(image.dim() == 4 && image.size(1) == 3, "DepthNet input must be [B,3,H,W], got ",
-              image.sizes());
+  TORCH_CHECK(image.dim() == 4 && image.size(1) == 3, "DepthNet input must be [B,3,H,W], got ", image.sizes());
   auto disp = net(normalize_image(image.to(compute_dtype)));
   for (auto& d : disp) d = d.to(torch::kFloat32);
   return DepthOutput{std::move(disp)};

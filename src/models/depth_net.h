@@ -10,15 +10,15 @@
 namespace geo {
 
 struct DepthNetOptions {
-  int encoder_depth = 50;            // ResNet-50 (paper)
-  bool use_fr = true;                // FR on (paper); false = Table 4 "w/o FR"
-  bool fr_encoder = true;            // Refined1..4 (paper)
-  bool fr_decoder = true;            // Refined5..10 (paper)
-  int64_t fr_ratio = 16;             // paper
-  bool fr_spatial_bn = false;        // CBAM's code option
+  int encoder_depth = 50;                          // ResNet-50 (paper)
+  bool use_fr = true;                              // FR on (paper); false = Table 4 "w/o FR"
+  bool fr_encoder = true;                          // Refined1..4 (paper)
+  bool fr_decoder = true;                          // Refined5..10 (paper)
+  int64_t fr_ratio = 16;                           // paper
+  bool fr_spatial_bn = false;                      // CBAM's code option
   UpsampleMode upsample = UpsampleMode::kNearest;  // GeoNet
-  double disp_scale = 5.0;           // disp = 5 sigmoid(x) + 0.01 (GeoNet ResNet-50 scaling)
-  double min_disp = 0.01;            // GeoNet
+  double disp_scale = 5.0;                         // disp = 5 sigmoid(x) + 0.01 (GeoNet ResNet-50 scaling)
+  double min_disp = 0.01;                          // GeoNet
 };
 
 // The encoder-decoder options of these settings for `in` input and `out` output channels

@@ -11,8 +11,8 @@
 namespace geo {
 
 struct FlowNetOptions {
-  DepthNetOptions backbone;   // same encoder-decoder settings as the DepthNet (paper)
-  double flow_scale = 0.1;    // residual = 0.1 * conv, in units of the image size (GeoNet)
+  DepthNetOptions backbone;  // same encoder-decoder settings as the DepthNet (paper)
+  double flow_scale = 0.1;   // residual = 0.1 * conv, in units of the image size (GeoNet)
   // The prediction convs start at zero (model.flow_zero_init), so the residual is 0 and the full
   // flow the rigid flow when the FlowNet starts training; GeoNet: Xavier like every other layer.
   bool zero_init_residual = false;
@@ -25,9 +25,8 @@ struct FlowOutput {
 // The 12 input channels of one direction: target and source (normalised to [-1,1]), the source
 // warped by the rigid flow (normalised), the rigid flow (2, pixels) and the per-pixel L2 norm over
 // colour channels of the rigid photometric error (1). All [B,*,H,W] at full resolution.
-torch::Tensor flow_net_input(const torch::Tensor& tgt, const torch::Tensor& src,
-                             const torch::Tensor& rigid_warp, const torch::Tensor& rigid_flow,
-                             const torch::Tensor& rigid_error_norm);
+torch::Tensor flow_net_input(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& rigid_warp,
+                             const torch::Tensor& rigid_flow, const torch::Tensor& rigid_error_norm);
 
 struct FlowNetImpl : torch::nn::Module {
   explicit FlowNetImpl(const FlowNetOptions& options = {});

@@ -143,22 +143,20 @@ std::pair<torch::Tensor, torch::Tensor> max_mean_over_space(const torch::Tensor&
 }
 
 FeatureRefinementImpl::FeatureRefinementImpl(const FeatureRefinementOptions& o) : options(o) {
-  TORCH_CHECK(o.channels >= 1 && o.ratio >= 1, "FR needs channels >= 1 and ratio >= 1, got ",
-              o.channels, " and ", o.ratio);
+  TORCH_CHECK(o.channels >= 1 && o.ratio >= 1, "FR needs channels >= 1 and ratio >= 1, got ", o.channels, " and ",
+              o.ratio);
   const int64_t hidden = std::max(o.min_hidden, o.channels / o.ratio);
   // The shared MLP as 1x1 convolutions without bias (as in common CBAM implementations).
-  mlp_in = register_module("mlp_in",
-                           Conv2d(torch::nn::Conv2dOptions(o.channels, hidden, 1).bias(false)));
-  mlp_out = register_module("mlp_out",
-                            Conv2d(torch::nn::Conv2dOptions(hidden, o.channels, 1).bias(false)));
-  spatial = register_module(
-      "spatial", Conv2d(torch::nn::Conv2dOptions(2, 1, o.kernel).padding(o.kernel / 2).bias(false)));
+  mlp_in = register_module("mlp_in", Conv2d(torch::nn::Conv2dOptions(o.channels, hidden, 1).bias(false)));
+  mlp_out = register_module("mlp_out", Conv2d(torch::nn::Conv2dOptions(hidden, o.channels, 1).bias(false)));
+  spatial =
+      register_module("spatial", Conv2d(torch::nn::Conv2dOptions(2, 1, o.kernel).padding(o.kernel / 2).bias(false)));
   if (o.spatial_bn) spatial_bn = register_module("spatial_bn", SyncBatchNorm2d(1));
 }
 
 torch::Tensor FeatureRefinementImpl::channel_gate(const torch::Tensor& x) {
-  TORCH_CHECK(x.dim() == 4 && x.size(1) == options.channels, "FR input must be [B,",
-              options.channels, ",H,W], got ", x.sizes());
+  TORCH_CHECK(x.dim() == 4 && x.size(1) == options.channels, "FR input must be [B,", options.channels, ",H,W], got ",
+              x.sizes());
   const auto [mx, avg] = max_mean_over_space(x);
   return channel_gate_of(mx, avg);
 }

@@ -14,10 +14,10 @@ namespace geo {
 struct FeatureRefinementOptions {
   explicit FeatureRefinementOptions(int64_t channels_) : channels(channels_) {}
   int64_t channels;
-  int64_t ratio = 16;        // hidden width C / r of the shared MLP (paper, CBAM)
-  int64_t min_hidden = 1;    // hidden width never below this (C / r < 1 for C < 16)
-  int64_t kernel = 7;        // spatial attention conv (CBAM)
-  bool spatial_bn = false;   // BatchNorm after the spatial conv (CBAM's code; off in the paper)
+  int64_t ratio = 16;       // hidden width C / r of the shared MLP (paper, CBAM)
+  int64_t min_hidden = 1;   // hidden width never below this (C / r < 1 for C < 16)
+  int64_t kernel = 7;       // spatial attention conv (CBAM)
+  bool spatial_bn = false;  // BatchNorm after the spatial conv (CBAM's code; off in the paper)
 };
 
 struct FeatureRefinementImpl : torch::nn::Module {

@@ -202,7 +202,8 @@ std::vector<torch::Tensor> Int8EncoderDecoder::forward(const torch::Tensor& x) {
 Int8PoseNet::Int8PoseNet(PoseNetImpl& net) : Int8Graph(net, {}, {}), net_(net) {}
 
 torch::Tensor Int8PoseNet::forward(const torch::Tensor& x) {
-  return run(x, [this](auto& ops, const torch::Tensor& in) { return std::vector<torch::Tensor>{pose_graph(net_, ops, in)}; })
+  return run(x, [this](auto& ops,
+                       const torch::Tensor& in) { return std::vector<torch::Tensor>{pose_graph(net_, ops, in)}; })
       .at(0);
 }
 
@@ -287,7 +288,8 @@ void quantize_int8(EncoderDecoderImpl& net) { quantize_observed(net); }
 void quantize_int8(PoseNetImpl& net) { quantize_observed(net); }
 
 void quantize_int8(EncoderDecoderImpl& net, const torch::Tensor& ranges, int64_t height, int64_t width) {
-  quantize_with_ranges<Int8EncoderDecoder>(net, ranges, torch::zeros({1, net.encoder->options.in_channels, height, width}));
+  quantize_with_ranges<Int8EncoderDecoder>(net, ranges,
+                                           torch::zeros({1, net.encoder->options.in_channels, height, width}));
 }
 
 void quantize_int8(PoseNetImpl& net, const torch::Tensor& ranges, int64_t height, int64_t width) {

@@ -14,13 +14,15 @@ namespace geo {
 
 std::string select_int8_engine() {
   const auto& supported = at::globalContext().supportedQEngines();
-  for (const auto& [engine, name] : std::vector<std::pair<at::QEngine, const char*>>{
-           {at::QEngine::ONEDNN, "onednn"},
+  for (const auto& [engine, name] : std::vector<std::pair<at::QEngine, const char*>> {
+         {at::QEngine::ONEDNN, "onednn"},
 #if TORCH_VERSION_MAJOR >= 2
-           {at::QEngine::X86, "x86"},
+             {at::QEngine::X86, "x86"},
 #endif
-           {at::QEngine::FBGEMM, "fbgemm"},
-           {at::QEngine::QNNPACK, "qnnpack"}})
+             {at::QEngine::FBGEMM, "fbgemm"}, {
+           at::QEngine::QNNPACK, "qnnpack"
+         }
+       })
     if (std::find(supported.begin(), supported.end(), engine) != supported.end()) {
       at::globalContext().setQEngine(engine);
       return name;

@@ -141,8 +141,8 @@ GEO_MULTIVERSIONED void quantize_planes(const float* __restrict__ x, int64_t C, 
 
 // Pixels [p0, p1) of x [pixels, Ci] (bytes) into Ci channels of y [pixels, Co]: round(x factor +
 // offset) clamped to 0..255 (offset = the output's zero point - x's zero point x factor + 0.5).
-GEO_MULTIVERSIONED void requantize_into(const uint8_t* __restrict__ x, int64_t Ci, float factor, float offset, int64_t p0,
-                                        int64_t p1, int64_t Co, uint8_t* __restrict__ y) {
+GEO_MULTIVERSIONED void requantize_into(const uint8_t* __restrict__ x, int64_t Ci, float factor, float offset,
+                                        int64_t p0, int64_t p1, int64_t Co, uint8_t* __restrict__ y) {
   for (int64_t p = p0; p < p1; ++p) {
     const uint8_t* row = x + p * Ci;
     uint8_t* o = y + p * Co;
@@ -165,8 +165,8 @@ torch::Tensor cat_int8(const std::vector<torch::Tensor>& parts_in, double scale,
     Co += t.size(1);
   }
   const int64_t B = parts[0].size(0), H = parts[0].size(2), W = parts[0].size(3);
-  auto out = at::_empty_affine_quantized({B, Co, H, W}, parts[0].options(), scale, zero_point,
-                                         at::MemoryFormat::ChannelsLast);
+  auto out =
+      at::_empty_affine_quantized({B, Co, H, W}, parts[0].options(), scale, zero_point, at::MemoryFormat::ChannelsLast);
   uint8_t* y = reinterpret_cast<uint8_t*>(out.data_ptr<c10::quint8>());
   at::parallel_for(0, B * H * W, 256, [&](int64_t p0, int64_t p1) {
     int64_t offset = 0;
@@ -193,13 +193,15 @@ torch::Tensor quantize_to_nhwc(const torch::Tensor& x_in, double scale, int64_t 
   const float* src = x.data_ptr<float>();
   uint8_t* dst = reinterpret_cast<uint8_t*>(out.data_ptr<c10::quint8>());
   const float inv = static_cast<float>(1.0 / scale), zo = static_cast<float>(zero_point) + 0.5f;
-  for (int64_t b = 0; b < B; ++b) at::parallel_for(0, HW, 1024, [&](int64_t p0, int64_t p1) {
-    quantize_planes(src + b * C * HW, C, HW, p0, p1, inv, zo, dst + b * C * HW);
-  });
+  for (int64_t b = 0; b < B; ++b)
+    at::parallel_for(0, HW, 1024, [&](int64_t p0, int64_t p1) {
+      quantize_planes(src + b * C * HW, C, HW, p0, p1, inv, zo, dst + b * C * HW);
+    });
   return out;
 }
 
-torch::Tensor int8_feature_refinement(FeatureRefinementImpl& fr, const torch::Tensor& q_in, double out_scale, int64_t out_zp) {
+torch::Tensor int8_feature_refinement(FeatureRefinementImpl& fr, const torch::Tensor& q_in, double out_scale,
+                                      int64_t out_zp) {
   const auto q = q_in.contiguous(at::MemoryFormat::ChannelsLast);
   const int64_t B = q.size(0), C = q.size(1), H = q.size(2), W = q.size(3), HW = H * W;
   const float s = static_cast<float>(q.q_scale()), z = static_cast<float>(q.q_zero_point());
@@ -236,18 +238,19 @@ torch::Tensor int8_feature_refinement(FeatureRefinementImpl& fr, const torch::Te
   // Max and mean over the channels of x * a_c per pixel, then the spatial gate's convolution.
   auto smax = torch::empty({B, 1, H, W}, fopt), smean = torch::empty({B, 1, H, W}, fopt);
   float *sm = smax.data_ptr<float>(), *sa = smean.data_ptr<float>();
-  for (int64_t b = 0; b < B; ++b) at::parallel_for(b * HW, (b + 1) * HW, 256, [&](int64_t p0, int64_t p1) {
-    max_mean_over_channels(x, ac + b * C, p0, p1, C, z, s, sm, sa);
-  });
+  for (int64_t b = 0; b < B; ++b)
+    at::parallel_for(b * HW, (b + 1) * HW, 256,
+                     [&](int64_t p0, int64_t p1) { max_mean_over_channels(x, ac + b * C, p0, p1, C, z, s, sm, sa); });
   const auto& spatial = *fr.spatial;
   const int64_t k = spatial.options.kernel_size()->at(0);
   const auto w = spatial.weight.to(torch::kFloat32).contiguous();
   TORCH_CHECK(w.sizes() == torch::IntArrayRef({1, 2, k, k}) && !spatial.bias.defined(),
               "int8 FR: a spatial convolution of 2 -> 1 channels without bias expected, got ", w.sizes());
   auto conv = torch::empty({B, 1, H, W}, fopt);
-  for (int64_t b = 0; b < B; ++b) at::parallel_for(0, H, 8, [&](int64_t y0, int64_t y1) {
-    conv_two_planes(sm + b * HW, sa + b * HW, w.data_ptr<float>(), k, H, W, y0, y1, conv.data_ptr<float>() + b * HW);
-  });
+  for (int64_t b = 0; b < B; ++b)
+    at::parallel_for(0, H, 8, [&](int64_t y0, int64_t y1) {
+      conv_two_planes(sm + b * HW, sa + b * HW, w.data_ptr<float>(), k, H, W, y0, y1, conv.data_ptr<float>() + b * HW);
+    });
   const auto gate_s = fr.spatial_gate_from(conv).to(torch::kFloat32).contiguous();
   const float* as = gate_s.data_ptr<float>();
 
@@ -256,9 +259,9 @@ torch::Tensor int8_feature_refinement(FeatureRefinementImpl& fr, const torch::Te
   std::vector<float> scaled(static_cast<size_t>(B * C));  // a_c s / out_scale
   for (int64_t i = 0; i < B * C; ++i) scaled[i] = ac[i] * s / static_cast<float>(out_scale);
   const float zo = static_cast<float>(out_zp) + 0.5f;
-  for (int64_t b = 0; b < B; ++b) at::parallel_for(b * HW, (b + 1) * HW, 256, [&](int64_t p0, int64_t p1) {
-    gate_bytes(x, scaled.data() + b * C, as, p0, p1, C, z, zo, y);
-  });
+  for (int64_t b = 0; b < B; ++b)
+    at::parallel_for(b * HW, (b + 1) * HW, 256,
+                     [&](int64_t p0, int64_t p1) { gate_bytes(x, scaled.data() + b * C, as, p0, p1, C, z, zo, y); });
   return out;
 }
 

@@ -15,9 +15,8 @@ torch::Tensor upsample2(const torch::Tensor& x, UpsampleMode mode) {
 torch::Tensor resize_like(const torch::Tensor& x, const torch::Tensor& ref) {
   if (x.size(2) == ref.size(2) && x.size(3) == ref.size(3)) return x;
   namespace F = torch::nn::functional;
-  return F::interpolate(x, F::InterpolateFuncOptions()
-                               .size(std::vector<int64_t>{ref.size(2), ref.size(3)})
-                               .mode(torch::kNearest));
+  return F::interpolate(
+      x, F::InterpolateFuncOptions().size(std::vector<int64_t>{ref.size(2), ref.size(3)}).mode(torch::kNearest));
 }
 
 void init_weights(torch::nn::Module& module) {

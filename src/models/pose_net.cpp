@@ -29,12 +29,11 @@ torch::Tensor PoseNetImpl::forward(const torch::Tensor& tgt, const std::vector<t
 }
 
 PoseOutput PoseNetImpl::predict(const torch::Tensor& tgt, const std::vector<torch::Tensor>& srcs) {
-  TORCH_CHECK(static_cast<int>(srcs.size()) == num_sources(), "PoseNet expects ", num_sources(),
-              " source images, got ", srcs.size());
+  TORCH_CHECK(static_cast<int>(srcs.size()) == num_sources(), "PoseNet expects ", num_sources(), " source images, got ",
+              srcs.size());
   std::vector<torch::Tensor> frames{tgt};
   for (const auto& s : srcs) {
-    TORCH_CHECK(s.sizes() == tgt.sizes(), "PoseNet: source ", s.sizes(), " must match target ",
-                tgt.sizes());
+    TORCH_CHECK(s.sizes() == tgt.sizes(), "PoseNet: source ", s.sizes(), " must match target ", tgt.sizes());
     frames.push_back(s);
   }
   TORCH_CHECK(tgt.dim() == 4 && tgt.size(1) == 3, "PoseNet target must be [B,3,H,W], got ", tgt.sizes());
@@ -48,7 +47,8 @@ PoseOutput PoseNetImpl::predict(const torch::Tensor& tgt, const std::vector<torc
   PoseOutput out;
   if (intrinsics) {
     // Scaled as the poses are (intrinsics_output_scale: why, in pose_net.h).
-    const auto v = options.intrinsics_output_scale * conv2d(*intrinsics, x.mean({2, 3}, true)).flatten(1).to(torch::kFloat32);  // [B,4]
+    const auto v = options.intrinsics_output_scale *
+                   conv2d(*intrinsics, x.mean({2, 3}, true)).flatten(1).to(torch::kFloat32);  // [B,4]
     const double W = static_cast<double>(tgt.size(3)), H = static_cast<double>(tgt.size(2));
     const auto fx = torch::softplus(v.select(1, 0)) * W, fy = torch::softplus(v.select(1, 1)) * W;
     const auto cx = (v.select(1, 2) + 0.5) * W, cy = (v.select(1, 3) + 0.5) * H;

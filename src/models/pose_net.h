@@ -44,9 +44,9 @@ struct PoseNetImpl : torch::nn::Module {
 
   PoseNetOptions options;
   torch::Dtype compute_dtype = torch::kFloat32;  // as DepthNetImpl::compute_dtype
-  std::vector<ConvBn> convs;     // conv1..conv7: 16 (7x7), 32 (5x5), 64, 128, 256, 256, 256 (3x3), /2
-  Conv2d pred{nullptr};  // 1x1 to 6 * num_sources, no BN / activation
-  Conv2d intrinsics{nullptr};  // learn_intrinsics: 1x1, 256 -> 4 on the averaged conv7 output
+  std::vector<ConvBn> convs;                     // conv1..conv7: 16 (7x7), 32 (5x5), 64, 128, 256, 256, 256 (3x3), /2
+  Conv2d pred{nullptr};                          // 1x1 to 6 * num_sources, no BN / activation
+  Conv2d intrinsics{nullptr};                    // learn_intrinsics: 1x1, 256 -> 4 on the averaged conv7 output
   // Set by observe_int8 (models/int8.h): conv1..conv7 calibrate, then (quantize_int8) run in int8.
   std::shared_ptr<Int8PoseNet> int8;
 };

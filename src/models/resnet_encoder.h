@@ -36,10 +36,10 @@ struct BasicBlockImpl : torch::nn::Module {
 TORCH_MODULE(BasicBlock);
 
 struct ResNetEncoderOptions {
-  int64_t in_channels = 3;   // 3 for DepthNet, 12 for FlowNet
-  int depth = 50;            // ResNet-50 (paper)
-  bool use_fr = true;        // FR after each residual stage (paper)
-  int64_t fr_ratio = 16;     // paper
+  int64_t in_channels = 3;  // 3 for DepthNet, 12 for FlowNet
+  int depth = 50;           // ResNet-50 (paper)
+  bool use_fr = true;       // FR after each residual stage (paper)
+  int64_t fr_ratio = 16;    // paper
   bool fr_spatial_bn = false;
 };
 

@@ -15,9 +15,10 @@ struct SumHolder : torch::CustomClassHolder {
 // y = x_hat * gamma + beta with x_hat = (x - mean) * invstd; mean and invstd are the statistics over
 // all processes (computed before, without autograd); backward accounts for their dependence on x.
 struct SyncBatchNormFn : torch::autograd::Function<SyncBatchNormFn> {
-  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& x, const torch::Tensor& weight,
-                               const torch::Tensor& bias, const torch::Tensor& mean, const torch::Tensor& invstd,
-                               double count, const std::shared_ptr<const SumAcrossProcesses>& sum) {
+  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& x,
+                               const torch::Tensor& weight, const torch::Tensor& bias, const torch::Tensor& mean,
+                               const torch::Tensor& invstd, double count,
+                               const std::shared_ptr<const SumAcrossProcesses>& sum) {
     ctx->save_for_backward({x, weight, mean, invstd});
     ctx->saved_data["count"] = count;
     ctx->saved_data["sum"] = c10::IValue::make_capsule(c10::make_intrusive<SumHolder>(sum));
@@ -43,8 +44,13 @@ struct SyncBatchNormFn : torch::autograd::Function<SyncBatchNormFn> {
     const auto g_dy = both.narrow(0, 0, C).div(count).view({1, -1, 1, 1});
     const auto g_dy_xhat = both.narrow(0, C, C).div(count).view({1, -1, 1, 1});
     const auto dx = (dy - g_dy - x_hat * g_dy_xhat) * (invstd * w).view({1, -1, 1, 1});
-    return {dx.to(x.scalar_type()), sum_dy_xhat.to(saved[1].scalar_type()), sum_dy.to(saved[1].scalar_type()),
-            torch::Tensor(), torch::Tensor(), torch::Tensor(), torch::Tensor()};
+    return {dx.to(x.scalar_type()),
+            sum_dy_xhat.to(saved[1].scalar_type()),
+            sum_dy.to(saved[1].scalar_type()),
+            torch::Tensor(),
+            torch::Tensor(),
+            torch::Tensor(),
+            torch::Tensor()};
   }
 };
 
@@ -62,8 +68,9 @@ torch::Tensor sync_batch_norm(const torch::Tensor& x, SyncBatchNorm2dImpl& bn,
     torch::NoGradGuard no_grad;
     // Sums in float64: E[x^2] - E[x]^2 over hundreds of thousands of values per channel.
     const auto xf = x.to(torch::kFloat32);
-    auto stats = torch::cat({xf.sum({0, 2, 3}, false, torch::kFloat64), (xf * xf).sum({0, 2, 3}, false, torch::kFloat64),
-                             torch::full({1}, static_cast<double>(x.numel() / C), xf.options().dtype(torch::kFloat64))});
+    auto stats =
+        torch::cat({xf.sum({0, 2, 3}, false, torch::kFloat64), (xf * xf).sum({0, 2, 3}, false, torch::kFloat64),
+                    torch::full({1}, static_cast<double>(x.numel() / C), xf.options().dtype(torch::kFloat64))});
     (*sum)(stats);
     count = stats[2 * C].item<double>();
     TORCH_CHECK(count > 1, "sync_batch_norm: one value per channel over all processes; BatchNorm needs more");

@@ -34,7 +34,8 @@ struct InterleavePhases : torch::autograd::Function<InterleavePhases> {
       for (int64_t b = 0; b < 2; ++b) {
         auto window = phases.select(1, a).select(1, b).narrow(2, a, h).narrow(3, b, w);
         auto pixels = image6.select(5, b).select(3, a);
-        if (to_image) pixels.copy_(window); else window.copy_(pixels);
+        if (to_image) pixels.copy_(window);
+        else window.copy_(pixels);
       }
   }
   static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& y) {
@@ -77,9 +78,9 @@ torch::Tensor phase_kernels(const torch::Tensor& weight) {
 torch::Tensor interleave_phases(const torch::Tensor& phases) { return InterleavePhases::apply(phases); }
 
 torch::Tensor conv3x3_of_upsampled(const torch::Tensor& x, const torch::Tensor& weight, const torch::Tensor& bias) {
-  TORCH_CHECK(x.dim() == 4 && weight.dim() == 4 && weight.size(2) == 3 && weight.size(3) == 3 &&
-                  weight.size(1) == x.size(1),
-              "conv3x3_of_upsampled: x ", x.sizes(), " and weight ", weight.sizes(), " do not match");
+  TORCH_CHECK(
+      x.dim() == 4 && weight.dim() == 4 && weight.size(2) == 3 && weight.size(3) == 3 && weight.size(1) == x.size(1),
+      "conv3x3_of_upsampled: x ", x.sizes(), " and weight ", weight.sizes(), " do not match");
   const int64_t B = x.size(0), Co = weight.size(0), h = x.size(2), w = x.size(3);
   const auto kernels = phase_kernels(weight);
   const auto b4 = bias.defined() ? bias.repeat({4}) : bias;

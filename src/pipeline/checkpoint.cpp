@@ -65,7 +65,8 @@ void write_model_file(const std::string& path, const Networks& nets, bool half) 
   a.write("spec", c10::IValue(nets.spec.to_yaml()));
   write_networks(a, nets, half ? std::optional<torch::ScalarType>(torch::kHalf) : std::nullopt);
   // An int8 model's calibration: its ranges, so that loading it in int8 needs no frames.
-  if (nets.depth->net->int8 && nets.depth->net->int8->quantized()) a.write("int8_depth", nets.depth->net->int8->ranges());
+  if (nets.depth->net->int8 && nets.depth->net->int8->quantized())
+    a.write("int8_depth", nets.depth->net->int8->ranges());
   if (nets.flow && nets.flow->net->int8 && nets.flow->net->int8->quantized())
     a.write("int8_flow", nets.flow->net->int8->ranges());
   if (nets.pose->int8 && nets.pose->int8->quantized()) a.write("int8_pose", nets.pose->int8->ranges());
@@ -77,7 +78,8 @@ void check_model_file_target(const std::string& label, const std::string& out, c
   std::error_code ec;
   if (!fs::exists(out)) return;
   if (fs::equivalent(out, source, ec))
-    throw std::runtime_error(label + " '" + out + "' is the checkpoint being exported (" + source + "): refusing to replace it");
+    throw std::runtime_error(label + " '" + out + "' is the checkpoint being exported (" + source +
+                             "): refusing to replace it");
   if (force) return;
   bool model_file = false;
   try {
@@ -85,7 +87,8 @@ void check_model_file_target(const std::string& label, const std::string& out, c
   } catch (const std::exception&) {
   }
   if (!model_file)
-    throw std::runtime_error(label + " '" + out + "' exists and is not a geo_export model file (a training "
+    throw std::runtime_error(label + " '" + out +
+                             "' exists and is not a geo_export model file (a training "
                              "checkpoint or another file): refusing to replace it; remove it or pass --force");
 }
 
@@ -122,8 +125,9 @@ CheckpointFile::CheckpointFile(std::string path) : path_(std::move(path)), archi
 std::vector<std::string> CheckpointFile::lineage() const {
   std::vector<std::string> out;
   out.push_back(config_ ? to_yaml(*config_)
-                        : "unknown: " + path_ + (model_file_ ? " is a geo_export model file, which carries no training config"
-                                                             : " carries no training config"));
+                        : "unknown: " + path_ +
+                              (model_file_ ? " is a geo_export model file, which carries no training config"
+                                           : " carries no training config"));
   out.insert(out.end(), init_configs_.begin(), init_configs_.end());
   return out;
 }
@@ -209,7 +213,8 @@ bool CheckpointFile::load_optimizer(torch::optim::Optimizer& optimizer) {
   // The state comes back on the device it was saved from: a CUDA run resumed on the CPU (or the
   // reverse) moves it to its parameters' device (all of them train on one).
   const auto& groups = optimizer.param_groups();
-  const auto with_params = std::find_if(groups.begin(), groups.end(), [](const auto& g) { return !g.params().empty(); });
+  const auto with_params =
+      std::find_if(groups.begin(), groups.end(), [](const auto& g) { return !g.params().empty(); });
   if (with_params == groups.end()) return true;
   const torch::Device device = with_params->params().front().device();
   for (auto& entry : optimizer.state())

@@ -28,8 +28,8 @@ namespace geo {
 
 // Where training stands.
 struct TrainState {
-  int64_t stage = 0;       // index into the config's stages
-  int64_t iteration = 0;   // iterations done in that stage
+  int64_t stage = 0;                                            // index into the config's stages
+  int64_t iteration = 0;                                        // iterations done in that stage
   double best_score = std::numeric_limits<double>::infinity();  // the stage's best validation score
   int64_t world_size = 1;  // processes of the run that wrote it (train/distributed.h)
   // The validation due at this iteration was interrupted (a signal): a resumed run does it first.

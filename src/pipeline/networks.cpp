@@ -114,8 +114,9 @@ void Networks::set_modes(const StageConfig& s) {
   pose->train(s.trains(Net::kPose));
   if (flow) flow->train(s.trains(Net::kFlow));
   if (!s.freeze_batch_norm) return;
-  for (torch::nn::Module* net : {static_cast<torch::nn::Module*>(depth.get()), static_cast<torch::nn::Module*>(pose.get()),
-                                 flow ? static_cast<torch::nn::Module*>(flow.get()) : nullptr})
+  for (torch::nn::Module* net :
+       {static_cast<torch::nn::Module*>(depth.get()), static_cast<torch::nn::Module*>(pose.get()),
+        flow ? static_cast<torch::nn::Module*>(flow.get()) : nullptr})
     if (net)
       for (const auto& m : net->modules())
         if (m->as<SyncBatchNorm2d>()) m->eval();
@@ -194,10 +195,10 @@ torch::Tensor rigid_flow_net_input(const torch::Tensor& tgt, const torch::Tensor
   return flow_net_input(tgt, src, from_loss_range(warped, loss), rigid_flow, channel_l2_norm(error_channels));
 }
 
-PairPrediction predict_pair(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& src,
-                            const torch::Tensor& K, const torch::Tensor& prev) {
-  TORCH_CHECK(tgt.dim() == 4 && tgt.size(1) == 3 && src.sizes() == tgt.sizes(), "predict_pair: tgt ",
-              tgt.sizes(), " and src ", src.sizes(), " must both be [B,3,H,W]");
+PairPrediction predict_pair(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& K,
+                            const torch::Tensor& prev) {
+  TORCH_CHECK(tgt.dim() == 4 && tgt.size(1) == 3 && src.sizes() == tgt.sizes(), "predict_pair: tgt ", tgt.sizes(),
+              " and src ", src.sizes(), " must both be [B,3,H,W]");
   const int64_t L = nets.pose->options.seq_length, before = (L - 1) / 2;
   std::vector<torch::Tensor> snippet;  // sources in time order around the target
   for (int64_t i = 0; i < L - 1; ++i) snippet.push_back(i < before ? (prev.defined() ? prev : tgt) : src);
@@ -211,9 +212,9 @@ PairPrediction predict_pair(Networks& nets, const torch::Tensor& tgt, const torc
   p.rigid_flow = rigid_flow(1.0 / p.disp, p.src_from_tgt, p.K);
   p.flow = p.rigid_flow;
   if (nets.flow)
-    p.flow = p.rigid_flow +
-             nets.flow->forward(rigid_flow_net_input(tgt, src, p.rigid_flow, nets.spec.flow_input.as_loss_config()))
-                 .flow[0];
+    p.flow =
+        p.rigid_flow +
+        nets.flow->forward(rigid_flow_net_input(tgt, src, p.rigid_flow, nets.spec.flow_input.as_loss_config())).flow[0];
   return p;
 }
 

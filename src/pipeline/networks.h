@@ -102,7 +102,7 @@ struct PairPrediction {
 };
 // `prev` (optional): the frame before tgt; the PoseNet then sees (prev.., tgt, src..) instead of
 // repeating tgt before it.
-PairPrediction predict_pair(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& src,
-                            const torch::Tensor& K, const torch::Tensor& prev = {});
+PairPrediction predict_pair(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& K,
+                            const torch::Tensor& prev = {});
 
 }  // namespace geo

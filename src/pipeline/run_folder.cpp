@@ -48,7 +48,8 @@ std::string RunFolder::resolve() const {
   if (!stage.empty() && fs::is_regular_file(best(stage))) return best(stage);
   const std::string file = checkpoints() + "/" + latest;
   if (!fs::is_regular_file(file))
-    throw std::runtime_error("run folder '" + root_ + "': checkpoints/latest names " + latest + ", which does not exist");
+    throw std::runtime_error("run folder '" + root_ + "': checkpoints/latest names " + latest +
+                             ", which does not exist");
   return file;
 }
 

@@ -17,8 +17,8 @@ auto network_pass(const Config& config, const torch::Device& device, F forward) 
 
 }  // namespace
 
-StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& srcs,
-                          const torch::Tensor& K, const StageConfig& stage, const Config& config) {
+StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& srcs, const torch::Tensor& K,
+                          const StageConfig& stage, const Config& config) {
   const int64_t B = tgt.size(0), N = srcs.size(1);
   std::vector<torch::Tensor> src_list;
   for (int64_t i = 0; i < N; ++i) src_list.push_back(srcs.select(1, i));

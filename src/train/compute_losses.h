@@ -24,7 +24,7 @@ struct StepOutput {
 // tgt [B,3,H,W], srcs [B,N,3,H,W], K [B,3,3] on the networks' device. FlowNet inputs are detached
 // (they are observations for it); the full flow keeps the rigid flow's gradient, so in the paper's
 // joint stage 2 the flow losses also train depth and pose.
-StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& srcs,
-                          const torch::Tensor& K, const StageConfig& stage, const Config& config);
+StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& srcs, const torch::Tensor& K,
+                          const StageConfig& stage, const Config& config);
 
 }  // namespace geo

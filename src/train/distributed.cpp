@@ -78,9 +78,9 @@ int agreed_signal(ProcessGroup& group, int local, const torch::Device& device) {
 
 void check_same_config(ProcessGroup& group, const std::string& config_yaml, const torch::Device& device) {
   // Each process's own: where it writes and logs, its device and threads, where its copy of the data is.
-  static const std::vector<std::string> own = {"run.name",    "run.dir",     "run.device",       "run.threads",
-                                               "run.distributed.timeout_s", "data.root", "data.videos",
-                                               "data.num_workers", "logging.level"};
+  static const std::vector<std::string> own = {
+      "run.name",  "run.dir",     "run.device",       "run.threads",  "run.distributed.timeout_s",
+      "data.root", "data.videos", "data.num_workers", "logging.level"};
   const auto configs = group.all_gather_strings("config", config_yaml);
   std::string report;
   for (int r = 1; r < group.size(); ++r) {
@@ -89,8 +89,10 @@ void check_same_config(ProcessGroup& group, const std::string& config_yaml, cons
   }
   // Also the barrier that keeps rank 0's store alive until every process has read every config.
   if (agreed_signal(group, report.empty() ? 0 : 1, device) != 0)
-    throw std::runtime_error("rank " + std::to_string(group.rank()) + ": the processes were started with different "
-                             "configurations (every rank must train the same run: same config and --set options):" + report);
+    throw std::runtime_error("rank " + std::to_string(group.rank()) +
+                             ": the processes were started with different "
+                             "configurations (every rank must train the same run: same config and --set options):" +
+                             report);
 }
 
 void broadcast_networks(ProcessGroup& group, Networks& nets) {

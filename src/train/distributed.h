@@ -33,10 +33,10 @@ namespace geo {
 struct LaunchInfo {
   int rank = 0;
   int world_size = 1;
-  int local_rank = 0;          // the GPU this process uses (cuda:local_rank)
-  std::string master_addr;     // the rendezvous host (rank 0 listens there)
+  int local_rank = 0;       // the GPU this process uses (cuda:local_rank)
+  std::string master_addr;  // the rendezvous host (rank 0 listens there)
   int master_port = 29500;
-  std::string launcher;        // "torchrun", "slurm" or "" (single process)
+  std::string launcher;  // "torchrun", "slurm" or "" (single process)
   bool distributed() const { return world_size > 1; }
 };
 
@@ -142,8 +142,8 @@ class GradientAverager {
 
  private:
   struct Bucket {
-    std::vector<size_t> members;  // indices into params_
-    std::vector<int64_t> offsets; // of each member in `flat`
+    std::vector<size_t> members;   // indices into params_
+    std::vector<int64_t> offsets;  // of each member in `flat`
     torch::Tensor flat;
     size_t ready = 0;
     bool started = false;
@@ -156,12 +156,12 @@ class GradientAverager {
   ProcessGroup& group_;
   int64_t bucket_bytes_;
   std::vector<torch::Tensor> params_;
-  std::vector<size_t> bucket_of_;            // param index -> bucket
-  std::vector<size_t> slot_of_;              // param index -> member position in its bucket
-  std::vector<char> ready_;                  // param index -> gradient copied this step
+  std::vector<size_t> bucket_of_;  // param index -> bucket
+  std::vector<size_t> slot_of_;    // param index -> member position in its bucket
+  std::vector<char> ready_;        // param index -> gradient copied this step
   std::vector<Bucket> buckets_;
-  size_t next_ = 0;                          // the next bucket to start
-  std::vector<unsigned> hooks_;              // hook handles of params_ (attached)
+  size_t next_ = 0;              // the next bucket to start
+  std::vector<unsigned> hooks_;  // hook handles of params_ (attached)
   int64_t bytes_ = 0, started_early_ = 0;
 };
 

@@ -53,8 +53,10 @@ LaunchInfo launch_from_environment(const std::function<const char*(const char*)>
   LaunchInfo l;
   const auto world = get("WORLD_SIZE"), rank = get("RANK");
   if (world || rank) {
-    if (!world) throw std::runtime_error("RANK is set but WORLD_SIZE is not: launch with torchrun --no-python, or set both");
-    if (!rank) throw std::runtime_error("WORLD_SIZE is set but RANK is not: launch with torchrun --no-python, or set both");
+    if (!world)
+      throw std::runtime_error("RANK is set but WORLD_SIZE is not: launch with torchrun --no-python, or set both");
+    if (!rank)
+      throw std::runtime_error("WORLD_SIZE is set but RANK is not: launch with torchrun --no-python, or set both");
     l.world_size = env_int("WORLD_SIZE", *world, 1, 65536);
     l.rank = env_int("RANK", *rank, 0, l.world_size - 1);
     const auto local = get("LOCAL_RANK");
@@ -73,8 +75,9 @@ LaunchInfo launch_from_environment(const std::function<const char*(const char*)>
   const auto addr = get("MASTER_ADDR");
   l.master_addr = addr ? *addr : master_addr;
   if (l.master_addr.empty())
-    throw std::runtime_error("MASTER_ADDR is not set (torchrun sets it; under SLURM export MASTER_ADDR=$(scontrol show "
-                             "hostnames \"$SLURM_JOB_NODELIST\" | head -n1) or give --master-addr)");
+    throw std::runtime_error(
+        "MASTER_ADDR is not set (torchrun sets it; under SLURM export MASTER_ADDR=$(scontrol show "
+        "hostnames \"$SLURM_JOB_NODELIST\" | head -n1) or give --master-addr)");
   if (const auto port = get("MASTER_PORT")) l.master_port = env_int("MASTER_PORT", *port, 1, 65535);
   return l;
 }

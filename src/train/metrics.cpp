@@ -95,7 +95,8 @@ void TensorBoardSink::on_step(const StepRecord& r) {
   const auto now = std::chrono::steady_clock::now();
   if (last_ && r.global_step > last_->first) {
     const double secs = std::chrono::duration<double>(now - last_->second).count();
-    if (secs > 0) writer_.add_scalar("iterations_per_s", r.global_step, static_cast<double>(r.global_step - last_->first) / secs);
+    if (secs > 0)
+      writer_.add_scalar("iterations_per_s", r.global_step, static_cast<double>(r.global_step - last_->first) / secs);
   }
   last_ = std::make_pair(r.global_step, now);
 }
@@ -134,11 +135,12 @@ void ProgressSink::warn_if_mostly_masked(const StepRecord& r, double masked) {
   const double mean = masked_sum_ / static_cast<double>(masked_steps_);
   if (mean >= kMostlyMasked && !masked_warned_) {
     progress_->clear();
-    spdlog::warn("stage {}: {:.0f}% of the pixels were auto-masked over iterations {}-{} (a still frame explains them "
-                 "better than the predicted motion: traffic moving with the camera, a camera that hardly moves, or "
-                 "networks that are not learning): such footage is unlikely to teach depth. More forward driving helps, "
-                 "or start from a model trained on forward driving (geo_train --init RUN)",
-                 r.stage, 100 * mean, r.iteration - masked_steps_ + 1, r.iteration);
+    spdlog::warn(
+        "stage {}: {:.0f}% of the pixels were auto-masked over iterations {}-{} (a still frame explains them "
+        "better than the predicted motion: traffic moving with the camera, a camera that hardly moves, or "
+        "networks that are not learning): such footage is unlikely to teach depth. More forward driving helps, "
+        "or start from a model trained on forward driving (geo_train --init RUN)",
+        r.stage, 100 * mean, r.iteration - masked_steps_ + 1, r.iteration);
     masked_warned_ = true;
   }
   masked_sum_ = 0;
@@ -159,19 +161,20 @@ void ProgressSink::on_step(const StepRecord& r) {
     if (name == "automasked") {
       masked = fmt::format(" | {:.0f}% of pixels auto-masked", 100 * value);
       warn_if_mostly_masked(r, value);
-    } else
-      details += fmt::format("{}{} {:.4f}", details.empty() ? "" : " ", name, value);
+    } else details += fmt::format("{}{} {:.4f}", details.empty() ? "" : " ", name, value);
   details += masked;
   if (r.skipped_steps) details += fmt::format(" ({} NaN/Inf steps skipped)", r.skipped_steps);
   if (r.camera.size() == 4)
-    details += fmt::format(" | camera fx {:.1f} fy {:.1f} cx {:.1f} cy {:.1f}", r.camera[0], r.camera[1], r.camera[2], r.camera[3]);
+    details += fmt::format(" | camera fx {:.1f} fy {:.1f} cx {:.1f} cy {:.1f}", r.camera[0], r.camera[1], r.camera[2],
+                           r.camera[3]);
   progress_->update(r.iteration, details);
 }
 
 void ProgressSink::on_validation(const ValidationRecord& r) {
   if (progress_) progress_->clear();
-  spdlog::info("validation at {} {}: photometric {:.5f}{}, score {:.5f} over {} snippets{}", r.stage, r.iteration, r.rigid,
-               r.flow ? fmt::format(", flow {:.5f}", *r.flow) : "", r.score, r.snippets, r.best ? " (best so far)" : "");
+  spdlog::info("validation at {} {}: photometric {:.5f}{}, score {:.5f} over {} snippets{}", r.stage, r.iteration,
+               r.rigid, r.flow ? fmt::format(", flow {:.5f}", *r.flow) : "", r.score, r.snippets,
+               r.best ? " (best so far)" : "");
 }
 
 }  // namespace geo

@@ -22,14 +22,14 @@ namespace geo {
 struct StepRecord {
   int64_t stage_index = 0;
   std::string stage;
-  int64_t iteration = 0;        // iterations done in the stage after this step (1-based)
-  int64_t stage_iterations = 0; // the stage's total
-  int64_t global_step = 0;      // iterations done over all stages (TensorBoard's step)
+  int64_t iteration = 0;                               // iterations done in the stage after this step (1-based)
+  int64_t stage_iterations = 0;                        // the stage's total
+  int64_t global_step = 0;                             // iterations done over all stages (TensorBoard's step)
   std::vector<std::pair<std::string, double>> losses;  // defined terms and "total" (LossTerms::values)
   double lr = 0;
   double grad_norm = 0;
-  int64_t skipped_steps = 0;    // NaN/Inf steps skipped so far in this process
-  std::vector<double> camera;   // a learned camera (model.learn_intrinsics): fx, fy, cx, cy in training pixels
+  int64_t skipped_steps = 0;   // NaN/Inf steps skipped so far in this process
+  std::vector<double> camera;  // a learned camera (model.learn_intrinsics): fx, fy, cx, cy in training pixels
 };
 
 struct ValidationRecord {
@@ -37,9 +37,9 @@ struct ValidationRecord {
   std::string stage;
   int64_t iteration = 0;
   int64_t global_step = 0;
-  double rigid = 0;             // mean L_br
-  std::optional<double> flow;   // mean L_fr, when the stage trains flow
-  double score = 0;             // what selects best-<stage>.pt (validate.h)
+  double rigid = 0;            // mean L_br
+  std::optional<double> flow;  // mean L_fr, when the stage trains flow
+  double score = 0;            // what selects best-<stage>.pt (validate.h)
   bool best = false;
   size_t snippets = 0;
 };
@@ -47,8 +47,8 @@ struct ValidationRecord {
 struct ImageRecord {
   std::string stage;
   int64_t iteration = 0, global_step = 0;
-  std::string tag;              // e.g. "disp"
-  std::string png;              // PNG file bytes
+  std::string tag;  // e.g. "disp"
+  std::string png;  // PNG file bytes
   int height = 0, width = 0, channels = 3;
 };
 

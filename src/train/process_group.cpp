@@ -87,7 +87,8 @@ class C10dGroup : public ProcessGroup {
     // timeout would report a missing process only after twice run.distributed.timeout_s.
     const auto deadline = std::chrono::steady_clock::now() + timeout;
     const auto time_left = [&] {
-      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+      const auto left =
+          std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
       return std::max(left, std::chrono::milliseconds(100));
     };
     const std::string where = l.master_addr + ":" + std::to_string(l.master_port);
@@ -113,12 +114,14 @@ class C10dGroup : public ProcessGroup {
       }
     } catch (const std::exception& e) {
       throw std::runtime_error(
-          l.rank == 0 ? "rank 0 could not open the rendezvous at " + where + " (MASTER_ADDR:MASTER_PORT; port in use, " +
-                            "e.g. by another process also launched with RANK=0?) or not all " + std::to_string(l.world_size) +
-                            " processes arrived within " + std::to_string(config.timeout_s) + " s (each process needs its own RANK, " +
-                            "0.." + std::to_string(l.world_size - 1) + "): " + message_of(e)
-                      : "rank " + std::to_string(l.rank) + " could not reach the rendezvous at " + where +
-                            " within run.distributed.timeout_s (" + std::to_string(config.timeout_s) + " s): " + message_of(e));
+          l.rank == 0
+              ? "rank 0 could not open the rendezvous at " + where + " (MASTER_ADDR:MASTER_PORT; port in use, " +
+                    "e.g. by another process also launched with RANK=0?) or not all " + std::to_string(l.world_size) +
+                    " processes arrived within " + std::to_string(config.timeout_s) +
+                    " s (each process needs its own RANK, " + "0.." + std::to_string(l.world_size - 1) +
+                    "): " + message_of(e)
+              : "rank " + std::to_string(l.rank) + " could not reach the rendezvous at " + where +
+                    " within run.distributed.timeout_s (" + std::to_string(config.timeout_s) + " s): " + message_of(e));
     }
     // Who is who, for naming a lost process later (set before the group forms, so every key exists).
     try {
@@ -129,7 +132,8 @@ class C10dGroup : public ProcessGroup {
       const std::string size = std::to_string(size_);
       store_->set("geo/world_size/" + std::to_string(rank_), std::vector<uint8_t>(size.begin(), size.end()));
     } catch (const std::exception& e) {
-      throw std::runtime_error("rank " + std::to_string(rank_) + ": the rendezvous at " + where + " failed: " + message_of(e));
+      throw std::runtime_error("rank " + std::to_string(rank_) + ": the rendezvous at " + where +
+                               " failed: " + message_of(e));
     }
     // Every process launched with the same WORLD_SIZE, said at once (else Gloo's own enforce message,
     // or a wait for processes that never come): each compares with rank 0, rank 0 with each.
@@ -144,9 +148,9 @@ class C10dGroup : public ProcessGroup {
       try {
         other = world_of(r);
       } catch (const std::exception& e) {
-        throw std::runtime_error("rank " + std::to_string(rank_) + ": rank " + std::to_string(r) + " did not register at " +
-                                 where + " within run.distributed.timeout_s (" + std::to_string(timeout_s_) +
-                                 " s): " + message_of(e));
+        throw std::runtime_error("rank " + std::to_string(rank_) + ": rank " + std::to_string(r) +
+                                 " did not register at " + where + " within run.distributed.timeout_s (" +
+                                 std::to_string(timeout_s_) + " s): " + message_of(e));
       }
       // Rank 0's store must outlive the others' reads: each says it has read rank 0's world size,
       // and rank 0 waits for that (briefly) before leaving on a mismatch, so that every process
@@ -155,7 +159,8 @@ class C10dGroup : public ProcessGroup {
       if (other != std::to_string(size_)) {
         if (rank_ == 0) {
           try {
-            store_->wait({"geo/world_size_read/" + std::to_string(r)}, std::min(time_left(), std::chrono::milliseconds(5000)));
+            store_->wait({"geo/world_size_read/" + std::to_string(r)},
+                         std::min(time_left(), std::chrono::milliseconds(5000)));
           } catch (const std::exception&) {  // it may have gone: the message below is rank 0's either way
           }
         }
@@ -195,8 +200,9 @@ class C10dGroup : public ProcessGroup {
 #endif
       }
     } catch (const std::exception& e) {
-      throw std::runtime_error("rank " + std::to_string(l.rank) + ": could not form the " + backend + " process group of " +
-                               std::to_string(l.world_size) + " at " + where + ": " + message_of(e));
+      throw std::runtime_error("rank " + std::to_string(l.rank) + ": could not form the " + backend +
+                               " process group of " + std::to_string(l.world_size) + " at " + where + ": " +
+                               message_of(e));
     }
   }
 
@@ -213,14 +219,18 @@ class C10dGroup : public ProcessGroup {
       guarded("broadcast", [&](auto& pg) { pg.broadcast(one, o)->wait(); });
     }
   }
-  void all_reduce_sum(std::vector<torch::Tensor>& tensors) override { all_reduce(tensors, c10d::ReduceOp::SUM, "all-reduce"); }
+  void all_reduce_sum(std::vector<torch::Tensor>& tensors) override {
+    all_reduce(tensors, c10d::ReduceOp::SUM, "all-reduce");
+  }
   std::function<void()> start_all_reduce_sum(torch::Tensor& tensor) override {
     c10::intrusive_ptr<c10d::Work> work;
     std::vector<torch::Tensor> one{tensor};
     guarded("all-reduce", [&](auto& pg) { work = pg.allreduce(one, c10d::AllreduceOptions()); });
     return [this, work] { guarded("all-reduce", [&](auto&) { work->wait(); }); };
   }
-  void all_reduce_max(std::vector<torch::Tensor>& tensors) override { all_reduce(tensors, c10d::ReduceOp::MAX, "all-reduce (max)"); }
+  void all_reduce_max(std::vector<torch::Tensor>& tensors) override {
+    all_reduce(tensors, c10d::ReduceOp::MAX, "all-reduce (max)");
+  }
 
   std::string share_from_rank0(const std::string& key, const std::string& value, bool failed) override {
     const std::string k = "geo/" + key;
@@ -237,7 +247,8 @@ class C10dGroup : public ProcessGroup {
       return v.substr(1);
     } catch (const std::runtime_error& e) {
       if (std::string(e.what()).rfind("rank 0 failed", 0) == 0) throw;
-      throw std::runtime_error("rank " + std::to_string(rank_) + ": waiting for '" + key + "' from rank 0 failed: " + message_of(e));
+      throw std::runtime_error("rank " + std::to_string(rank_) + ": waiting for '" + key +
+                               "' from rank 0 failed: " + message_of(e));
     }
   }
 
@@ -252,8 +263,8 @@ class C10dGroup : public ProcessGroup {
         out[static_cast<size_t>(r)].assign(bytes.begin(), bytes.end());
       }
     } catch (const std::exception& e) {
-      throw std::runtime_error("rank " + std::to_string(rank_) + ": waiting for '" + key + "' of rank " + std::to_string(r) +
-                               " failed: " + lost_processes() + ": " + message_of(e));
+      throw std::runtime_error("rank " + std::to_string(rank_) + ": waiting for '" + key + "' of rank " +
+                               std::to_string(r) + " failed: " + lost_processes() + ": " + message_of(e));
     }
     return out;
   }
@@ -273,7 +284,8 @@ class C10dGroup : public ProcessGroup {
     });
   }
 
-  template <class F> void guarded(const char* what, F&& f) {
+  template <class F>
+  void guarded(const char* what, F&& f) {
     try {
 #ifdef GEO_WITH_NCCL
       if (nccl_) return f(*nccl_);
@@ -284,8 +296,9 @@ class C10dGroup : public ProcessGroup {
       throw std::logic_error("no process group");
     } catch (const std::exception& e) {
       throw std::runtime_error("rank " + std::to_string(rank_) + " of " + std::to_string(size_) + ": " + what +
-                               " failed: " + lost_processes() + " (or did not answer within run.distributed.timeout_s, " +
-                               std::to_string(timeout_s_) + " s): " + message_of(e));
+                               " failed: " + lost_processes() +
+                               " (or did not answer within run.distributed.timeout_s, " + std::to_string(timeout_s_) +
+                               " s): " + message_of(e));
     }
   }
 

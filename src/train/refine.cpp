@@ -76,8 +76,8 @@ std::string refine(const RefineOptions& o) {
   TrainOptions train_options;
   train_options.run_dir = o.run_dir;
   train_options.init = source_path;
-  spdlog::info("{} {}: training {} iteration(s) on {} from {} (run folder {})", o.option, o.iterations,
-               o.iterations, o.input, source_path, o.run_dir);
+  spdlog::info("{} {}: training {} iteration(s) on {} from {} (run folder {})", o.option, o.iterations, o.iterations,
+               o.input, source_path, o.run_dir);
   std::string run_dir;
   int code = 0;
   try {

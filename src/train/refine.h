@@ -18,13 +18,13 @@
 namespace geo {
 
 struct RefineOptions {
-  std::string checkpoint;           // training checkpoint, run folder or geo_export model file
-  std::string input;                // the clip: a video file or a folder of frames
-  int64_t iterations = 0;           // training iterations on the clip (>= 1)
+  std::string checkpoint;  // training checkpoint, run folder or geo_export model file
+  std::string input;       // the clip: a video file or a folder of frames
+  int64_t iterations = 0;  // training iterations on the clip (>= 1)
   // fx fy cx cy in pixels of the clip's frames (unused for a model that learns its camera: its
   // camera head trains on).
   std::vector<double> intrinsics;
-  std::string run_dir;              // the refinement's run folder (created; must not hold a run)
+  std::string run_dir;  // the refinement's run folder (created; must not hold a run)
   std::string device = "auto";
   int threads = 0;                  // intra-op threads (0: all cores)
   std::string option = "--refine";  // names the setting in messages

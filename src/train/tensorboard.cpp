@@ -33,7 +33,8 @@ void varint(std::string& out, uint64_t v) {
   out.push_back(static_cast<char>(v));
 }
 void key(std::string& out, int field, int wire) { varint(out, static_cast<uint64_t>(field) << 3 | wire); }
-template <class T> void fixed(std::string& out, T v) {  // little-endian (x86, ARM)
+template <class T>
+void fixed(std::string& out, T v) {  // little-endian (x86, ARM)
   char b[sizeof(T)];
   std::memcpy(b, &v, sizeof(T));
   out.append(b, sizeof(T));
@@ -63,9 +64,7 @@ std::string with_summary_value(std::string e, const std::string& value) {
   return e;
 }
 
-double now() {
-  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
-}
+double now() { return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count(); }
 
 }  // namespace
 
@@ -130,8 +129,7 @@ EventWriter::EventWriter(const std::string& dir) {
   std::filesystem::create_directories(dir);
   char host[256] = "localhost";
   gethostname(host, sizeof host - 1);
-  const std::string base = dir + "/events.out.tfevents." +
-                           std::to_string(static_cast<long long>(now())) + "." + host;
+  const std::string base = dir + "/events.out.tfevents." + std::to_string(static_cast<long long>(now())) + "." + host;
   path_ = base;
   for (int n = 2; std::filesystem::exists(path_); ++n) path_ = base + "." + std::to_string(n);
   out_.open(path_, std::ios::binary);

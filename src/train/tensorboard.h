@@ -38,8 +38,7 @@ class EventWriter {
   explicit EventWriter(const std::string& dir);
   void add_scalar(const std::string& tag, int64_t step, double value);
   // `png`: a PNG file's bytes; channels 1 (grey), 3 (RGB) or 4 (RGBA).
-  void add_image(const std::string& tag, int64_t step, const std::string& png, int height, int width,
-                 int channels);
+  void add_image(const std::string& tag, int64_t step, const std::string& png, int height, int width, int channels);
   void add_session_start(int64_t step);
   void flush();
   const std::string& path() const { return path_; }

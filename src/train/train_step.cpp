@@ -121,8 +121,7 @@ torch::Tensor gradient_norm(const std::vector<torch::Tensor>& parameters) {
 std::unique_ptr<torch::optim::Adam> make_adam(const std::vector<torch::Tensor>& parameters, double lr,
                                               const OptimizerConfig& o) {
   return std::make_unique<MultiTensorAdam>(
-      parameters,
-      torch::optim::AdamOptions(lr).betas({o.beta1, o.beta2}).eps(o.eps).weight_decay(o.weight_decay));
+      parameters, torch::optim::AdamOptions(lr).betas({o.beta1, o.beta2}).eps(o.eps).weight_decay(o.weight_decay));
 }
 
 TrainStep::TrainStep(Networks& nets, const Config& config, const StageConfig& stage)
@@ -139,10 +138,8 @@ void TrainStep::set_gradient_averager(GradientAverager* averager, bool overlap) 
   if (overlap_) averager_->attach(params_);
 }
 
-StepResult TrainStep::run(const torch::Tensor& tgt, const torch::Tensor& srcs, const torch::Tensor& K,
-                          double lr) {
-  for (auto& group : adam_->param_groups())
-    static_cast<torch::optim::AdamOptions&>(group.options()).lr(lr);
+StepResult TrainStep::run(const torch::Tensor& tgt, const torch::Tensor& srcs, const torch::Tensor& K, double lr) {
+  for (auto& group : adam_->param_groups()) static_cast<torch::optim::AdamOptions&>(group.options()).lr(lr);
   adam_->zero_grad();
   StepResult r;
   r.out = compute_losses(nets_, tgt, srcs, K, stage_, config_);

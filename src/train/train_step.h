@@ -14,7 +14,7 @@ namespace geo {
 // stages[].lr_schedule: constant, or step (x lr_gamma every lr_step iterations).
 struct LrSchedule {
   double base = 2e-4;
-  int64_t step = 0;     // 0 = constant
+  int64_t step = 0;  // 0 = constant
   double gamma = 1.0;
 
   static LrSchedule of(const StageConfig& stage);
@@ -41,11 +41,11 @@ std::unique_ptr<torch::optim::Adam> make_adam(const std::vector<torch::Tensor>& 
                                               const OptimizerConfig& optimizer);
 
 struct StepResult {
-  bool finite = false;    // false: NaN/Inf loss or gradient; weights and Adam state untouched
-  double grad_norm = 0;   // global L2 norm of the gradients before clipping (when finite)
+  bool finite = false;   // false: NaN/Inf loss or gradient; weights and Adam state untouched
+  double grad_norm = 0;  // global L2 norm of the gradients before clipping (when finite)
   std::vector<std::pair<std::string, double>> losses;  // LossTerms::values() of this step
   std::vector<double> camera;  // model.learn_intrinsics: the batch's mean fx, fy, cx, cy (training pixels)
-  StepOutput out;         // losses and intermediate maps (for logging and summaries)
+  StepOutput out;              // losses and intermediate maps (for logging and summaries)
 };
 
 // The global L2 norm of the defined gradients of `parameters`, on their device (one multi-tensor

@@ -53,8 +53,7 @@ class Run {
   // `group`: this process's group (a SingleProcess alone). Only rank 0 writes to the run folder
   // (checkpoints, logs, summaries) and validates.
   Run(Config config, RunFolder folder, const TrainOptions& options, bool resuming, ProcessGroup& group)
-      : cfg_(std::move(config)), folder_(std::move(folder)), opts_(options), group_(group),
-        writer_(group.rank() == 0),
+      : cfg_(std::move(config)), folder_(std::move(folder)), opts_(options), group_(group), writer_(group.rank() == 0),
         device_(process_device(options.device.empty() ? cfg_.run.device : options.device, group)),
         checkpoints_(folder_, cfg_.logging.keep_last, !writer_) {
     apply_run_settings(cfg_.run, device_);
@@ -97,33 +96,39 @@ class Run {
  private:
   // What this run is about to do, and the settings that will hurt it.
   void report_start() const {
-    spdlog::info("run folder {}; device {} ({}); {} threads; data {} in {} ({} training snippets{}{}, {} validation); "
-                 "TensorBoard: tensorboard --logdir {}",
-                 folder_.root(), device_.str(), name_of(cfg_.run.precision), torch::get_num_threads(), data_.format, data_.root, data_.train->size(),
-                 data_.excluded ? ", " + std::to_string(data_.excluded) + " excluded by " + join_list(data_.exclusions, ", ") : "",
-                 data_.dropped ? ", " + std::to_string(data_.dropped) + " without neighbours" : "",
-                 data_.val ? data_.val->size() : 0, fs::path(folder_.root()).parent_path().string());
+    spdlog::info(
+        "run folder {}; device {} ({}); {} threads; data {} in {} ({} training snippets{}{}, {} validation); "
+        "TensorBoard: tensorboard --logdir {}",
+        folder_.root(), device_.str(), name_of(cfg_.run.precision), torch::get_num_threads(), data_.format, data_.root,
+        data_.train->size(),
+        data_.excluded ? ", " + std::to_string(data_.excluded) + " excluded by " + join_list(data_.exclusions, ", ")
+                       : "",
+        data_.dropped ? ", " + std::to_string(data_.dropped) + " without neighbours" : "",
+        data_.val ? data_.val->size() : 0, fs::path(folder_.root()).parent_path().string());
     if (!data_.val && cfg_.logging.val_interval > 0)
-      spdlog::warn("no validation data ({}): nothing is validated, no best-<stage>.pt is kept, and a run folder "
-                   "resolves to its latest checkpoint", data_.format == "packed" ? "the cache has no val/"
-                                                                                   : "no validation list found");
+      spdlog::warn(
+          "no validation data ({}): nothing is validated, no best-<stage>.pt is kept, and a run folder "
+          "resolves to its latest checkpoint",
+          data_.format == "packed" ? "the cache has no val/" : "no validation list found");
     int64_t total = 0;
     for (const auto& s : cfg_.stages) total += s.iterations;
     // The advice (0.1) only where it helps: a run too short even for 0.1 gets the count it needs.
     if (static_cast<double>(total) * cfg_.model.bn_momentum < 5.0)
-      spdlog::warn("model.bn_momentum {} averages BatchNorm's running statistics over ~{:.0f} batches but this run "
-                   "has {} iterations: evaluation will see statistics close to their initial values ({})",
-                   cfg_.model.bn_momentum, 1.0 / cfg_.model.bn_momentum, total,
-                   cfg_.model.bn_momentum < 0.1 && total * 0.1 >= 5.0
-                       ? "use model.bn_momentum: 0.1 for short runs"
-                       : "train for at least " + std::to_string(static_cast<int64_t>(std::ceil(5.0 / cfg_.model.bn_momentum))) +
-                             " iterations");
+      spdlog::warn(
+          "model.bn_momentum {} averages BatchNorm's running statistics over ~{:.0f} batches but this run "
+          "has {} iterations: evaluation will see statistics close to their initial values ({})",
+          cfg_.model.bn_momentum, 1.0 / cfg_.model.bn_momentum, total,
+          cfg_.model.bn_momentum < 0.1 && total * 0.1 >= 5.0
+              ? "use model.bn_momentum: 0.1 for short runs"
+              : "train for at least " + std::to_string(static_cast<int64_t>(std::ceil(5.0 / cfg_.model.bn_momentum))) +
+                    " iterations");
     if (several())
-      spdlog::info("distributed: {} processes ({}), this is rank {} on {}; batch_size is per process ({} in all); "
-                   "{}", group_.size(), group_.backend(), group_.rank(), device_.str(),
-                   stage().batch_size * group_.size(),
-                   cfg_.run.distributed.shard_data ? "each reads its own shard of the data stream"
-                                                   : "all read the same batches (run.distributed.shard_data false)");
+      spdlog::info(
+          "distributed: {} processes ({}), this is rank {} on {}; batch_size is per process ({} in all); "
+          "{}",
+          group_.size(), group_.backend(), group_.rank(), device_.str(), stage().batch_size * group_.size(),
+          cfg_.run.distributed.shard_data ? "each reads its own shard of the data stream"
+                                          : "all read the same batches (run.distributed.shard_data false)");
   }
 
   // data.videos: what each clip gave (frames kept, a digest) is kept with the run (clips.txt); a
@@ -142,9 +147,11 @@ class Run {
       const std::string was = i < then.size() ? then[i] : "(none)", is = i < now.size() ? now[i] : "(none)";
       if (was == is) continue;
       throw std::runtime_error("--resume " + folder_.root() + ": a clip changed since the run started: then " + was +
-                               "; now " + is + " (" + file + "). Resuming on other frames would train on snippets "
+                               "; now " + is + " (" + file +
+                               "). Resuming on other frames would train on snippets "
                                "the run never had: restore the clip, or start a new run from this one's weights "
-                               "(geo_train --init " + folder_.root() + ")");
+                               "(geo_train --init " +
+                               folder_.root() + ")");
     }
   }
 
@@ -178,9 +185,10 @@ class Run {
     const int64_t was = state_.world_size;
     const int64_t now = group_.size();
     if (was != now && writer_)
-      spdlog::warn("{} was written by a run of {} process(es), this one has {}: training continues from it with the "
-                   "data stream re-sharded for {} (the samples after this point differ from an uninterrupted run's)",
-                   resume_from_, was, now, now);
+      spdlog::warn(
+          "{} was written by a run of {} process(es), this one has {}: training continues from it with the "
+          "data stream re-sharded for {} (the samples after this point differ from an uninterrupted run's)",
+          resume_from_, was, now, now);
     if (state_.stage >= static_cast<int64_t>(cfg_.stages.size()))
       throw std::runtime_error(resume_from_ + ": stage index " + std::to_string(state_.stage) +
                                " beyond the config's stages");
@@ -222,9 +230,9 @@ class Run {
       lo.world_size = group_.size();
     }
     BatchLoader loader(data_.train, lo, state_.iteration);
-    spdlog::info("stage {} ({}/{}): training [{}] for {} iterations from {}, batch {}, lr {}", s.name,
-                 state_.stage + 1, cfg_.stages.size(), join_list(s.train.names(), ", "), s.iterations, state_.iteration,
-                 s.batch_size, s.learning_rate);
+    spdlog::info("stage {} ({}/{}): training [{}] for {} iterations from {}, batch {}, lr {}", s.name, state_.stage + 1,
+                 cfg_.stages.size(), join_list(s.train.names(), ", "), s.iterations, state_.iteration, s.batch_size,
+                 s.learning_rate);
     const auto& log = cfg_.logging;
     int bad_in_row = 0;
     // A validation interrupted by a signal before the checkpoint being resumed: done now, on the
@@ -242,26 +250,27 @@ class Run {
     while (state_.iteration < s.iterations) {
       const Batch batch = loader.next();
       const bool async = device_.is_cuda();  // the batch stays alive until the step has read it
-      StepResult r = step.run(batch.tgt.to(device_, async), batch.srcs.to(device_, async),
-                              batch.K.to(device_, async), lr.at(state_.iteration));
+      StepResult r = step.run(batch.tgt.to(device_, async), batch.srcs.to(device_, async), batch.K.to(device_, async),
+                              lr.at(state_.iteration));
       if (!r.finite) {
         ++skipped_;
-        spdlog::warn("stage {} iteration {}: NaN/Inf loss or gradient, step skipped ({} in a row, {} in all)",
-                     s.name, state_.iteration + 1, ++bad_in_row, skipped_);
+        spdlog::warn("stage {} iteration {}: NaN/Inf loss or gradient, step skipped ({} in a row, {} in all)", s.name,
+                     state_.iteration + 1, ++bad_in_row, skipped_);
         if (bad_in_row >= log.max_bad_steps)
-          throw std::runtime_error("stopping: " + std::to_string(bad_in_row) +
-                                   " NaN/Inf steps in a row (logging.max_bad_steps) at stage " + s.name +
-                                   " iteration " + std::to_string(state_.iteration + 1) +
-                                   (checkpoints_.latest().empty()
-                                        ? "; no checkpoint was written before it"
-                                        : "; the last good checkpoint is untouched: " + checkpoints_.latest()) +
-                                   " (try a lower learning rate or optimizer.grad_clip)");
+          throw std::runtime_error(
+              "stopping: " + std::to_string(bad_in_row) + " NaN/Inf steps in a row (logging.max_bad_steps) at stage " +
+              s.name + " iteration " + std::to_string(state_.iteration + 1) +
+              (checkpoints_.latest().empty() ? "; no checkpoint was written before it"
+                                             : "; the last good checkpoint is untouched: " + checkpoints_.latest()) +
+              " (try a lower learning rate or optimizer.grad_clip)");
         continue;  // the same iteration again with the next batch
       }
       bad_in_row = 0;
       ++state_.iteration;
       report_step(r, lr.at(state_.iteration - 1));
-      const auto due = [&](int64_t every) { return every > 0 && (state_.iteration % every == 0 || state_.iteration == s.iterations); };
+      const auto due = [&](int64_t every) {
+        return every > 0 && (state_.iteration % every == 0 || state_.iteration == s.iterations);
+      };
       if (writer_ && due(log.summary_interval)) write_summaries(batch, r.out);
       // A new best is checkpointed at once: best-<stage>.pt holds exactly the weights that earned the score.
       const bool new_best = writer_ && due(log.val_interval) && data_.val && validate(signals);
@@ -272,8 +281,10 @@ class Run {
       const bool checkpoint = due(log.checkpoint_interval);
       if (writer_ && (checkpoint || signal || new_best)) save(step, new_best);
       if (signal) {
-        spdlog::warn("signal {} received: checkpoint written at stage {} iteration {}; continue with "
-                     "geo_train --resume {}", signal, s.name, state_.iteration, folder_.root());
+        spdlog::warn(
+            "signal {} received: checkpoint written at stage {} iteration {}; continue with "
+            "geo_train --resume {}",
+            signal, s.name, state_.iteration, folder_.root());
         return 130;
       }
     }
@@ -298,7 +309,8 @@ class Run {
   // Validates the stage; true when the score is the stage's best so far. A signal ends the pass
   // early, unrecorded (the checkpoint that follows matters more than the score).
   bool validate(const SignalScope& signals) {
-    const Validation v = geo::validate(nets_, data_.val, stage(), cfg_, device_, [&] { return signals.received() != 0; });
+    const Validation v =
+        geo::validate(nets_, data_.val, stage(), cfg_, device_, [&] { return signals.received() != 0; });
     if (v.interrupted) {
       spdlog::warn("validation at {} {} interrupted by signal {}: not recorded; a resumed run validates first",
                    stage().name, state_.iteration, signals.received());
@@ -323,11 +335,12 @@ class Run {
 
   void save(TrainStep& step, bool best) {
     for (auto& sink : sinks_) sink->flush();
-    const std::string path = checkpoints_.save(stage().name, state_.iteration, best, [&](torch::serialize::OutputArchive& a) {
-      TrainState state = state_;
-      state.world_size = group_.size();
-      write_checkpoint(a, CheckpointContents{nets_, &step.optimizer(), state, cfg_, init_configs_});
-    });
+    const std::string path =
+        checkpoints_.save(stage().name, state_.iteration, best, [&](torch::serialize::OutputArchive& a) {
+          TrainState state = state_;
+          state.world_size = group_.size();
+          write_checkpoint(a, CheckpointContents{nets_, &step.optimizer(), state, cfg_, init_configs_});
+        });
     spdlog::info("checkpoint {}{}", path, best ? " (best of stage " + stage().name + ")" : "");
   }
 
@@ -346,8 +359,14 @@ class Run {
       images.emplace_back("visible", out.flow->fwd_visible[0][0][0].cpu().expand({3, -1, -1}));
     }
     for (const auto& [tag, image] : images) {
-      ImageRecord rec{stage().name, state_.iteration, global_step(), tag, encode_png(image),
-                      static_cast<int>(image.size(1)), static_cast<int>(image.size(2)), 3};
+      ImageRecord rec{stage().name,
+                      state_.iteration,
+                      global_step(),
+                      tag,
+                      encode_png(image),
+                      static_cast<int>(image.size(1)),
+                      static_cast<int>(image.size(2)),
+                      3};
       for (auto& sink : sinks_) sink->on_image(rec);
     }
 #else
@@ -369,7 +388,7 @@ class Run {
   Networks nets_;
   std::vector<std::shared_ptr<MetricsSink>> sinks_;
   TrainState state_;
-  std::string resume_from_;  // the checkpoint the current stage resumes from ("" = a fresh stage)
+  std::string resume_from_;                // the checkpoint the current stage resumes from ("" = a fresh stage)
   std::vector<std::string> init_configs_;  // CheckpointContents::init_configs of this run
   int64_t skipped_ = 0;
   bool summaries_skipped_ = false;
@@ -432,38 +451,46 @@ int run_in_folder(const Config& config, const TrainOptions& options, bool resumi
 }  // namespace
 
 int train(const Config& config, const TrainOptions& options, std::string* run_dir) {
-  return run_in_folder(config, options, false, [&] {
-    const bool created = options.run_dir.empty() || !fs::exists(options.run_dir);
-    PreparedFolder p{options.run_dir.empty() ? RunFolder::create_new(config.run.dir, config.run.name)
-                                             : RunFolder(options.run_dir),
-                     nullptr, created};
-    const std::string& dir = p.folder.root();
-    // A folder the run reads (a clip's frames, the data root, an init run) is not where it writes.
-    check_outputs({{"--run-dir", dir}, {"--run-dir", p.folder.config()}}, config_reads(config), true);
-    // The lock first: a folder where a run is training right now is said to be in use, never
-    // called a stopped run to be removed.
-    fs::create_directories(dir);
-    p.lock = std::make_unique<FolderLock>(dir);
-    if (!p.folder.latest().empty())
-      throw std::runtime_error("run folder '" + dir + "' already holds a run; use --resume " + dir + " or another --run-dir");
-    // A run that stopped before its first checkpoint cannot be resumed, and a new one would append
-    // to its logs: refused, so that two runs never mix in one folder.
-    const auto earlier = p.folder.run_files();
-    if (!earlier.empty())
-      throw std::runtime_error("run folder '" + dir + "' holds the files of an earlier run (" + join_list(earlier, ", ") +
-                               ") that stopped before its first checkpoint: remove the folder or use another --run-dir");
-    write_file_atomic(p.folder.config(), to_yaml(config));
-    return p;
-  }, run_dir);
+  return run_in_folder(
+      config, options, false,
+      [&] {
+        const bool created = options.run_dir.empty() || !fs::exists(options.run_dir);
+        PreparedFolder p{options.run_dir.empty() ? RunFolder::create_new(config.run.dir, config.run.name)
+                                                 : RunFolder(options.run_dir),
+                         nullptr, created};
+        const std::string& dir = p.folder.root();
+        // A folder the run reads (a clip's frames, the data root, an init run) is not where it writes.
+        check_outputs({{"--run-dir", dir}, {"--run-dir", p.folder.config()}}, config_reads(config), true);
+        // The lock first: a folder where a run is training right now is said to be in use, never
+        // called a stopped run to be removed.
+        fs::create_directories(dir);
+        p.lock = std::make_unique<FolderLock>(dir);
+        if (!p.folder.latest().empty())
+          throw std::runtime_error("run folder '" + dir + "' already holds a run; use --resume " + dir +
+                                   " or another --run-dir");
+        // A run that stopped before its first checkpoint cannot be resumed, and a new one would append
+        // to its logs: refused, so that two runs never mix in one folder.
+        const auto earlier = p.folder.run_files();
+        if (!earlier.empty())
+          throw std::runtime_error(
+              "run folder '" + dir + "' holds the files of an earlier run (" + join_list(earlier, ", ") +
+              ") that stopped before its first checkpoint: remove the folder or use another --run-dir");
+        write_file_atomic(p.folder.config(), to_yaml(config));
+        return p;
+      },
+      run_dir);
 }
 
 int resume(const std::string& run_dir, const TrainOptions& options) {
   const RunFolder folder(run_dir);
   if (!fs::exists(folder.config()))
     throw std::runtime_error("--resume '" + run_dir + "': not a run folder (no config.yaml)");
-  return run_in_folder(load_config(folder.config()), options, true, [&] {
-    return PreparedFolder{folder, std::make_unique<FolderLock>(run_dir), false};
-  }, nullptr);
+  return run_in_folder(
+      load_config(folder.config()), options, true,
+      [&] {
+        return PreparedFolder{folder, std::make_unique<FolderLock>(run_dir), false};
+      },
+      nullptr);
 }
 
 }  // namespace geo

@@ -17,10 +17,10 @@
 namespace geo {
 
 struct TrainOptions {
-  std::string run_dir;        // run folder to create; empty = <run.dir>/<run.name>-<timestamp>
-  std::string init;           // overrides stages[0].init (a checkpoint file or a run folder)
-  std::string device;         // overrides run.device (auto | cpu | cuda | cuda:N)
-  std::string master_addr;    // distributed under SLURM: the rendezvous host when MASTER_ADDR is unset
+  std::string run_dir;      // run folder to create; empty = <run.dir>/<run.name>-<timestamp>
+  std::string init;         // overrides stages[0].init (a checkpoint file or a run folder)
+  std::string device;       // overrides run.device (auto | cpu | cuda | cuda:N)
+  std::string master_addr;  // distributed under SLURM: the rendezvous host when MASTER_ADDR is unset
   // Extra receivers of every step, validation and summary image, after the built-in CSV,
   // TensorBoard and console sinks. An exception thrown by a sink stops the run at once, without a
   // checkpoint (as a crash would).

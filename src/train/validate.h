@@ -13,20 +13,19 @@
 namespace geo {
 
 struct Validation {
-  double rigid = 0;             // mean L_br (photometric, rigid flow)
-  std::optional<double> flow;   // mean L_fr (photometric, full flow), when the stage trains flow
+  double rigid = 0;            // mean L_br (photometric, rigid flow)
+  std::optional<double> flow;  // mean L_fr (photometric, full flow), when the stage trains flow
   // What selects the stage's best checkpoint: L_br when the stage trains depth or pose, plus L_fr
   // when it trains flow (a flow-only stage, GeoNet's, is ranked by L_fr alone: its frozen depth and
   // pose leave L_br constant).
   double score = 0;
   size_t snippets = 0;
-  bool interrupted = false;     // `stop` said so before the pass ended: no score
+  bool interrupted = false;  // `stop` said so before the pass ended: no score
 };
 
 // Restores the stage's train/eval modes before returning. `stop`, asked before every batch, ends
 // the pass early (a SIGTERM must not wait for a long validation: schedulers kill soon after it).
 Validation validate(Networks& nets, std::shared_ptr<const SnippetSource> source, const StageConfig& stage,
-                    const Config& config, const torch::Device& device,
-                    const std::function<bool()>& stop = nullptr);
+                    const Config& config, const torch::Device& device, const std::function<bool()>& stop = nullptr);
 
 }  // namespace geo

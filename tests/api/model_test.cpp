@@ -105,19 +105,20 @@ TEST(Api, AnyInputSizeAndBatches) {
   const auto a = image(64, 208), b = image(64, 208, 0.1);
   const auto small = m.flow(a, b);
   const auto wide = [](const torch::Tensor& x) { return x.repeat_interleave(2, 2); };
-  ASSERT_TRUE(torch::equal(torch::nn::functional::interpolate(
-                               wide(a).unsqueeze(0), torch::nn::functional::InterpolateFuncOptions()
-                                                         .size(std::vector<int64_t>{64, 208})
-                                                         .mode(torch::kBilinear)
-                                                         .align_corners(false))[0],
-                           a));
+  ASSERT_TRUE(torch::equal(
+      torch::nn::functional::interpolate(wide(a).unsqueeze(0), torch::nn::functional::InterpolateFuncOptions()
+                                                                   .size(std::vector<int64_t>{64, 208})
+                                                                   .mode(torch::kBilinear)
+                                                                   .align_corners(false))[0],
+      a));
   const auto big = m.flow(wide(a), wide(b));
   EXPECT_EQ(big.sizes(), (torch::IntArrayRef{2, 64, 416}));
-  const auto expected = torch::nn::functional::interpolate(
-      small.unsqueeze(0), torch::nn::functional::InterpolateFuncOptions()
-                              .size(std::vector<int64_t>{64, 416})
-                              .mode(torch::kBilinear)
-                              .align_corners(false))[0] * torch::tensor({2.f, 1.f}).view({2, 1, 1});
+  const auto expected =
+      torch::nn::functional::interpolate(small.unsqueeze(0), torch::nn::functional::InterpolateFuncOptions()
+                                                                 .size(std::vector<int64_t>{64, 416})
+                                                                 .mode(torch::kBilinear)
+                                                                 .align_corners(false))[0] *
+      torch::tensor({2.f, 1.f}).view({2, 1, 1});
   EXPECT_LT((big - expected).abs().max().item<double>(), 1e-4);
   EXPECT_GT(big[0].abs().mean().item<double>(), 0.1);  // a flow whose x component matters
 }
@@ -126,7 +127,8 @@ TEST(Api, AnyInputSizeAndBatches) {
 // snippet's first; the trajectory is chain_poses of the motions; scales multiply depth and steps.
 TEST(Api, RunSequenceIsTheCallsFrameByFrame) {
   const Model m = Model::load(checkpoint());
-  const std::vector<torch::Tensor> frames{image(64, 208), image(64, 208, 0.1), image(64, 208, 0.25), image(64, 208, 0.3)};
+  const std::vector<torch::Tensor> frames{image(64, 208), image(64, 208, 0.1), image(64, 208, 0.25),
+                                          image(64, 208, 0.3)};
   TensorFrames source(frames);
   std::vector<SequenceFrame> seen;
   const auto poses = m.run_sequence(source, [&](const SequenceFrame& f) { seen.push_back(f); });
@@ -290,11 +292,15 @@ TEST(Api, MisuseIsAGeoErrorThatSaysWhat) {
   expect_error([&] { m.depth(image(64, 208) * 255); }, "floating-point pixels must lie in [0, 1]");
   expect_error([&] { m.pose({image(64, 208)}); }, "takes 3 frames, got 1");
   expect_error([&] { m.flow(image(64, 208), image(32, 208)); }, "differ in size");
-  expect_error([&] { m.relative_pose(image(64, 208), image(32, 208)); },
-               "frame 2 is [3, 32, 208] but frame 0 is [3, 64, 208]: the frames of a snippet (or pair) must have one size");
+  expect_error(
+      [&] { m.relative_pose(image(64, 208), image(32, 208)); },
+      "frame 2 is [3, 32, 208] but frame 0 is [3, 64, 208]: the frames of a snippet (or pair) must have one size");
   expect_error([&] { m.pose({image(64, 208), image(64, 208), image(64, 200)}); }, "frame 2 is [3, 64, 200]");
-  expect_error([&] { m.flow(image(64, 208), image(64, 208), torch::zeros({3, 3})); },
-               "intrinsics: focal lengths fx = 0, fy = 0 are not plausible");
+  expect_error(
+      [&] {
+        m.flow(image(64, 208), image(64, 208), torch::zeros({3, 3}));
+      },
+      "intrinsics: focal lengths fx = 0, fy = 0 are not plausible");
   const auto outside = torch::tensor({100.0, 0.0, -500.0, 0.0, 100.0, 9000.0, 0.0, 0.0, 1.0}).view({3, 3});
   expect_error([&] { m.flow(image(64, 208), image(64, 208), outside); },
                "intrinsics: principal point (-500, 9000) lies outside the 208x64 frame");
@@ -307,12 +313,12 @@ TEST(Api, MisuseIsAGeoErrorThatSaysWhat) {
 }
 
 TEST(Api, Rgb8ImagesWithRowPadding) {
-  const uint8_t px[] = {1, 2, 3, 4, 5, 6, 0, 0,  // row 0: two pixels, 2 bytes of padding
+  const uint8_t px[] = {1, 2, 3, 4,  5,  6,  0, 0,  // row 0: two pixels, 2 bytes of padding
                         7, 8, 9, 10, 11, 12, 0, 0};
   const auto t = rgb8_image(px, 2, 2, 8);
   EXPECT_EQ(t.sizes(), (torch::IntArrayRef{3, 2, 2}));
-  EXPECT_EQ(t[0][1][0].item<int>(), 7);   // R of row 1, column 0
-  EXPECT_EQ(t[2][0][1].item<int>(), 6);   // B of row 0, column 1
+  EXPECT_EQ(t[0][1][0].item<int>(), 7);  // R of row 1, column 0
+  EXPECT_EQ(t[2][0][1].item<int>(), 6);  // B of row 0, column 1
 }
 
 // LoadOptions::precision bf16: weights and arithmetic in bfloat16, outputs float32, close to fp32.
@@ -362,14 +368,18 @@ TEST(GeoInfer, WritesDepthFlowAndTrajectoryAndRefusesMixedFrameSizes) {
   // Videos, a point cloud and the ground truth in the plot; a pose file too short is refused.
   write_poses(dir + "/gt.txt", trajectory);
   ASSERT_EQ(std::system((tool + dir + "/frames --output " + dir + "/out3 --videos --ply 1 --ground-truth " + dir +
-                         "/gt.txt > " + dir + "/log 2>&1").c_str()), 0)
+                         "/gt.txt > " + dir + "/log 2>&1")
+                            .c_str()),
+            0)
       << test::read_file(dir + "/log");
   for (const char* f : {"disp.avi", "flow.avi", "000001.ply", "trajectory.png"})
     EXPECT_TRUE(std::filesystem::exists(dir + "/out3/" + f)) << f;
   EXPECT_NE(test::read_file(dir + "/out3/000001.ply").find("element vertex "), std::string::npos);
   write_poses(dir + "/short.txt", trajectory.slice(0, 0, 2));
-  EXPECT_NE(std::system((tool + dir + "/frames --output " + dir + "/out4 --ground-truth " + dir + "/short.txt > " + dir +
-                         "/log 2>&1").c_str()), 0);
+  EXPECT_NE(std::system((tool + dir + "/frames --output " + dir + "/out4 --ground-truth " + dir + "/short.txt > " +
+                         dir + "/log 2>&1")
+                            .c_str()),
+            0);
   EXPECT_NE(test::read_file(dir + "/log").find(dir + "/short.txt' has 2 poses for 3 frames"), std::string::npos)
       << test::read_file(dir + "/log");
   EXPECT_NE(std::system((tool + dir + "/frames --output " + dir + "/out5 --ply 3 > " + dir + "/log 2>&1").c_str()), 0);
@@ -380,15 +390,18 @@ TEST(GeoInfer, WritesDepthFlowAndTrajectoryAndRefusesMixedFrameSizes) {
   // and nothing else; the input folder is never the output; two frames of one name are refused.
   auto run = [&](const std::string& args) {
     return std::system((test::apps_dir() + "/geo_infer --checkpoint " + checkpoint() + " --device cpu " + args + " > " +
-                        dir + "/log 2>&1").c_str());
+                        dir + "/log 2>&1")
+                           .c_str());
   };
   EXPECT_NE(run("--input " + dir + "/frames/000000.png --output " + dir + "/out3"), 0);
   EXPECT_NE(test::read_file(dir + "/log").find("--output '" + dir + "/out3' is not empty (--force"), std::string::npos)
       << test::read_file(dir + "/log");
   // Files of the user's named like geo_infer's outputs stay: --force removes what geo_infer's
   // manifest (geo_infer-outputs.txt) says it wrote, and nothing else.
-  for (const char* mine : {"notes.txt", "lidar.ply", "notes-depth.png"}) test::write_text(dir + "/out3/" + mine, "mine");
-  ASSERT_EQ(run("--input " + dir + "/frames/000000.png --output " + dir + "/out3 --force"), 0) << test::read_file(dir + "/log");
+  for (const char* mine : {"notes.txt", "lidar.ply", "notes-depth.png"})
+    test::write_text(dir + "/out3/" + mine, "mine");
+  ASSERT_EQ(run("--input " + dir + "/frames/000000.png --output " + dir + "/out3 --force"), 0)
+      << test::read_file(dir + "/log");
   for (const char* gone : {"trajectory.txt", "trajectory.png", "disp.avi", "000001.ply", "000001-disp.png"})
     EXPECT_FALSE(std::filesystem::exists(dir + "/out3/" + std::string(gone))) << gone;
   EXPECT_TRUE(std::filesystem::exists(dir + "/out3/000000-disp.png"));
@@ -398,14 +411,16 @@ TEST(GeoInfer, WritesDepthFlowAndTrajectoryAndRefusesMixedFrameSizes) {
   // An output name that is a file of the user's: refused before anything is removed or written.
   test::write_text(dir + "/mine/trajectory.txt", "my poses");
   EXPECT_NE(run("--input " + dir + "/frames --output " + dir + "/mine --force"), 0);
-  EXPECT_NE(test::read_file(dir + "/log").find("holds 'trajectory.txt', which this tool did not write"), std::string::npos)
+  EXPECT_NE(test::read_file(dir + "/log").find("holds 'trajectory.txt', which this tool did not write"),
+            std::string::npos)
       << test::read_file(dir + "/log");
   EXPECT_EQ(test::read_file(dir + "/mine/trajectory.txt"), "my poses");
   EXPECT_FALSE(std::filesystem::exists(dir + "/mine/000000-disp.png"));
   // The camera rule of every tool: a principal point far outside the frames is refused.
   EXPECT_NE(run("--input " + dir + "/frames --output " + dir + "/out7 --intrinsics 100 100 -500 9000"), 0);
-  EXPECT_NE(test::read_file(dir + "/log").find("--intrinsics: principal point (-500, 9000) lies outside the 208x64 frame"),
-            std::string::npos)
+  EXPECT_NE(
+      test::read_file(dir + "/log").find("--intrinsics: principal point (-500, 9000) lies outside the 208x64 frame"),
+      std::string::npos)
       << test::read_file(dir + "/log");
   // Never among the frames: the input folder, or the folder of a single image.
   EXPECT_NE(run("--input " + dir + "/frames --output " + dir + "/frames/ --force"), 0);
@@ -419,8 +434,8 @@ TEST(GeoInfer, WritesDepthFlowAndTrajectoryAndRefusesMixedFrameSizes) {
   write_image(dir + "/twins/000001.png", image(64, 208, 0.1));
   write_image(dir + "/twins/000001.jpg", image(64, 208, 0.1));
   EXPECT_NE(run("--input " + dir + "/twins --output " + dir + "/out6"), 0);
-  EXPECT_NE(test::read_file(dir + "/log").find("'" + dir + "/twins/000001.jpg' and '" + dir +
-                                               "/twins/000001.png' would write the same outputs"),
+  EXPECT_NE(test::read_file(dir + "/log")
+                .find("'" + dir + "/twins/000001.jpg' and '" + dir + "/twins/000001.png' would write the same outputs"),
             std::string::npos)
       << test::read_file(dir + "/log");
 
@@ -433,12 +448,14 @@ TEST(GeoInfer, WritesDepthFlowAndTrajectoryAndRefusesMixedFrameSizes) {
   EXPECT_TRUE(std::filesystem::exists(dir + "/out_int8/000001-flow.png"));
   EXPECT_NE(run("--input " + dir + "/frames --output " + dir + "/out7 --calibration-frames 2"), 0);
   EXPECT_NE(test::read_file(dir + "/log").find("--calibration-frames calibrates int8: it needs --precision int8"),
-            std::string::npos) << test::read_file(dir + "/log");
+            std::string::npos)
+      << test::read_file(dir + "/log");
 
   write_image(dir + "/frames/000003.png", image(32, 104));
   EXPECT_NE(std::system((tool + dir + "/frames --output " + dir + "/out2 > " + dir + "/log 2>&1").c_str()), 0);
   const std::string log = test::read_file(dir + "/log");
-  EXPECT_NE(log.find("'" + dir + "/frames/000003.png' is 104x32 but '" + dir + "/frames/000000.png' is 208x64"), std::string::npos)
+  EXPECT_NE(log.find("'" + dir + "/frames/000003.png' is 104x32 but '" + dir + "/frames/000000.png' is 208x64"),
+            std::string::npos)
       << log;
 }
 
@@ -451,15 +468,20 @@ TEST(GeoInfer, RefinesOnTheInputFirst) {
   ASSERT_TRUE(std::filesystem::is_directory(clip)) << clip;
   const auto dir = test::fresh_dir("geo_infer_refine");
   auto run = [&](const std::string& args) {
-    return std::system((test::apps_dir() + "/geo_infer --device cpu --threads 2 " + args + " > " + dir + "/log 2>&1").c_str());
+    return std::system(
+        (test::apps_dir() + "/geo_infer --device cpu --threads 2 " + args + " > " + dir + "/log 2>&1").c_str());
   };
   const std::string source = "--checkpoint " + checkpoint() + " --input " + clip;
-  ASSERT_EQ(run(source + " --output " + dir + "/refined --refine 2 --refine-run " + dir + "/run"), 0) << test::read_file(dir + "/log");
-  EXPECT_NE(test::read_file(dir + "/log").find("stage refine (1/1): training [depth, pose] for 2 iterations from 0, batch 4, lr 0.0001"), std::string::npos)
+  ASSERT_EQ(run(source + " --output " + dir + "/refined --refine 2 --refine-run " + dir + "/run"), 0)
+      << test::read_file(dir + "/log");
+  EXPECT_NE(test::read_file(dir + "/log")
+                .find("stage refine (1/1): training [depth, pose] for 2 iterations from 0, batch 4, lr 0.0001"),
+            std::string::npos)
       << test::read_file(dir + "/log");
   const std::string model = dir + "/run/refined.pt";
   ASSERT_TRUE(std::filesystem::exists(model));
-  ASSERT_EQ(run("--checkpoint " + model + " --input " + clip + " --output " + dir + "/again"), 0) << test::read_file(dir + "/log");
+  ASSERT_EQ(run("--checkpoint " + model + " --input " + clip + " --output " + dir + "/again"), 0)
+      << test::read_file(dir + "/log");
   ASSERT_EQ(run(source + " --output " + dir + "/plain"), 0) << test::read_file(dir + "/log");
   for (const char* f : {"0000000000-depth.png", "0000000007-depth.png", "0000000003-flow.png", "trajectory.txt"}) {
     EXPECT_EQ(test::read_file(dir + "/refined/" + f), test::read_file(dir + "/again/" + f)) << f;
@@ -494,11 +516,13 @@ TEST(GeoInfer, RefinesOnTheInputFirst) {
   for (const char* f : {"0000000000.png", "0000000001.png"}) std::filesystem::copy(clip + "/" + f, dir + "/two/" + f);
   refused("--checkpoint " + checkpoint() + " --input " + dir + "/two --output " + dir + "/o1 --refine 2",
           "--refine 2: clip '" + dir + "/two' has 2 frames: a training snippet needs 3");
-  refused(source + " --output " + dir + "/plain --refine 2 --refine-run " + dir + "/run2", "--output '" + dir + "/plain' is not empty");
+  refused(source + " --output " + dir + "/plain --refine 2 --refine-run " + dir + "/run2",
+          "--output '" + dir + "/plain' is not empty");
   EXPECT_FALSE(std::filesystem::exists(dir + "/run2"));
   refused(source + " --output " + dir + "/o1 --refine 2 --refine-run " + dir + "/run",
           "--refine-run '" + dir + "/run' exists and is not an empty folder");
-  refused(source + " --output " + dir + "/o1 --refine-run " + dir + "/run3", "keeps the run of --refine N: give --refine too");
+  refused(source + " --output " + dir + "/o1 --refine-run " + dir + "/run3",
+          "keeps the run of --refine N: give --refine too");
 }
 
 }  // namespace

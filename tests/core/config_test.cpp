@@ -18,7 +18,8 @@ using geo::Config;
 using geo::ConfigError;
 
 // Runs `fn` and returns the ConfigError message (fails the test if nothing is thrown).
-template <class Fn> std::string error_of(Fn&& fn) {
+template <class Fn>
+std::string error_of(Fn&& fn) {
   try {
     fn();
   } catch (const ConfigError& e) {
@@ -69,9 +70,8 @@ TEST(Config, GeoNetSwitchesParseRoundTripAndAreValidated) {
   EXPECT_EQ(back.loss.sampler, geo::Sampler::kBorder);
   EXPECT_DOUBLE_EQ(back.model.bn_momentum, 0.1);
   EXPECT_TRUE(back.model.bn_scale);
-  const std::string msg = error_of([] {
-    geo::parse_config("loss: {image_range: [0, 255]}\nmodel: {bn_momentum: 0}\n");
-  });
+  const std::string msg =
+      error_of([] { geo::parse_config("loss: {image_range: [0, 255]}\nmodel: {bn_momentum: 0}\n"); });
   for (const char* want : {"'loss.image_range' = [0, 255] (line 1): must be [-1, 1] (GeoNet) or [0, 1]",
                            "'model.bn_momentum' = 0 (line 2)"})
     EXPECT_NE(msg.find(want), std::string::npos) << want << "\n" << msg;
@@ -116,26 +116,21 @@ run: {seed: 7, device: cpu}
 }
 
 TEST(Config, UnknownKeyNamesFullPathAndLine) {
-  const std::string msg = error_of([] {
-    geo::parse_config("model:\n  encoder_depth: 50\n  use_frr: true\n", "x.yaml");
-  });
+  const std::string msg =
+      error_of([] { geo::parse_config("model:\n  encoder_depth: 50\n  use_frr: true\n", "x.yaml"); });
   EXPECT_NE(msg.find("unknown key 'model.use_frr'"), std::string::npos) << msg;
   EXPECT_NE(msg.find("x.yaml line 3"), std::string::npos) << msg;
   EXPECT_NE(msg.find("use_fr"), std::string::npos) << msg;  // lists the valid keys
 }
 
 TEST(Config, UnknownKeyInsideAStage) {
-  const std::string msg = error_of([] {
-    geo::parse_config("stages:\n  - name: s\n    iters: 5\n", "x.yaml");
-  });
+  const std::string msg = error_of([] { geo::parse_config("stages:\n  - name: s\n    iters: 5\n", "x.yaml"); });
   EXPECT_NE(msg.find("unknown key 'stages[0].iters'"), std::string::npos) << msg;
   EXPECT_NE(msg.find("line 3"), std::string::npos) << msg;
 }
 
 TEST(Config, WrongTypeNamesKeyValueAndLine) {
-  const std::string msg = error_of([] {
-    geo::parse_config("data:\n  height: tall\n", "x.yaml");
-  });
+  const std::string msg = error_of([] { geo::parse_config("data:\n  height: tall\n", "x.yaml"); });
   EXPECT_NE(msg.find("'data.height'"), std::string::npos) << msg;
   EXPECT_NE(msg.find("an integer"), std::string::npos) << msg;
   EXPECT_NE(msg.find("'tall'"), std::string::npos) << msg;
@@ -143,12 +138,9 @@ TEST(Config, WrongTypeNamesKeyValueAndLine) {
 }
 
 TEST(Config, NegativeLearningRateNamesKeyValueAndLine) {
-  const std::string msg = error_of([] {
-    geo::parse_config("stages:\n  - name: s\n    learning_rate: -0.001\n", "x.yaml");
-  });
-  EXPECT_NE(msg.find("'stages[0].learning_rate' = -0.001 (line 3): must be in (0, 1]"),
-            std::string::npos)
-      << msg;
+  const std::string msg =
+      error_of([] { geo::parse_config("stages:\n  - name: s\n    learning_rate: -0.001\n", "x.yaml"); });
+  EXPECT_NE(msg.find("'stages[0].learning_rate' = -0.001 (line 3): must be in (0, 1]"), std::string::npos) << msg;
 }
 
 // A value left empty is an error, not the default; integers are decimal (YAML's 010 is octal 8).
@@ -165,7 +157,8 @@ TEST(Config, EmptyValuesAndNonDecimalIntegersAreRefused) {
   }
   EXPECT_EQ(geo::parse_config("stages: [{name: s, iterations: 10}]\n").stages[0].iterations, 10);
   EXPECT_EQ(geo::parse_config("stages: [{name: s, iterations: +5}]\n").stages[0].iterations, 5);
-  EXPECT_EQ(geo::parse_config("model:\nrun: {seed: -0}\n").model.use_fr, geo::Config().model.use_fr);  // an empty section
+  EXPECT_EQ(geo::parse_config("model:\nrun: {seed: -0}\n").model.use_fr,
+            geo::Config().model.use_fr);  // an empty section
 }
 
 // Sizes are bounded where they are read, naming the key: never a 22 GB allocation, a LibTorch
@@ -188,7 +181,8 @@ TEST(Config, StageNamesArePlainAndThreadsBounded) {
     EXPECT_NE(msg.find("'stages[0].name'"), std::string::npos) << bad << ": " << msg;
   }
   EXPECT_NO_THROW(geo::parse_config("stages: [{name: stage-2.b_1}]\n"));
-  EXPECT_NE(error_of([] { geo::parse_config("stages: [{name: s-00000001}]\n"); }).find("eight digits"), std::string::npos);
+  EXPECT_NE(error_of([] { geo::parse_config("stages: [{name: s-00000001}]\n"); }).find("eight digits"),
+            std::string::npos);
   EXPECT_NE(error_of([] { geo::parse_config("run: {threads: 100000}\n"); }).find("'run.threads' = 100000"),
             std::string::npos);
 }
@@ -205,13 +199,13 @@ TEST(Config, CountsAreBoundedWhereTheyAreRead) {
     EXPECT_NO_THROW(geo::parse_config("", "x.yaml", {std::string(key) + "=1000000000000"})) << key;
   }
   for (const char* set : {"stages.0.batch_size=65537", "logging.keep_last=1000001", "model.fr_ratio=4097"})
-    EXPECT_NE(error_of([&] { geo::parse_config("", "x.yaml", {set}); }).find("must be in 1.."), std::string::npos) << set;
+    EXPECT_NE(error_of([&] { geo::parse_config("", "x.yaml", {set}); }).find("must be in 1.."), std::string::npos)
+        << set;
 }
 
 TEST(Config, ReportsEveryInvalidValue) {
-  const std::string msg = error_of([] {
-    geo::parse_config("model: {encoder_depth: 101}\nrun: {device: tpu}\n", "x.yaml");
-  });
+  const std::string msg =
+      error_of([] { geo::parse_config("model: {encoder_depth: 101}\nrun: {device: tpu}\n", "x.yaml"); });
   EXPECT_NE(msg.find("'model.encoder_depth' = 101 (line 1)"), std::string::npos) << msg;
   EXPECT_NE(msg.find("'run.device' = 'tpu' (line 2)"), std::string::npos) << msg;
 }
@@ -247,9 +241,8 @@ TEST(Config, NonMapAndEmptyConfigsNameTheFile) {
 }
 
 TEST(Config, OverridesApplyAndAreValidated) {
-  const Config c = geo::parse_config("", "<s>",
-                                     {"loss.ssim_alpha=0.8", "stages[0].learning_rate=1e-3",
-                                      "data.root=/tmp/k", "stages.0.train=[depth]"});
+  const Config c = geo::parse_config(
+      "", "<s>", {"loss.ssim_alpha=0.8", "stages[0].learning_rate=1e-3", "data.root=/tmp/k", "stages.0.train=[depth]"});
   EXPECT_DOUBLE_EQ(c.loss.ssim_alpha, 0.8);
   EXPECT_DOUBLE_EQ(c.stages[0].learning_rate, 1e-3);
   EXPECT_EQ(c.data.root, "/tmp/k");
@@ -265,13 +258,12 @@ TEST(Config, OverridesApplyAndAreValidated) {
   msg = error_of([] { geo::parse_config("", "<s>", {"no_equals_sign"}); });
   EXPECT_NE(msg.find("expected key.path=value"), std::string::npos) << msg;
   // Malformed keys and empty values are errors naming the key (not a default, not "stoul").
-  const std::pair<const char*, const char*> bad[] = {
-      {"stages[-1].iterations=3", "'[-1]' is not a list index"},
-      {"stages[abc].iterations=3", "'[abc]' is not a list index"},
-      {"stages[0.iterations=3", "unclosed '['"},
-      {"stages[99999999999999].iterations=3", "is not a list index"},
-      {"loss.ssim_alpha=", "empty value"},
-      {"loss..ssim_alpha=1", "is not a key name"}};
+  const std::pair<const char*, const char*> bad[] = {{"stages[-1].iterations=3", "'[-1]' is not a list index"},
+                                                     {"stages[abc].iterations=3", "'[abc]' is not a list index"},
+                                                     {"stages[0.iterations=3", "unclosed '['"},
+                                                     {"stages[99999999999999].iterations=3", "is not a list index"},
+                                                     {"loss.ssim_alpha=", "empty value"},
+                                                     {"loss..ssim_alpha=1", "is not a key name"}};
   for (const auto& [set, want] : bad) {
     msg = error_of([&] { geo::parse_config("", "<s>", {set}); });
     EXPECT_NE(msg.find(want), std::string::npos) << set << ": " << msg;
@@ -335,7 +327,8 @@ TEST(Config, VideoConfigNeedsClipsAndTakesOneCamera) {
     msg = e.what();
   }
   for (const char* want : {"key 'data.camera.intrinsics' = [0, 700, 640, 360] (from --set): give one of",
-                           "key 'data.camera.intrinsics' = [0, 700, 640, 360] (from --set): focal lengths fx = 0, fy = 700 are not plausible",
+                           "key 'data.camera.intrinsics' = [0, 700, 640, 360] (from --set): focal lengths fx = 0, fy = "
+                           "700 are not plausible",
                            "key 'data.video.static_threshold' = 1.5 (from --set): must be in [0, 1)",
                            "key 'data.video.crop_y' = -1 (from --set): must be in [0, 1]"})
     EXPECT_NE(msg.find(want), std::string::npos) << want << "\n" << msg;
@@ -398,7 +391,8 @@ TEST(Config, ResolveNamesEveryPlaceTried) {
 TEST(Config, OnlyBareNamesMeanShippedConfigs) {
   const auto msg = error_of([] { geo::resolve_config_path("no_such_folder/stage1.yaml"); });
   EXPECT_NE(msg.find("config 'no_such_folder/stage1.yaml' not found (a path with a folder is used as given"),
-            std::string::npos) << msg;
+            std::string::npos)
+      << msg;
   EXPECT_EQ(geo::resolve_config_path("stage1"), geo::shipped_config_dir() + "/stage1.yaml");
   EXPECT_EQ(geo::resolve_config_path("stage1.yaml"), geo::shipped_config_dir() + "/stage1.yaml");
   const auto dir = geo::test::fresh_dir("config_here");
@@ -424,8 +418,9 @@ TEST(Config, DifferencesAreNamedByKey) {
   b.data.augment.scale_max = 1.3;
   EXPECT_EQ(config_differences(to_yaml(a), to_yaml(b), {"run", "data.augment"}),
             (std::vector<std::string>{"model.use_fr: true vs false", "stages[1].batch_size: 4 vs 8"}));
-  EXPECT_EQ(config_differences(to_yaml(a), to_yaml(b), {"run.threads", "run.distributed", "data", "model", "stages[1]"}),
-            std::vector<std::string>{});
+  EXPECT_EQ(
+      config_differences(to_yaml(a), to_yaml(b), {"run.threads", "run.distributed", "data", "model", "stages[1]"}),
+      std::vector<std::string>{});
   b.stages.pop_back();
   EXPECT_EQ(config_differences(to_yaml(a), to_yaml(b), {"run", "data", "model"}).front().rfind("stages[1].", 0), 0u);
 }

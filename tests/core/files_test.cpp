@@ -91,7 +91,7 @@ TEST(Files, RemoveTreeRemovesFoldersButNotWhatLinksPointTo) {
   EXPECT_FALSE(fs::exists(fs::symlink_status(dir + "/tree")));
   EXPECT_EQ(test::read_file(dir + "/kept.txt"), "kept");
   EXPECT_EQ(test::read_file(dir + "/kept_dir/z.txt"), "z");
-  EXPECT_TRUE(remove_tree(dir + "/tree"));  // already gone
+  EXPECT_TRUE(remove_tree(dir + "/tree"));      // already gone
   EXPECT_TRUE(remove_tree(dir + "/kept.txt"));  // a single file
   EXPECT_FALSE(fs::exists(dir + "/kept.txt"));
   // What cannot be removed, even by root (procfs entries): false, the entry and the OS error named.
@@ -126,7 +126,7 @@ TEST(CheckOutputs, NeverOverInputsOrEachOtherOrAModel) {
   test::write_text(dir + "/old.json", "{}");
   const std::vector<std::string> inputs{dir + "/model.pt", dir + "/data"};
   EXPECT_NO_THROW(check_outputs({{"--output", dir + "/new.json"}, {"--output-poses", ""}}, inputs));
-  EXPECT_NO_THROW(check_outputs({{"--output", dir + "/old.json"}}, inputs));  // an earlier result: replaced
+  EXPECT_NO_THROW(check_outputs({{"--output", dir + "/old.json"}}, inputs));           // an earlier result: replaced
   EXPECT_NO_THROW(check_outputs({{"--output", dir + "/data/results.json"}}, inputs));  // new, beside the data
   GEO_EXPECT_THROW_WITH(check_outputs({{"--output", dir + "/a.json"}, {"--output-poses", dir + "/./a.json"}}, inputs),
                         "--output and --output-poses name one file");
@@ -135,7 +135,8 @@ TEST(CheckOutputs, NeverOverInputsOrEachOtherOrAModel) {
   GEO_EXPECT_THROW_WITH(check_outputs({{"--output-poses", dir + "/data/poses/09.txt"}}, inputs),
                         "is a file inside '" + dir + "/data', which this command reads");
   test::write_text(dir + "/other.pt", std::string("PK\x03\x04", 4));
-  GEO_EXPECT_THROW_WITH(check_outputs({{"--json", dir + "/other.pt"}}, inputs), "--json '" + dir + "/other.pt' is a model or checkpoint");
+  GEO_EXPECT_THROW_WITH(check_outputs({{"--json", dir + "/other.pt"}}, inputs),
+                        "--json '" + dir + "/other.pt' is a model or checkpoint");
   EXPECT_NO_THROW(check_outputs({{"--json", dir + "/other.pt"}}, inputs, true));
 }
 

@@ -78,7 +78,8 @@ TEST(Runtime, ToolsUseEveryCoreUnlessOmpNumThreadsIsSet) {
   torch::set_num_threads(1);
   EXPECT_EQ(use_all_cores(), 1);
   EXPECT_EQ(torch::get_num_threads(), 1);
-  if (saved) setenv("OMP_NUM_THREADS", before.c_str(), 1); else unsetenv("OMP_NUM_THREADS");
+  if (saved) setenv("OMP_NUM_THREADS", before.c_str(), 1);
+  else unsetenv("OMP_NUM_THREADS");
   torch::set_num_threads(threads);
 }
 

@@ -81,8 +81,7 @@ TEST(StateIo, MissingAndCorruptFilesAreNamed) {
         try {
           geo::load_state(*a, "/nonexistent/x.pt");
         } catch (const std::runtime_error& e) {
-          EXPECT_NE(std::string(e.what()).find("/nonexistent/x.pt: no such file"),
-                    std::string::npos);
+          EXPECT_NE(std::string(e.what()).find("/nonexistent/x.pt: no such file"), std::string::npos);
           throw;
         }
       },
@@ -98,7 +97,8 @@ TEST(StateIo, MissingAndCorruptFilesAreNamed) {
     geo::save_state(*nan_net, nan_path);
     Tiny c(4);
     const auto before = c->fc1->weight.clone();
-    GEO_EXPECT_THROW_WITH(geo::load_state(*c, nan_path), "holds NaN or infinite values in fc1.bias", "nothing was loaded");
+    GEO_EXPECT_THROW_WITH(geo::load_state(*c, nan_path), "holds NaN or infinite values in fc1.bias",
+                          "nothing was loaded");
     EXPECT_TRUE(torch::equal(before, c->fc1->weight));
     std::filesystem::remove(nan_path);
   }
@@ -168,8 +168,10 @@ TEST(StateIo, AnAlteredCompressedRecordIsRefused) {
   }
   // The first compressed record (method 8) of the central directory; its data after the local
   // header's name and extra field (LibTorch's local headers leave the sizes to a data descriptor).
-  const auto u16 = [&](size_t at) { return static_cast<size_t>(static_cast<unsigned char>(bytes[at])) |
-                                           static_cast<size_t>(static_cast<unsigned char>(bytes[at + 1])) << 8; };
+  const auto u16 = [&](size_t at) {
+    return static_cast<size_t>(static_cast<unsigned char>(bytes[at])) |
+           static_cast<size_t>(static_cast<unsigned char>(bytes[at + 1])) << 8;
+  };
   const auto u32 = [&](size_t at) { return u16(at) | u16(at + 2) << 16; };
   size_t entry = 0;
   for (entry = bytes.find("PK\x01\x02"); entry != std::string::npos; entry = bytes.find("PK\x01\x02", entry + 4))

@@ -15,7 +15,7 @@
 #include "test_util.h"
 #include "train/training_helpers.h"
 
-#define GEO_REQUIRE_CUDA()                                                                 \
+#define GEO_REQUIRE_CUDA() \
   if (!torch::cuda::is_available()) GTEST_SKIP() << "no CUDA device here (scripts/gpu_check.sh runs these on a GPU)"
 
 namespace geo {
@@ -92,8 +92,9 @@ TEST(Cuda, Fp32StepMatchesTheCpuStep) {
   namespace F = torch::nn::functional;
   torch::manual_seed(8);
   const auto smooth = [](const torch::Tensor& low) {  // frames with image structure, not white noise
-    return F::interpolate(low, F::InterpolateFuncOptions().size(std::vector<int64_t>{64, 128}).mode(torch::kBilinear)
-                                   .align_corners(false));
+    return F::interpolate(
+        low,
+        F::InterpolateFuncOptions().size(std::vector<int64_t>{64, 128}).mode(torch::kBilinear).align_corners(false));
   };
   const auto tgt = smooth(torch::rand({2, 3, 8, 16}));
   const auto srcs = smooth(torch::rand({4, 3, 8, 16})).view({2, 2, 3, 64, 128});
@@ -102,11 +103,12 @@ TEST(Cuda, Fp32StepMatchesTheCpuStep) {
   const Step cuda = fp32_step(torch::Device(torch::kCUDA, 0), tgt, srcs);
   ASSERT_EQ(cuda.losses.size(), cpu.losses.size());
   for (size_t i = 0; i < cpu.losses.size(); ++i)
-    EXPECT_NEAR(cuda.losses[i].second, cpu.losses[i].second, 1e-3 * std::abs(cpu.losses[i].second)) << cpu.losses[i].first;
+    EXPECT_NEAR(cuda.losses[i].second, cpu.losses[i].second, 1e-3 * std::abs(cpu.losses[i].second))
+        << cpu.losses[i].first;
   for (const char* net : {"depth", "pose", "flow"}) {
     const double gap = gradient_gap(cpu, cuda, net), yardstick = gradient_gap(cpu, cpu_perturbed, net);
-    std::cout << net << ": CUDA vs CPU gradient gap " << gap << ", CPU vs CPU with the input perturbed by 1e-6: "
-              << yardstick << "\n";
+    std::cout << net << ": CUDA vs CPU gradient gap " << gap
+              << ", CPU vs CPU with the input perturbed by 1e-6: " << yardstick << "\n";
     EXPECT_GT(yardstick, 0) << net;
     EXPECT_LT(gap, 2 * yardstick) << net;
   }
@@ -124,7 +126,8 @@ stages:
   - {name: s2, iterations: 2, train: [depth, pose, flow], batch_size: 2}
 logging: {interval: 1, summary_interval: 0, checkpoint_interval: 2, val_interval: 2, keep_last: 5}
 run: {threads: 2, seed: 3, device: cuda, precision: fp32, deterministic: true}
-)", "cuda.yaml");
+)",
+                      "cuda.yaml");
 }
 
 // The losses column by column: CUDA's backward sums with atomics (grid_sample, some cuDNN

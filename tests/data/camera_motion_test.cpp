@@ -118,7 +118,8 @@ TEST(CameraMotion, AClipStandingInTrafficIsWarnedAbout) {
   const auto& k = o.intrinsics;
   const auto data = open_video_clips(clip_config({dir + "/clip"}, {k.fx, k.fy, k.cx, k.cy}));
   ASSERT_EQ(data.report.size(), 1u);
-  EXPECT_NE(data.report[0].find(" with the camera standing while other things moved"), std::string::npos) << data.report[0];
+  EXPECT_NE(data.report[0].find(" with the camera standing while other things moved"), std::string::npos)
+      << data.report[0];
   ASSERT_EQ(data.warnings.size(), 1u) << data.report[0];
   EXPECT_NE(data.warnings[0].find("unlikely to teach depth"), std::string::npos) << data.warnings[0];
   EXPECT_NE(data.warnings[0].find("--init"), std::string::npos) << data.warnings[0];
@@ -128,7 +129,8 @@ TEST(CameraMotion, AClipStandingInTrafficIsWarnedAbout) {
 TEST(CameraMotion, RealDrivingKeepsEveryFrameWithoutAWarning) {
   const std::string data_dir = GEO_TEST_DATA_DIR "/kitti_real";
   for (const char* run : {"odometry_forward", "odometry_turn"}) {
-    const auto data = open_video_clips(clip_config({data_dir + "/" + run + "/frames"}, {244.5443, 244.6167, 208.1615, 63.3466}));
+    const auto data =
+        open_video_clips(clip_config({data_dir + "/" + run + "/frames"}, {244.5443, 244.6167, 208.1615, 63.3466}));
     ASSERT_EQ(data.report.size(), 1u);
     EXPECT_NE(data.report[0].find("0 static frames left out"), std::string::npos) << data.report[0];
     EXPECT_NE(data.report[0].find("the camera moved in 100% of the frames"), std::string::npos) << data.report[0];

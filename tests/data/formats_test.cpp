@@ -21,7 +21,8 @@ namespace geo {
 namespace {
 
 TEST(Calib, ParsesKeyValuesAndSkipsCalibTime) {
-  const auto kv = parse_key_values("calib_time: 09-Jan-2012 13:57:47\nP_rect_02: 1 2 3 4 5 6 7 8 9 10 11 12\nS_rect_02: 1242 375\n", "x.txt");
+  const auto kv = parse_key_values(
+      "calib_time: 09-Jan-2012 13:57:47\nP_rect_02: 1 2 3 4 5 6 7 8 9 10 11 12\nS_rect_02: 1242 375\n", "x.txt");
   EXPECT_FALSE(kv.has("calib_time"));
   const auto P = kv.matrix("P_rect_02", 3, 4);
   EXPECT_EQ(P[1][2].item<double>(), 7.0);
@@ -29,7 +30,8 @@ TEST(Calib, ParsesKeyValuesAndSkipsCalibTime) {
 }
 
 TEST(Calib, MalformedInputsNameFileLineAndKey) {
-  GEO_EXPECT_THROW_WITH(parse_key_values("P0: 1 2 x 4\n", "calib.txt"), "calib.txt line 1", "'P0'", "'x' is not a number");
+  GEO_EXPECT_THROW_WITH(parse_key_values("P0: 1 2 x 4\n", "calib.txt"), "calib.txt line 1", "'P0'",
+                        "'x' is not a number");
   const auto kv = parse_key_values("R: 1 2 3\n", "velo.txt");
   GEO_EXPECT_THROW_WITH(kv.get("T", 3), "velo.txt", "missing calibration entry 'T'");
   GEO_EXPECT_THROW_WITH(kv.matrix("R", 3, 3), "velo.txt", "'R' has 3 numbers, expected 9");
@@ -69,12 +71,16 @@ TEST(Calib, NonFiniteOrImplausibleFocalLengthsAreRejectedNamingFileAndKey) {
                    "R_rect_00: 1 0 0 0 1 0 0 0 inf\nP_rect_02: 100 0 50 0 0 100 20 0 0 0 1 0\n");
   GEO_EXPECT_THROW_WITH(read_raw_calib(dir, 2), "'R_rect_00'", "non-finite");
   // A key given twice: which one is meant cannot be told.
-  test::write_text(dir + "/calib_cam_to_cam.txt", rect + "P_rect_02: 100 0 50 0 0 100 20 0 0 0 1 0\nP_rect_02: 7 0 50 0 0 7 20 0 0 0 1 0\n");
-  GEO_EXPECT_THROW_WITH(read_raw_calib(dir, 2), "calib_cam_to_cam.txt line 3 ('P_rect_02')", "given twice (lines 2 and 3)");
+  test::write_text(dir + "/calib_cam_to_cam.txt",
+                   rect + "P_rect_02: 100 0 50 0 0 100 20 0 0 0 1 0\nP_rect_02: 7 0 50 0 0 7 20 0 0 0 1 0\n");
+  GEO_EXPECT_THROW_WITH(read_raw_calib(dir, 2), "calib_cam_to_cam.txt line 3 ('P_rect_02')",
+                        "given twice (lines 2 and 3)");
   // Finite but absurd: a principal point at 1e30, a zero or a mirroring "rotation".
   test::write_text(dir + "/calib_cam_to_cam.txt", rect + "P_rect_02: 100 0 1e30 0 0 100 20 0 0 0 1 0\n");
-  GEO_EXPECT_THROW_WITH(read_raw_calib(dir, 2), "calib_cam_to_cam.txt", "'P_rect_02'", "principal point", "not plausible");
-  test::write_text(dir + "/calib_cam_to_cam.txt", "R_rect_00: 0 0 0 0 0 0 0 0 0\nP_rect_02: 100 0 50 0 0 100 20 0 0 0 1 0\n");
+  GEO_EXPECT_THROW_WITH(read_raw_calib(dir, 2), "calib_cam_to_cam.txt", "'P_rect_02'", "principal point",
+                        "not plausible");
+  test::write_text(dir + "/calib_cam_to_cam.txt",
+                   "R_rect_00: 0 0 0 0 0 0 0 0 0\nP_rect_02: 100 0 50 0 0 100 20 0 0 0 1 0\n");
   GEO_EXPECT_THROW_WITH(read_raw_calib(dir, 2), "calib_cam_to_cam.txt", "'R_rect_00' is not a rotation");
   test::write_text(dir + "/calib_cam_to_cam.txt", rect + "P_rect_02: 100 0 50 0 0 100 20 0 0 0 1 0\n");
   test::write_text(dir + "/calib_velo_to_cam.txt", "R: -1 0 0 0 1 0 0 0 1\nT: 0 0 0\n");
@@ -147,7 +153,8 @@ TEST(TextFormats, VelodyneRoundTripAndTruncation) {
 
 TEST(VelodyneDepth, EigenProtocolByHand) {
   // Identity-like projection: image = (f*y/x + c, ..., x) with the scanner looking along x.
-  const auto P = torch::tensor({0.0, 10.0, 0.0, 0.0, 0.0, 0.0, 10.0, 0.0, 1.0, 0.0, 0.0, 0.0}, torch::kFloat64).view({3, 4});
+  const auto P =
+      torch::tensor({0.0, 10.0, 0.0, 0.0, 0.0, 0.0, 10.0, 0.0, 1.0, 0.0, 0.0, 0.0}, torch::kFloat64).view({3, 4});
   // Points at x = 5 (u = 10*y/5), two on one pixel (nearest kept), one behind, one off the image.
   const auto pts = torch::tensor({5.0f, 1.0f, 1.0f, 0.f,   // u = 2, v = 2 -> pixel (1,1) with -1
                                   4.0f, 0.8f, 0.8f, 0.f,   // same pixel, nearer
@@ -163,12 +170,13 @@ TEST(VelodyneDepth, EigenProtocolByHand) {
 }
 
 TEST(VelodyneDepth, NonFiniteAndFarOffPointsAreLeftOutAndCounted) {
-  const auto P = torch::tensor({0.0, 10.0, 0.0, 0.0, 0.0, 0.0, 10.0, 0.0, 1.0, 0.0, 0.0, 0.0}, torch::kFloat64).view({3, 4});
+  const auto P =
+      torch::tensor({0.0, 10.0, 0.0, 0.0, 0.0, 0.0, 10.0, 0.0, 1.0, 0.0, 0.0, 0.0}, torch::kFloat64).view({3, 4});
   const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
-  const auto pts = torch::tensor({5.0f, 1.0f, 1.0f, 0.f,     // pixel (1,1), depth 5
-                                  nan, 1.0f, 1.0f, 0.f,      // NaN x
-                                  5.0f, inf, 1.0f, 0.f,      // infinite y
-                                  5.0f, 1.0f, 1.0f, nan,     // NaN reflectance: a usable point
+  const auto pts = torch::tensor({5.0f,   1.0f,  1.0f,  0.f,   // pixel (1,1), depth 5
+                                  nan,    1.0f,  1.0f,  0.f,   // NaN x
+                                  5.0f,   inf,   1.0f,  0.f,   // infinite y
+                                  5.0f,   1.0f,  1.0f,  nan,   // NaN reflectance: a usable point
                                   1e-30f, 1e30f, 1e30f, 0.f})  // projects beyond int64: ignored, no UB
                        .view({5, 4});
   EXPECT_EQ(count_non_finite_points(pts), 2);
@@ -188,8 +196,8 @@ TEST(Splits, RawDriveSnippetsAreGeoNetsFrameListsWithoutStaticFrames) {
   };
   frames("2011_09_26_drive_0001_sync", "image_02", 6);
   frames("2011_09_26_drive_0001_sync", "image_03", 6);
-  frames("2011_09_26_drive_0002_sync", "image_02", 6);  // a test scene
-  frames("2011_09_26_drive_0003_sync", "image_02", 2);  // shorter than a snippet
+  frames("2011_09_26_drive_0002_sync", "image_02", 6);                              // a test scene
+  frames("2011_09_26_drive_0003_sync", "image_02", 2);                              // shorter than a snippet
   std::filesystem::create_directories(root + "/calibration/x_sync/image_02/data");  // not a date folder
   const std::set<std::string> statics = {static_key("2011_09_26_drive_0001_sync", 2),
                                          static_key("2011_09_26_drive_0001_sync", 3)};
@@ -226,7 +234,8 @@ TEST(KittiSamples, CalibrationAndVelodyneGroundTruth) {
   if (root.empty()) GTEST_SKIP() << "../shared/kitti_samples not present";
   const auto calib = read_raw_calib(root + "/raw/2011_09_26", 2);
   EXPECT_NEAR(calib.K()[0][0].item<double>(), 721.5377, 1e-4);
-  const auto pts = read_velodyne(root + "/raw/2011_09_26/2011_09_26_drive_0000_sync/velodyne_points/data/0000000000.bin");
+  const auto pts =
+      read_velodyne(root + "/raw/2011_09_26/2011_09_26_drive_0000_sync/velodyne_points/data/0000000000.bin");
   const auto depth = velodyne_depth(pts, calib.img_from_velo(), 375, 1242);
   // The reference (monodepth2's generate_depth_map, as the Eigen protocol computes it) written out
   // from the files' own matrices: P_rect_02 R_rect_00 [R|T]velo_to_cam, points ahead of the scanner,
@@ -282,7 +291,8 @@ TEST(Npy, TheHeaderIsReadWhateverItsSpacing) {
   EXPECT_EQ(t[1][0].item<float>(), 4.0f);
   test::write_text(dir + "/f.npy", test::npy_bytes("{'descr':'<f4','fortran_order':True,'shape':(2,3)}", data));
   GEO_EXPECT_THROW_WITH(read_npy(dir + "/f.npy"), "f.npy: Fortran-order arrays are not supported");
-  test::write_text(dir + "/b.npy", test::npy_bytes("{'descr': '>f4', 'fortran_order': False, 'shape': (2, 3), }", data));
+  test::write_text(dir + "/b.npy",
+                   test::npy_bytes("{'descr': '>f4', 'fortran_order': False, 'shape': (2, 3), }", data));
   GEO_EXPECT_THROW_WITH(read_npy(dir + "/b.npy"), "'descr' is '>f4'", "little-endian");
   test::write_text(dir + "/o.npy", test::npy_bytes("{'descr': '<f4', 'fortran_order': 0, 'shape': (2, 3), }", data));
   GEO_EXPECT_THROW_WITH(read_npy(dir + "/o.npy"), "'fortran_order' is '0'");

@@ -20,9 +20,9 @@ TEST(FrameSelection, StrideFromFrameRates) {
   EXPECT_EQ(geo::frame_rate_stride(29.97, 10), 3);
   EXPECT_EQ(geo::frame_rate_stride(25, 10), 3);  // 2.5 rounds away from zero
   EXPECT_EQ(geo::frame_rate_stride(10, 10), 1);
-  EXPECT_EQ(geo::frame_rate_stride(5, 10), 1);   // slower than the target: every frame
-  EXPECT_EQ(geo::frame_rate_stride(0, 10), 1);   // unknown source rate
-  EXPECT_EQ(geo::frame_rate_stride(30, 0), 1);   // fps 0: every frame
+  EXPECT_EQ(geo::frame_rate_stride(5, 10), 1);  // slower than the target: every frame
+  EXPECT_EQ(geo::frame_rate_stride(0, 10), 1);  // unknown source rate
+  EXPECT_EQ(geo::frame_rate_stride(30, 0), 1);  // fps 0: every frame
 }
 
 TEST(FrameSelection, ChangedFractionCountsPixelsAboveTheNoiseLevel) {
@@ -117,7 +117,8 @@ TEST(FrameSelection, ValidationBlocksNeverNeighbourTrainingFrames) {
 TEST(FrameSelection, NaturalOrderComparesNumbersAsNumbers) {
   std::vector<std::string> names{"frame10.png", "frame2.png", "frame1.png", "b.png", "a.png", "frame002.png"};
   std::sort(names.begin(), names.end(), geo::natural_less);
-  EXPECT_EQ(names, (std::vector<std::string>{"a.png", "b.png", "frame1.png", "frame002.png", "frame2.png", "frame10.png"}));
+  EXPECT_EQ(names,
+            (std::vector<std::string>{"a.png", "b.png", "frame1.png", "frame002.png", "frame2.png", "frame10.png"}));
   EXPECT_TRUE(geo::natural_less("img_9.jpg", "img_10.jpg"));
   EXPECT_FALSE(geo::natural_less("img_10.jpg", "img_9.jpg"));
   EXPECT_FALSE(geo::natural_less("x", "x"));

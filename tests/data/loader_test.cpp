@@ -190,7 +190,8 @@ TEST(Packed, RoundTripAndCorruptionMessages) {
   test::write_text(dir + "/cache/index.txt", "geo-packed one\n" + index.substr(13));
   GEO_EXPECT_THROW_WITH(PackedSnippets(dir + "/cache"), "index.txt", "malformed first line");
   // Header values whose record size would overflow are refused before any arithmetic.
-  test::write_text(dir + "/cache/index.txt", "geo-packed 2\nheight 16384\nwidth 16384\nseq_length 64\ncount 9000000000\n");
+  test::write_text(dir + "/cache/index.txt",
+                   "geo-packed 2\nheight 16384\nwidth 16384\nseq_length 64\ncount 9000000000\n");
   GEO_EXPECT_THROW_WITH(PackedSnippets(dir + "/cache"), "index.txt", "implausible header");
   test::write_text(dir + "/cache/index.txt", "geo-packed 2\nwidth 8\nheight 16\nseq_length 3\ncount 3\n");
   GEO_EXPECT_THROW_WITH(PackedSnippets(dir + "/cache"), "'width 8'", "expected 'height N'");

@@ -38,7 +38,8 @@ TEST(PointCloud, PlyHoldsTheBackProjectedColouredPixels) {
   }
   EXPECT_EQ(write_point_cloud_ply(dir + "/b.ply", depth[0], rgb, K), 3);  // [H,W] depth, no limit
   // uint8 colours (geo_infer's 8-bit frames) are the bytes as they are: the same file.
-  const auto rgb8 = torch::stack({torch::full({2, 2}, 255), torch::full({2, 2}, 128), torch::zeros({2, 2})}).to(torch::kUInt8);
+  const auto rgb8 =
+      torch::stack({torch::full({2, 2}, 255), torch::full({2, 2}, 128), torch::zeros({2, 2})}).to(torch::kUInt8);
   ASSERT_EQ(write_point_cloud_ply(dir + "/a8.ply", depth, rgb8, K, 5.0), 2);
   EXPECT_EQ(test::read_file(dir + "/a8.ply"), bytes);
   GEO_EXPECT_THROW_WITH(write_point_cloud_ply(dir + "/c.ply", depth, rgb.slice(1, 0, 1), K), "rgb");

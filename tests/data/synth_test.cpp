@@ -76,9 +76,11 @@ TEST(Synth, TrafficStandsStartsAndKeepsTheCarAhead) {
     // The leader's pixels: moving objects all, the same depth at every frame (within the sway).
     const auto on_leader = frame.object == leader;
     EXPECT_TRUE(mask.masked_select(on_leader).all().item<bool>());
-    if (on_leader.sum().item<int64_t>() > 50) leader_depth.push_back(frame.depth[0].masked_select(on_leader).min().item<double>());
+    if (on_leader.sum().item<int64_t>() > 50)
+      leader_depth.push_back(frame.depth[0].masked_select(on_leader).min().item<double>());
     // A truck beside a standing camera fills much of the image's right half.
-    if (!scene.camera_moves(f) && mask.slice(1, o.width / 2).to(torch::kFloat32).mean().item<double>() > 0.3) ++truck_seen;
+    if (!scene.camera_moves(f) && mask.slice(1, o.width / 2).to(torch::kFloat32).mean().item<double>() > 0.3)
+      ++truck_seen;
   }
   EXPECT_GT(standing, 15);
   EXPECT_GT(moving, 15);
@@ -103,9 +105,14 @@ TEST(Synth, TrafficFlowWarpsNextFrameOntoThisOne) {
     const auto gt = render_flow(scene, f, o);
     const auto mask = gt.valid_noc.unsqueeze(0) * border_mask(o.height, o.width, 4);
     ASSERT_GT(mask.sum().item<double>(), 0.5 * o.height * o.width);
-    const double warped = ((warp(f1.image.unsqueeze(0), gt.flow.unsqueeze(0), OutOfView::kBorder).image -
-                            f0.image.unsqueeze(0)).abs().mean(1, true) * mask).sum().item<double>() /
-                          mask.sum().item<double>();
+    const double warped =
+        ((warp(f1.image.unsqueeze(0), gt.flow.unsqueeze(0), OutOfView::kBorder).image - f0.image.unsqueeze(0))
+             .abs()
+             .mean(1, true) *
+         mask)
+            .sum()
+            .item<double>() /
+        mask.sum().item<double>();
     EXPECT_LT(warped, 2.0 / 255) << "frame " << f;
   }
   EXPECT_GT(checked_standing, 0) << "no standing frame among those checked: the test needs another seed";
@@ -138,9 +145,10 @@ TEST(Synth, RigidFlowFromDepthAndPosesMatchesStaticFlow) {
     const auto f0 = render_frame(scene, f, o);
     const auto gt = render_flow(scene, f, o);
     const auto src_from_tgt = inverse_transform(scene.camera(f + 1).matrix().unsqueeze(0))
-                                  .matmul(scene.camera(f).matrix().unsqueeze(0)).to(torch::kFloat32);
-    const auto rigid = rigid_flow(f0.depth.unsqueeze(0), src_from_tgt,
-                                  o.intrinsics.K().to(torch::kFloat32).unsqueeze(0))[0];
+                                  .matmul(scene.camera(f).matrix().unsqueeze(0))
+                                  .to(torch::kFloat32);
+    const auto rigid =
+        rigid_flow(f0.depth.unsqueeze(0), src_from_tgt, o.intrinsics.K().to(torch::kFloat32).unsqueeze(0))[0];
     auto moving = torch::zeros({o.height, o.width}, torch::kBool);
     for (size_t id = 0; id < scene.boxes().size(); ++id)
       if (scene.is_moving(static_cast<int>(id))) moving |= f0.object == static_cast<int>(id);
@@ -181,8 +189,11 @@ TEST(Synth, WrittenWorldReadsBack) {
   const SynthScene scene(synth_drive_seed(1, 0, 0), 6);  // drive 1
   const auto f2 = render_frame(scene, 2, o);
   const std::string drive = root + "/raw/" + synth_drive_folder(1);
-  EXPECT_LE((read_image(drive + "/image_02/data/0000000002.png") - f2.image).abs().max().item<double>(), 0.5 / 255 + 1e-6);
-  EXPECT_LE((read_depth_png(drive + "/proj_depth/groundtruth/image_02/0000000002.png") - f2.depth).abs().max().item<double>(), 0.5 / 256 + 1e-6);
+  EXPECT_LE((read_image(drive + "/image_02/data/0000000002.png") - f2.image).abs().max().item<double>(),
+            0.5 / 255 + 1e-6);
+  EXPECT_LE(
+      (read_depth_png(drive + "/proj_depth/groundtruth/image_02/0000000002.png") - f2.depth).abs().max().item<double>(),
+      0.5 / 256 + 1e-6);
   const auto poses = read_poses(drive + "/poses.txt");
   EXPECT_EQ(poses.size(0), 6);
   EXPECT_TRUE(torch::allclose(poses[0], torch::eye(4, torch::kFloat64), 0, 1e-12));
@@ -196,7 +207,8 @@ TEST(Synth, WrittenWorldReadsBack) {
   EXPECT_EQ(read_lines(root + "/odometry/sequences/09/times.txt").size(), 5u);
   const auto flow = read_flow_png(root + "/kitti2015/training/flow_occ/000000_10.png");
   EXPECT_EQ(flow.flow.size(2), o.width);
-  EXPECT_GE(flow.valid.sum().item<double>(), read_flow_png(root + "/kitti2015/training/flow_noc/000000_10.png").valid.sum().item<double>());
+  EXPECT_GE(flow.valid.sum().item<double>(),
+            read_flow_png(root + "/kitti2015/training/flow_noc/000000_10.png").valid.sum().item<double>());
   EXPECT_TRUE(read_key_values(root + "/kitti2015/training/calib_cam_to_cam/000000.txt").has("P_rect_02"));
   // Splits: frames 1..4 (those with both neighbours) of the training and of the test drive.
   const auto train = read_split(root + "/raw/splits/eigen_zhou/train_files.txt");

@@ -61,7 +61,8 @@ TEST(VideoClips, AFrameFolderInNaturalOrderWithoutItsStaticStretch) {
   auto d = video_config({dir + "/clip"});
   const auto data = open_video_clips(d);
   ASSERT_EQ(data.report.size(), 1u);
-  EXPECT_NE(data.report[0].find("16 frames (208x64, rate unknown); every frame, 4 static frames left out"), std::string::npos)
+  EXPECT_NE(data.report[0].find("16 frames (208x64, rate unknown); every frame, 4 static frames left out"),
+            std::string::npos)
       << data.report[0];
   EXPECT_NE(data.report[0].find("12 kept"), std::string::npos) << data.report[0];
   // 12 frames are too few for a 10% validation block of 3: 10 training snippets.

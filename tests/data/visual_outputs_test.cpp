@@ -66,7 +66,8 @@ TEST(TrajectoryPlot, DrawsEstimateAndTruthToScaleFromAbove) {
   EXPECT_TRUE(torch::allclose(rgb(100, 100), torch::ones({3}), 0, 0.15)) << rgb(100, 100);  // between: paper or grid
   // Alone, the estimate is centred.
   const auto alone = trajectory_plot(poses, {}, 200);
-  EXPECT_TRUE(torch::allclose(alone.index({torch::indexing::Slice(), 100, 100}), torch::tensor({1.0f, 120 / 255.f, 0.0f}), 0, 0.15));
+  EXPECT_TRUE(torch::allclose(alone.index({torch::indexing::Slice(), 100, 100}),
+                              torch::tensor({1.0f, 120 / 255.f, 0.0f}), 0, 0.15));
   GEO_EXPECT_THROW_WITH(trajectory_plot(torch::zeros({3, 3, 4})), "poses");
 }
 

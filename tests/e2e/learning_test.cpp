@@ -102,8 +102,8 @@ TEST_F(Learning, ShortTrainingBeatsUntrainedAndTrivialBaselines) {
     const char* metric;
     double margin;  // trained must be below margin x the better baseline
   };
-  for (const Check c : {Check{"eigen", "abs_rel", 0.92}, Check{"odometry", "ate_mean", 0.5},
-                        Check{"kitti2015", "epe_all", 0.8}}) {
+  for (const Check c :
+       {Check{"eigen", "abs_rel", 0.92}, Check{"odometry", "ate_mean", 0.5}, Check{"kitti2015", "epe_all", 0.8}}) {
     const double tr = metric_of(trained_result(c.split), c.metric);
     const double un = metric_of(eval(c.split, &untrained), c.metric);
     const double tv = metric_of(eval(c.split, nullptr), c.metric);
@@ -118,7 +118,8 @@ TEST_F(Learning, Int8KeepsTheAccuracyOfFp32) {
   // 3%, ATE within 5%.
   std::vector<torch::Tensor> frames;
   for (int f = 0; f < 8; ++f)
-    frames.push_back(read_image(root_ + "/world/raw/" + synth_drive_folder(1) + "/image_02/data/" + zero_padded(f, 10) + ".png"));
+    frames.push_back(
+        read_image(root_ + "/world/raw/" + synth_drive_folder(1) + "/image_02/data/" + zero_padded(f, 10) + ".png"));
   Predictor int8(run_, "cpu");
   int8.quantize_int8(frames);
   struct Check {
@@ -126,8 +127,8 @@ TEST_F(Learning, Int8KeepsTheAccuracyOfFp32) {
     const char* metric;
     double tolerance;
   };
-  for (const Check c : {Check{"eigen", "abs_rel", 0.02}, Check{"kitti2015", "epe_all", 0.03},
-                        Check{"odometry", "ate_mean", 0.05}}) {
+  for (const Check c :
+       {Check{"eigen", "abs_rel", 0.02}, Check{"kitti2015", "epe_all", 0.03}, Check{"odometry", "ate_mean", 0.05}}) {
     const double a = metric_of(trained_result(c.split), c.metric), b = metric_of(eval(c.split, &int8), c.metric);
     std::printf("learning check int8 %-9s %-8s fp32 %.4f  int8 %.4f (%+.2f%%)\n", c.split, c.metric, a, b,
                 100 * (b / a - 1));
@@ -176,7 +177,8 @@ TEST_F(Learning, MotionInMetresWithoutGroundTruth) {
   // metres (the network's own scale is arbitrary; see the printed unscaled ratio).
   const auto odometry = eval("odometry", &trained, DepthScaling::kCameraHeight);
   std::printf("learning check metric trajectory: scale error %.3f, road plane in %lld of %lld frames\n",
-              metric_of(odometry, "metric_scale_error"), static_cast<long long>(count_of(odometry, "frames_with_road_plane")),
+              metric_of(odometry, "metric_scale_error"),
+              static_cast<long long>(count_of(odometry, "frames_with_road_plane")),
               static_cast<long long>(count_of(odometry, "frames")));
   EXPECT_LT(std::abs(std::log(metric_of(odometry, "metric_scale_error"))), std::log(1.5));
   EXPECT_GT(count_of(odometry, "frames_with_road_plane"), count_of(odometry, "frames") / 2);
@@ -204,8 +206,8 @@ TEST_F(Learning, MotionInMetresWithoutGroundTruth) {
     const auto plain = model.relative_pose(a, b, K);
     EXPECT_EQ(pose_scale, depth_scale);
     EXPECT_TRUE(torch::equal(step.slice(0, 0, 3).slice(1, 0, 3), plain.slice(0, 0, 3).slice(1, 0, 3)));
-    EXPECT_TRUE(torch::allclose(step.slice(0, 0, 3).select(1, 3), plain.slice(0, 0, 3).select(1, 3) * depth_scale[0],
-                                1e-6, 0));
+    EXPECT_TRUE(
+        torch::allclose(step.slice(0, 0, 3).select(1, 3), plain.slice(0, 0, 3).select(1, 3) * depth_scale[0], 1e-6, 0));
     const auto true_step = torch::inverse(truth[f + 1]).matmul(truth[f]);  // points in f's camera -> f+1's
     predicted += step.slice(0, 0, 3).select(1, 3).norm().item<double>();
     unscaled += plain.slice(0, 0, 3).select(1, 3).norm().item<double>();
@@ -230,7 +232,10 @@ TEST_F(Learning, MotionInMetresWithoutGroundTruth) {
   scales.pop_back();
   const auto poses = chain_poses(motions, scales);
   const auto length = [](const torch::Tensor& p) {
-    return (p.slice(0, 1).select(2, 3).slice(1, 0, 3) - p.slice(0, 0, -1).select(2, 3).slice(1, 0, 3)).norm(2, 1).sum().item<double>();
+    return (p.slice(0, 1).select(2, 3).slice(1, 0, 3) - p.slice(0, 0, -1).select(2, 3).slice(1, 0, 3))
+        .norm(2, 1)
+        .sum()
+        .item<double>();
   };
   std::printf("learning check library trajectory: %.3f m against %.3f m travelled\n", length(poses), length(truth));
   EXPECT_LT(std::abs(std::log(length(poses) / length(truth))), std::log(1.5));
@@ -267,10 +272,11 @@ run: {seed: 1, threads: 2}
   for (int64_t f = 0; f + 1 < truth.size(0); f += 3) cams.push_back(camera_model.intrinsics(frame(f), frame(f + 1)));
   const auto K_learned = torch::stack(cams).mean(0);
   const double fx = K_learned[0][0].item<double>(), fy = K_learned[1][1].item<double>();
-  std::printf("learning check learned camera: fx %.1f fy %.1f cx %.1f cy %.1f (truth %.1f %.1f %.1f %.1f), abs_rel %.4f "
-              "(calibrated %.4f, %.3fx)\n", fx, fy, K_learned[0][2].item<double>(), K_learned[1][2].item<double>(),
-              o.intrinsics.fx, o.intrinsics.fy, o.intrinsics.cx, o.intrinsics.cy, learned_abs_rel, median_abs_rel,
-              learned_abs_rel / median_abs_rel);
+  std::printf(
+      "learning check learned camera: fx %.1f fy %.1f cx %.1f cy %.1f (truth %.1f %.1f %.1f %.1f), abs_rel %.4f "
+      "(calibrated %.4f, %.3fx)\n",
+      fx, fy, K_learned[0][2].item<double>(), K_learned[1][2].item<double>(), o.intrinsics.fx, o.intrinsics.fy,
+      o.intrinsics.cx, o.intrinsics.cy, learned_abs_rel, median_abs_rel, learned_abs_rel / median_abs_rel);
   EXPECT_NEAR(fx, o.intrinsics.fx, 0.1 * o.intrinsics.fx);
   EXPECT_NEAR(fy, o.intrinsics.fy, 0.1 * o.intrinsics.fy);
   EXPECT_LT(learned_abs_rel, 1.15 * median_abs_rel);

@@ -38,7 +38,6 @@ constexpr int kTrainFrames = 36;  // frames 0..35 train; snippets centred on 39.
 
 using test::metric_of;
 
-
 struct Scores {
   double abs_rel = 0;
   std::vector<double> ate;  // one per run of kRuns
@@ -73,9 +72,10 @@ class RealVideo : public ::testing::Test {
       const std::string seq = root_ + "/eval/odometry/sequences/" + sequence(i);
       fs::create_directories(seq);
       fs::create_directory_symlink(kData + "/odometry_" + kRuns[i] + "/frames", seq + "/image_2");
-      test::write_text(seq + "/calib.txt", "P0: " + P + "\nP1: " + P + "\nP2: " + P + "\nP3: " + P +
-                                               "\nTr: 1 0 0 0 0 1 0 0 0 0 1 0\n");
-      fs::copy_file(kData + "/odometry_" + kRuns[i] + "/poses.txt", root_ + "/eval/odometry/poses/" + sequence(i) + ".txt");
+      test::write_text(seq + "/calib.txt",
+                       "P0: " + P + "\nP1: " + P + "\nP2: " + P + "\nP3: " + P + "\nTr: 1 0 0 0 0 1 0 0 0 0 1 0\n");
+      fs::copy_file(kData + "/odometry_" + kRuns[i] + "/poses.txt",
+                    root_ + "/eval/odometry/poses/" + sequence(i) + ".txt");
       std::string centres;
       for (int c = kTrainFrames + 3; c <= 48; ++c) centres += sequence(i) + " " + std::to_string(c) + " l\n";
       test::write_text(root_ + "/eval/heldout_" + sequence(i) + ".txt", centres);
@@ -88,12 +88,22 @@ class RealVideo : public ::testing::Test {
     std::string videos = "data.videos=[";
     for (size_t i = 0; i < clips.size(); ++i) videos += (i ? "," : "") + clips[i];
     videos += "]";
-    const std::vector<std::string> common = {
-        videos, "data.camera.intrinsics=" + intrinsics, "data.video.val_fraction=0",
-        "data.height=64", "data.width=208", "data.num_workers=1", "model.encoder_depth=18",
-        "model.bn_momentum=0.1", "stages.0.iterations=400", "stages.0.learning_rate=5.0e-4", "logging.interval=100",
-        "logging.summary_interval=0", "logging.checkpoint_interval=400", "logging.val_interval=0", "run.seed=1",
-        "run.threads=2"};
+    const std::vector<std::string> common = {videos,
+                                             "data.camera.intrinsics=" + intrinsics,
+                                             "data.video.val_fraction=0",
+                                             "data.height=64",
+                                             "data.width=208",
+                                             "data.num_workers=1",
+                                             "model.encoder_depth=18",
+                                             "model.bn_momentum=0.1",
+                                             "stages.0.iterations=400",
+                                             "stages.0.learning_rate=5.0e-4",
+                                             "logging.interval=100",
+                                             "logging.summary_interval=0",
+                                             "logging.checkpoint_interval=400",
+                                             "logging.val_interval=0",
+                                             "run.seed=1",
+                                             "run.threads=2"};
     config_ = load_config(resolve_config_path("video.yaml"), common);
     auto without_photometric = common;
     without_photometric.push_back("stages.0.weights.rigid=0");

@@ -26,8 +26,8 @@ namespace {
 TEST(DepthMetrics, HandComputed) {
   const auto gt = torch::tensor({2.0, 4.0}), pred = torch::tensor({1.0, 4.0});
   const auto e = depth_errors(gt, pred);
-  EXPECT_NEAR(e.abs_rel, (0.5 + 0) / 2, 1e-12);          // |2-1|/2
-  EXPECT_NEAR(e.sq_rel, (1.0 / 2 + 0) / 2, 1e-12);       // 1/2
+  EXPECT_NEAR(e.abs_rel, (0.5 + 0) / 2, 1e-12);     // |2-1|/2
+  EXPECT_NEAR(e.sq_rel, (1.0 / 2 + 0) / 2, 1e-12);  // 1/2
   EXPECT_NEAR(e.rmse, std::sqrt(0.5), 1e-12);
   EXPECT_NEAR(e.rmse_log, std::sqrt(std::pow(std::log(2.0), 2) / 2), 1e-12);
   EXPECT_NEAR(e.a1, 0.5, 1e-12);  // ratio 2 fails 1.25, 1.5625 and 1.953
@@ -39,8 +39,8 @@ TEST(DepthMetrics, HandComputed) {
 TEST(DepthMetrics, EigenImageMedianScalingAndMask) {
   auto gt = torch::zeros({100, 100});
   gt.slice(0, 50, 90).slice(1, 10, 90).fill_(10.0);
-  gt[60][20] = 90.0;  // beyond 80 m: masked out
-  gt[10][20] = 5.0;   // above the Garg crop: masked out
+  gt[60][20] = 90.0;                             // beyond 80 m: masked out
+  gt[10][20] = 5.0;                              // above the Garg crop: masked out
   const auto pred = torch::full({50, 50}, 2.0);  // another size and scale
   double scale = 0;
   const auto e = eigen_image_errors(gt, pred, {}, &scale);
@@ -86,8 +86,8 @@ TEST(FlowMetrics, SumsPoolOverMasksAndPairs) {
   auto gt = torch::zeros({2, 2, 2});
   gt[0].fill_(10.0);
   auto pred = gt.clone();
-  pred[0][0][0] = 14.0;  // EPE 4, outlier
-  pred[1][0][1] = 1.0;   // EPE 1
+  pred[0][0][0] = 14.0;                                                    // EPE 4, outlier
+  pred[1][0][1] = 1.0;                                                     // EPE 1
   const auto fg = torch::tensor({true, true, false, false}).view({2, 2});  // the top row
   auto a = flow_error_sums(gt, fg, pred);
   EXPECT_EQ(a.pixels, 2);
@@ -116,7 +116,8 @@ TEST(FlowMetrics, ResizeNearestAsGeoNetsFlowlibOrBilinear) {
 }
 
 TEST(PoseMetrics, SnippetAteIsScaleAndOffsetInvariantAndHandComputed) {
-  const auto gt = torch::tensor({0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 2.0, 0.0, 0.0, 3.0, 0.0, 0.0, 4.0}).view({5, 3});
+  const auto gt =
+      torch::tensor({0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 2.0, 0.0, 0.0, 3.0, 0.0, 0.0, 4.0}).view({5, 3});
   EXPECT_NEAR(snippet_ate(gt, gt * 0.5 + 3.0), 0.0, 1e-12);
   // Zero motion: scale has no effect (0/0 -> 1), error = sqrt(0+1+4+9+16)/5.
   EXPECT_NEAR(snippet_ate(gt, torch::zeros({5, 3})), std::sqrt(30.0) / 5, 1e-12);
@@ -142,8 +143,8 @@ TEST(PoseMetrics, KittiOdometryErrorsAsTheDevkitOnAHandMadePair) {
   std::vector<torch::Tensor> gt, longer, turning;
   for (int i = 0; i < 21; ++i) {
     gt.push_back(pose(i, 0));
-    longer.push_back(pose(1.1 * i, 0));      // 10% too fast: the error is 0.1 x the segment's frames
-    turning.push_back(pose(i, 0.01 * i));    // right positions, heading off by 0.01 rad per frame
+    longer.push_back(pose(1.1 * i, 0));    // 10% too fast: the error is 0.1 x the segment's frames
+    turning.push_back(pose(i, 0.01 * i));  // right positions, heading off by 0.01 rad per frame
   }
   const std::vector<double> lengths = {5, 10};
   const auto a = kitti_odometry_errors(torch::stack(gt), torch::stack(longer), lengths);
@@ -181,7 +182,9 @@ EvalOptions options_for(const std::string& split, const std::string& root) {
 }
 
 // The protocol's score of prediction files.
-EvalResult score_files(const EvalOptions& o, const std::string& predictions) { return evaluate(o, *file_source(predictions)); }
+EvalResult score_files(const EvalOptions& o, const std::string& predictions) {
+  return evaluate(o, *file_source(predictions));
+}
 
 // The Eigen test list's dense ground truth as predictions (named by line of the list).
 std::vector<std::string> dense_truth_as_predictions(const std::string& root) {
@@ -210,7 +213,8 @@ TEST(Protocols, EigenDepthOfTheTruthScoresNearlyPerfectly) {
   e.matlab_offset = false;
   const double exact = score_files(e, predictions).metrics[0].second;
   EXPECT_LT(exact, depth.metrics[0].second);
-  std::printf("abs_rel of the dense truth: %.4f (reference pixel shift), %.4f (exact pixels)\n", depth.metrics[0].second, exact);
+  std::printf("abs_rel of the dense truth: %.4f (reference pixel shift), %.4f (exact pixels)\n",
+              depth.metrics[0].second, exact);
   EXPECT_EQ(count_of(depth, "velodyne_points_non_finite"), 0);
   EXPECT_EQ(count_of(depth, "predictions_resized"), 0);
   {  // A prediction file of another size is resized and counted; one with H and W swapped is refused.
@@ -341,13 +345,15 @@ TEST(Protocols, ComparisonsSayHowTheColumnsDiffer) {
   b.metrics = {{"abs_rel", 0.2}};
   const auto alike = format_results({a, b}, {"a", "b"});
   EXPECT_EQ(alike.find("note:"), std::string::npos) << alike;
-  EXPECT_NE(alike.find(fmt::format("{:<22} {:>14} {:>14}\n", "scored", "40 images", "40 images")), std::string::npos) << alike;
+  EXPECT_NE(alike.find(fmt::format("{:<22} {:>14} {:>14}\n", "scored", "40 images", "40 images")), std::string::npos)
+      << alike;
   b.scaling = "camera-height 1.650000 m";
   b.counts = {{"images", 23}, {"pixels", 1000}};
   b.data_root = "/data/b";
   b.training_drives_unknown = "no training config";
   const auto unlike = format_results({a, b}, {"a", "b"});
-  EXPECT_NE(unlike.find("note: the columns differ in scaling: a median, b camera-height 1.650000 m\n"), std::string::npos)
+  EXPECT_NE(unlike.find("note: the columns differ in scaling: a median, b camera-height 1.650000 m\n"),
+            std::string::npos)
       << unlike;
   EXPECT_NE(unlike.find("note: the columns differ in data root: a /data/a, b /data/b\n"), std::string::npos);
   EXPECT_NE(unlike.find("note: the columns differ in 'images' (the metrics average over different sets): a 40, b 23\n"),
@@ -364,11 +370,11 @@ TEST(Protocols, ComparisonsSayHowTheColumnsDiffer) {
   const auto precisions = format_results({fp32, read_result(root + "/int8.json")}, {"fp32", "int8"});
   EXPECT_NE(precisions.find("note: the columns differ in precision: fp32 fp32, int8 int8\n"), std::string::npos)
       << precisions;
-  for (const auto& [name, text, why] :
-       std::vector<std::tuple<std::string, std::string, std::string>>{
+  for (const auto& [name, text, why] : std::vector<std::tuple<std::string, std::string, std::string>>{
            {"list.json", "[1, 2]", "not a JSON object"},
            {"config.json", "{\"model\": {\"use_fr\": true}}", "no 'split'"},
-           {"other.json", "{\"split\": \"cityscapes\", \"metrics\": {\"x\": 1}, \"counts\": {\"n\": 1}}", "unknown split 'cityscapes'"},
+           {"other.json", "{\"split\": \"cityscapes\", \"metrics\": {\"x\": 1}, \"counts\": {\"n\": 1}}",
+            "unknown split 'cityscapes'"},
            {"empty.json", "{\"split\": \"eigen\", \"metrics\": {}, \"counts\": {}}", "no metrics or no counts"},
            {"scalar.json", "{\"split\": \"eigen\", \"metrics\": 3, \"counts\": {\"n\": 1}}", "must be objects"}}) {
     test::write_text(root + "/" + name, text);
@@ -404,7 +410,8 @@ TEST(Protocols, ModelsOnTheOdometryAndFlowProtocols) {
     const auto streamed = read_poses(q.output_poses);
     ASSERT_EQ(streamed.size(0), 8);
     std::vector<torch::Tensor> frames;
-    for (int64_t f = 0; f < 8; ++f) frames.push_back(read_image_resized(images + zero_padded(f, 6) + ".png", 64, 208).unsqueeze(0));
+    for (int64_t f = 0; f < 8; ++f)
+      frames.push_back(read_image_resized(images + zero_padded(f, 6) + ".png", 64, 208).unsqueeze(0));
     auto chained = torch::eye(4, torch::kFloat64);
     EXPECT_TRUE(torch::allclose(streamed[0], chained));
     for (int64_t j = 0; j + 1 < 8; ++j) {
@@ -516,8 +523,8 @@ TEST(Protocols, CameraHeightScalingRecoversTheScaleWithoutGroundTruth) {
   // The height comes from the world's record (geo_synth's camera_height.txt) unless given.
   EXPECT_EQ(test::read_file(root + "/world/camera_height.txt"), "1.65\n");
   test::write_text(root + "/world/camera_height.txt", "3.3\n");
-  EXPECT_NEAR(metric_of(score_files(e, scaled), "scale_agreement_median"), 2 * metric_of(height, "scale_agreement_median"),
-              1e-9);
+  EXPECT_NEAR(metric_of(score_files(e, scaled), "scale_agreement_median"),
+              2 * metric_of(height, "scale_agreement_median"), 1e-9);
   e.camera_height = 1.65;
   EXPECT_NEAR(metric_of(score_files(e, scaled), "scale_agreement_median"), metric_of(height, "scale_agreement_median"),
               1e-12);
@@ -535,10 +542,11 @@ TEST(Protocols, AModelTrainedOnTestDrivesIsWarnedAndRecorded) {
   std::filesystem::copy(world + "/odometry", root + "/odometry", std::filesystem::copy_options::recursive);
   // A KITTI root without its own split lists: training used the shipped ones.
   std::filesystem::create_directories(root + "/kitti_raw");
-  auto checkpoint_of = [&](const std::string& data, const std::string& name, const std::string& data_root = "/kitti_raw",
-                           std::vector<std::string> init_configs = {}) {
-    const Config c = parse_config("model: {encoder_depth: 18}\ndata: {height: 64, width: 208, root: " + root +
-                                      data_root + ", " + data + "}\n", name + ".yaml");
+  auto checkpoint_of = [&](const std::string& data, const std::string& name,
+                           const std::string& data_root = "/kitti_raw", std::vector<std::string> init_configs = {}) {
+    const Config c = parse_config(
+        "model: {encoder_depth: 18}\ndata: {height: 64, width: 208, root: " + root + data_root + ", " + data + "}\n",
+        name + ".yaml");
     torch::manual_seed(1);
     Networks nets = Networks::create(NetworkSpec::of(c), false);
     torch::serialize::OutputArchive a;
@@ -566,9 +574,12 @@ TEST(Protocols, AModelTrainedOnTestDrivesIsWarnedAndRecorded) {
   // Clean itself, but initialised from a checkpoint that trained on the test drive: the init chain
   // is followed (the flow table's stage 1 on eigen_zhou); a link without a config is unknown.
   const std::string leaky_init = to_yaml(CheckpointFile(root + "/eigen_zhou.pt").config().value());
-  Predictor chained(checkpoint_of("split: odometry", "chained", "/kitti_raw", {to_yaml(CheckpointFile(root + "/odometry.pt").config().value()), leaky_init}), "cpu");
+  Predictor chained(checkpoint_of("split: odometry", "chained", "/kitti_raw",
+                                  {to_yaml(CheckpointFile(root + "/odometry.pt").config().value()), leaky_init}),
+                    "cpu");
   EXPECT_EQ(evaluate(e, chained).test_drives_in_training, std::vector<std::string>{"2011_09_30_drive_0033"});
-  Predictor from_model(checkpoint_of("split: odometry", "from_model", "/kitti_raw", {"unknown: m.pt is a model file"}), "cpu");
+  Predictor from_model(checkpoint_of("split: odometry", "from_model", "/kitti_raw", {"unknown: m.pt is a model file"}),
+                       "cpu");
   const auto unknown_init = evaluate(e, from_model);
   EXPECT_NE(unknown_init.training_drives_unknown.find("m.pt is a model file"), std::string::npos)
       << unknown_init.training_drives_unknown;
@@ -576,8 +587,10 @@ TEST(Protocols, AModelTrainedOnTestDrivesIsWarnedAndRecorded) {
   Predictor elsewhere(checkpoint_of("split: eigen_zhou", "elsewhere", "/moved_away"), "cpu");
   const auto unknown = evaluate(e, elsewhere);
   EXPECT_TRUE(unknown.test_drives_in_training.empty());
-  EXPECT_NE(unknown.training_drives_unknown.find("the training data root '" + root + "/moved_away' is not a folder here"),
-            std::string::npos) << unknown.training_drives_unknown;
+  EXPECT_NE(
+      unknown.training_drives_unknown.find("the training data root '" + root + "/moved_away' is not a folder here"),
+      std::string::npos)
+      << unknown.training_drives_unknown;
   // A geo_synth world's odometry/ and kitti2015/ scenes are no raw drive: nothing to compare.
   e.data_root = world;
   EXPECT_TRUE(evaluate(e, depth_model).test_drives.empty());

@@ -42,14 +42,80 @@ int64_t env_int(const char* name, int64_t fallback) {
 
 // Tokens that reach the corners of number and structure parsing.
 const std::vector<std::string>& text_dictionary() {
-  static const std::vector<std::string> d = {
-      "nan", "-nan", "inf", "-inf", "1e309", "-1e309", "1e-320", "0", "-0", "-1", "99999999999999999999",
-      "-9223372036854775808", "0x1p3", "1,5", ".", "e", ":", " ", "\t", "\n", "\r\n", "#", "'", "\"", "[", "]",
-      "{", "}", ",", "&a", "*a", "<<: *a", "!!binary", "~", "null", "- ", "? ", "|", ">", "%YAML 1.2\n", "---\n",
-      "P_rect_02:", "R_rect_00:", "S_rect_02:", "R:", "T:", "Tr:", "P2:", "calib_time:", "image_02/data/",
-      "0000000001.png", " l", " r", "geo-packed 1", "geo-packed 2", "height ", "width ", "seq_length ", "count ", "pack ",
-      "'descr': '<f4'", "'descr': '<f8'", "'fortran_order': True", "'fortran_order':True", "'shape': (", ")", "stages:", "iterations: ",
-      "data:", "model:", "encoder_depth: ", std::string(1, '\0'), std::string(300, '9'), std::string(2000, '[')};
+  static const std::vector<std::string> d = {"nan",
+                                             "-nan",
+                                             "inf",
+                                             "-inf",
+                                             "1e309",
+                                             "-1e309",
+                                             "1e-320",
+                                             "0",
+                                             "-0",
+                                             "-1",
+                                             "99999999999999999999",
+                                             "-9223372036854775808",
+                                             "0x1p3",
+                                             "1,5",
+                                             ".",
+                                             "e",
+                                             ":",
+                                             " ",
+                                             "\t",
+                                             "\n",
+                                             "\r\n",
+                                             "#",
+                                             "'",
+                                             "\"",
+                                             "[",
+                                             "]",
+                                             "{",
+                                             "}",
+                                             ",",
+                                             "&a",
+                                             "*a",
+                                             "<<: *a",
+                                             "!!binary",
+                                             "~",
+                                             "null",
+                                             "- ",
+                                             "? ",
+                                             "|",
+                                             ">",
+                                             "%YAML 1.2\n",
+                                             "---\n",
+                                             "P_rect_02:",
+                                             "R_rect_00:",
+                                             "S_rect_02:",
+                                             "R:",
+                                             "T:",
+                                             "Tr:",
+                                             "P2:",
+                                             "calib_time:",
+                                             "image_02/data/",
+                                             "0000000001.png",
+                                             " l",
+                                             " r",
+                                             "geo-packed 1",
+                                             "geo-packed 2",
+                                             "height ",
+                                             "width ",
+                                             "seq_length ",
+                                             "count ",
+                                             "pack ",
+                                             "'descr': '<f4'",
+                                             "'descr': '<f8'",
+                                             "'fortran_order': True",
+                                             "'fortran_order':True",
+                                             "'shape': (",
+                                             ")",
+                                             "stages:",
+                                             "iterations: ",
+                                             "data:",
+                                             "model:",
+                                             "encoder_depth: ",
+                                             std::string(1, '\0'),
+                                             std::string(300, '9'),
+                                             std::string(2000, '[')};
   return d;
 }
 
@@ -202,7 +268,8 @@ FuzzStats fuzz(const std::string& target, const std::vector<std::string>& seeds,
 // Seeds: the real file from ../shared/kitti_samples when present, then synthetic ones.
 std::vector<std::string> with_sample(const std::string& relative, std::vector<std::string> seeds) {
   const std::string root = test::kitti_samples();
-  if (!root.empty() && fs::exists(root + "/" + relative)) seeds.insert(seeds.begin(), test::read_file(root + "/" + relative));
+  if (!root.empty() && fs::exists(root + "/" + relative))
+    seeds.insert(seeds.begin(), test::read_file(root + "/" + relative));
   return seeds;
 }
 
@@ -228,16 +295,16 @@ TEST(Fuzz, RawCalibration) {
     (void)c.img_from_velo();
   });
   test::write_text(dir + "/calib_cam_to_cam.txt", cam.back());
-  fuzz("velo_to_cam", velo, dir + "/calib_velo_to_cam.txt", dir, [&](const std::string&) {
-    (void)read_raw_calib(dir, 2).img_from_velo();
-  });
+  fuzz("velo_to_cam", velo, dir + "/calib_velo_to_cam.txt", dir,
+       [&](const std::string&) { (void)read_raw_calib(dir, 2).img_from_velo(); });
 }
 
 TEST(Fuzz, OdometryCalibration) {
   const auto dir = test::fresh_dir("fuzz_odocalib");
   std::string seed;
   for (int k = 0; k < 4; ++k)
-    seed += "P" + std::to_string(k) + ": 7.07e+02 0 6.01e+02 " + std::to_string(-k * 100) + " 0 7.07e+02 1.83e+02 0 0 0 1 0\n";
+    seed += "P" + std::to_string(k) + ": 7.07e+02 0 6.01e+02 " + std::to_string(-k * 100) +
+            " 0 7.07e+02 1.83e+02 0 0 0 1 0\n";
   seed += "Tr: 0 -1 0 0 0 0 -1 0 1 0 0 -0.27\n";
   fuzz("odo_calib", {seed}, dir + "/calib.txt", dir + "/calib.txt",
        [](const std::string& p) { (void)read_odometry_calib(p); });
@@ -245,9 +312,10 @@ TEST(Fuzz, OdometryCalibration) {
 
 TEST(Fuzz, SplitAndSceneLists) {
   const auto dir = test::fresh_dir("fuzz_splits");
-  const auto seeds = with_sample("splits/eigen/test_files.txt",
-                                 {"2011_09_26/2011_09_26_drive_0001_sync 5 l\n2011_09_26/2011_09_26_drive_0001_sync 6 r\n",
-                                  "2011_09_26/2011_09_26_drive_0002_sync/image_02/data/0000000069.png\n"});
+  const auto seeds =
+      with_sample("splits/eigen/test_files.txt",
+                  {"2011_09_26/2011_09_26_drive_0001_sync 5 l\n2011_09_26/2011_09_26_drive_0001_sync 6 r\n",
+                   "2011_09_26/2011_09_26_drive_0002_sync/image_02/data/0000000069.png\n"});
   // The real list is long: its first lines are enough to seed.
   std::vector<std::string> short_seeds;
   for (const auto& s : seeds) short_seeds.push_back(s.substr(0, 2000).substr(0, s.substr(0, 2000).rfind('\n') + 1));
@@ -271,12 +339,14 @@ TEST(Fuzz, VelodyneScans) {
   const auto dir = test::fresh_dir("fuzz_velo");
   const auto pts = torch::tensor({5.f, 1.f, 1.f, 0.1f, 20.f, -3.f, 0.5f, 0.2f, -4.f, 0.f, 0.f, 0.f}).view({3, 4});
   write_velodyne(dir + "/seed.bin", pts);
-  const auto P = torch::tensor({0.0, -700.0, 0.0, 600.0, 0.0, 0.0, -700.0, 170.0, 1.0, 0.0, 0.0, 0.0}, torch::kFloat64).view({3, 4});
-  fuzz("velodyne", {test::read_file(dir + "/seed.bin")}, dir + "/scan.bin", dir + "/scan.bin", [&](const std::string& p) {
-    const auto points = read_velodyne(p);
-    (void)count_non_finite_points(points);
-    (void)velodyne_depth(points, P, 375, 1242);
-  });
+  const auto P = torch::tensor({0.0, -700.0, 0.0, 600.0, 0.0, 0.0, -700.0, 170.0, 1.0, 0.0, 0.0, 0.0}, torch::kFloat64)
+                     .view({3, 4});
+  fuzz("velodyne", {test::read_file(dir + "/seed.bin")}, dir + "/scan.bin", dir + "/scan.bin",
+       [&](const std::string& p) {
+         const auto points = read_velodyne(p);
+         (void)count_non_finite_points(points);
+         (void)velodyne_depth(points, P, 375, 1242);
+       });
 }
 
 TEST(Fuzz, KittiPngs) {
@@ -285,7 +355,8 @@ TEST(Fuzz, KittiPngs) {
   write_depth_png(dir + "/seed_depth.png", torch::rand({1, 5, 7}) * 80);
   write_image(dir + "/seed_image.png", torch::rand({3, 5, 7}));
   // Every reader gets every kind (16-bit RGB, 16-bit grey, 8-bit RGB): wrong kinds must be named.
-  const std::vector<std::string> kinds = {test::read_file(dir + "/seed_flow.png"), test::read_file(dir + "/seed_depth.png"),
+  const std::vector<std::string> kinds = {test::read_file(dir + "/seed_flow.png"),
+                                          test::read_file(dir + "/seed_depth.png"),
                                           test::read_file(dir + "/seed_image.png")};
   auto kinds_with = [&](const std::string& first) {
     auto k = kinds;
@@ -294,11 +365,14 @@ TEST(Fuzz, KittiPngs) {
   };
   // Only the first seed must be accepted as it is (valid_seeds 1).
   const auto flow = with_sample("flow2012/training/flow_noc/000157_10.png", kinds_with(kinds[0]));
-  fuzz("flow_png", flow, dir + "/flow.png", dir + "/flow.png", [](const std::string& p) { (void)read_flow_png(p); }, 1);
-  fuzz("depth_png", kinds_with(kinds[1]), dir + "/depth.png", dir + "/depth.png",
-       [](const std::string& p) { (void)read_depth_png(p); }, 1);
-  fuzz("image_png", kinds_with(kinds[2]), dir + "/image.png", dir + "/image.png",
-       [](const std::string& p) { (void)read_image_resized(p, 4, 6); }, 1);
+  fuzz(
+      "flow_png", flow, dir + "/flow.png", dir + "/flow.png", [](const std::string& p) { (void)read_flow_png(p); }, 1);
+  fuzz(
+      "depth_png", kinds_with(kinds[1]), dir + "/depth.png", dir + "/depth.png",
+      [](const std::string& p) { (void)read_depth_png(p); }, 1);
+  fuzz(
+      "image_png", kinds_with(kinds[2]), dir + "/image.png", dir + "/image.png",
+      [](const std::string& p) { (void)read_image_resized(p, 4, 6); }, 1);
 }
 
 TEST(Fuzz, PackedCacheIndex) {
@@ -341,8 +415,9 @@ TEST(Fuzz, YamlConfigs) {
     }
   std::sort(seeds.begin(), seeds.end());
   // Anchors and aliases, as users write them to share values between stages.
-  seeds.push_back("stages:\n  - {name: a, iterations: &n 3, batch_size: 1, train: &t [depth, pose]}\n"
-                  "  - {name: b, iterations: *n, batch_size: 1, train: *t}\n");
+  seeds.push_back(
+      "stages:\n  - {name: a, iterations: &n 3, batch_size: 1, train: &t [depth, pose]}\n"
+      "  - {name: b, iterations: *n, batch_size: 1, train: *t}\n");
   fuzz("yaml", seeds, dir + "/config.yaml", dir + "/config.yaml", [](const std::string& p) { (void)load_config(p); });
 }
 

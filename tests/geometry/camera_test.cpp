@@ -10,7 +10,6 @@
 
 namespace {
 
-
 torch::Tensor intrinsics(double fx, double fy, double cx, double cy, int64_t batch = 1) {
   return torch::tensor({fx, 0., cx, 0., fy, cy, 0., 0., 1.}, torch::kFloat64).view({1, 3, 3}).repeat({batch, 1, 1});
 }
@@ -36,8 +35,9 @@ TEST(Camera, Inverse3x3IsTheInverse) {
   const auto inv = geo::inverse_3x3(M);
   EXPECT_LT((M.matmul(inv) - torch::eye(3, torch::kFloat64)).abs().max().item<double>(), 1e-12);
   inv.sum().backward();
-  EXPECT_TRUE(torch::allclose(M.grad(), -inv.transpose(1, 2).matmul(torch::ones({5, 3, 3}, torch::kFloat64))
-                                            .matmul(inv.transpose(1, 2)), 1e-9, 1e-12));
+  EXPECT_TRUE(torch::allclose(
+      M.grad(), -inv.transpose(1, 2).matmul(torch::ones({5, 3, 3}, torch::kFloat64)).matmul(inv.transpose(1, 2)), 1e-9,
+      1e-12));
   EXPECT_THROW(geo::inverse_3x3(torch::zeros({2, 3, 4})), c10::Error);
 }
 
@@ -95,9 +95,9 @@ TEST(Camera, MalformedShapesNameTheArgument) {
   } catch (const c10::Error& e) {
     EXPECT_NE(std::string(e.what_without_backtrace()).find("depth must have shape"), std::string::npos);
   }
-  EXPECT_THROW(geo::rigid_flow(torch::ones({2, 1, 4, 4}), torch::eye(4).expand({1, 4, 4}),
-                               torch::eye(3).expand({2, 3, 3})),
-               c10::Error);
+  EXPECT_THROW(
+      geo::rigid_flow(torch::ones({2, 1, 4, 4}), torch::eye(4).expand({1, 4, 4}), torch::eye(3).expand({2, 3, 3})),
+      c10::Error);
 }
 
 }  // namespace
@@ -106,7 +106,8 @@ namespace {
 
 // A camera point's pixel in a frame, (u, v) = (fx x/z + cx, fy y/z + cy).
 std::pair<double, double> pixel_of(const torch::Tensor& K, double x, double y, double z) {
-  return {K[0][0].item<double>() * x / z + K[0][2].item<double>(), K[1][1].item<double>() * y / z + K[1][2].item<double>()};
+  return {K[0][0].item<double>() * x / z + K[0][2].item<double>(),
+          K[1][1].item<double>() * y / z + K[1][2].item<double>()};
 }
 
 }  // namespace

@@ -6,7 +6,6 @@
 
 namespace {
 
-
 void expect_close(const torch::Tensor& a, const torch::Tensor& b, double tol) {
   ASSERT_EQ(a.sizes(), b.sizes());
   EXPECT_LE((a - b).abs().max().item<double>(), tol) << a << "\nvs\n" << b;
@@ -49,10 +48,12 @@ TEST(Pose, AnglesAreClippedToPlusMinusPiAsGeoNet) {
   // clipped angle passes no gradient.
   auto v = vec({0, 0, 0, 4.0, 0, 0}).requires_grad_(true);
   const auto T = geo::pose_vec_to_matrix(v);
-  expect_close(T[0].narrow(0, 0, 3).narrow(1, 0, 3), torch::diag(torch::tensor({1., -1., -1.}, torch::kFloat64)), 1e-12);
+  expect_close(T[0].narrow(0, 0, 3).narrow(1, 0, 3), torch::diag(torch::tensor({1., -1., -1.}, torch::kFloat64)),
+               1e-12);
   T.sum().backward();
   EXPECT_EQ(v.grad()[0][3].item<double>(), 0.0);
-  expect_close(geo::pose_vec_to_matrix(vec({0, 0, 0, 0, -7.0, 0})), geo::pose_vec_to_matrix(vec({0, 0, 0, 0, -M_PI, 0})), 0);
+  expect_close(geo::pose_vec_to_matrix(vec({0, 0, 0, 0, -7.0, 0})),
+               geo::pose_vec_to_matrix(vec({0, 0, 0, 0, -M_PI, 0})), 0);
 }
 
 TEST(Pose, InverseAndComposition) {
@@ -74,8 +75,7 @@ TEST(Pose, AxisAngleMatchesEulerForSingleAxisRotations) {
     auto euler = torch::zeros({1, 6}, torch::kFloat64);
     euler[0][3 + axis] = 0.7;
     euler.narrow(1, 0, 3).copy_(torch::tensor({0.5, -1., 2.}, torch::kFloat64).view({1, 3}));
-    expect_close(geo::axisangle_to_matrix(aa, euler.narrow(1, 0, 3)),
-                 geo::pose_vec_to_matrix(euler), 1e-12);
+    expect_close(geo::axisangle_to_matrix(aa, euler.narrow(1, 0, 3)), geo::pose_vec_to_matrix(euler), 1e-12);
   }
   // Zero axis-angle is the identity rotation.
   expect_close(geo::axisangle_to_matrix(torch::zeros({1, 3}, torch::kFloat64), torch::zeros({1, 3}, torch::kFloat64)),

@@ -7,7 +7,6 @@
 
 namespace {
 
-
 TEST(Warp, ZeroFlowReturnsTheInput) {
   torch::manual_seed(7);
   const auto img = torch::rand({2, 3, 9, 13}, torch::kFloat64);
@@ -59,7 +58,9 @@ double geonet_sample(const torch::Tensor& img, double x, double y) {
   const double x0 = std::floor(x), y0 = std::floor(y);
   auto clip = [](double v, int64_t n) { return std::min(std::max(v, 0.0), static_cast<double>(n - 1)); };
   const double x0s = clip(x0, W), x1s = clip(x0 + 1, W), y0s = clip(y0, H), y1s = clip(y0 + 1, H);
-  auto at = [&](double yy, double xx) { return img[static_cast<int64_t>(yy)][static_cast<int64_t>(xx)].item<double>(); };
+  auto at = [&](double yy, double xx) {
+    return img[static_cast<int64_t>(yy)][static_cast<int64_t>(xx)].item<double>();
+  };
   const double wx0 = x1s - x, wx1 = x - x0s, wy0 = y1s - y, wy1 = y - y0s;
   return wx0 * wy0 * at(y0s, x0s) + wx0 * wy1 * at(y1s, x0s) + wx1 * wy0 * at(y0s, x1s) + wx1 * wy1 * at(y1s, x1s);
 }
@@ -117,8 +118,7 @@ TEST(Warp, MalformedFlowNamesTheArgument) {
     geo::warp(torch::zeros({1, 3, 4, 4}), torch::zeros({1, 3, 4, 4}), geo::OutOfView::kZero);
     FAIL();
   } catch (const c10::Error& e) {
-    EXPECT_NE(std::string(e.what_without_backtrace()).find("flow must have shape [1, 2, 4, 4]"),
-              std::string::npos)
+    EXPECT_NE(std::string(e.what_without_backtrace()).find("flow must have shape [1, 2, 4, 4]"), std::string::npos)
         << e.what_without_backtrace();
   }
 }

@@ -4,7 +4,6 @@
 
 namespace {
 
-
 TEST(Occlusion, ConsistentFlowsAreVisibleEverywhere) {
   // Constant translation (u, v) forward and (-u, -v) backward: W_f + W_b(p + W_f) = 0.
   auto fw = torch::zeros({1, 2, 8, 10}, torch::kFloat64);
@@ -65,7 +64,8 @@ TEST(Consistency, GradientFlowsIntoTheFlowsButNotTheBound) {
   torch::manual_seed(12);
   const auto fw = (torch::randn({1, 2, 6, 6}, torch::kFloat64)).requires_grad_();
   const auto bw = (torch::randn({1, 2, 6, 6}, torch::kFloat64)).requires_grad_();
-  const auto c = geo::geometric_consistency(fw, geo::backward_at_forward(fw, bw, geo::OutOfView::kBorder), 3.0, 0.05, 0, true);
+  const auto c =
+      geo::geometric_consistency(fw, geo::backward_at_forward(fw, bw, geo::OutOfView::kBorder), 3.0, 0.05, 0, true);
   c.loss.backward();
   EXPECT_FALSE(c.mask.requires_grad());
   EXPECT_TRUE(torch::isfinite(fw.grad()).all().item<bool>());
@@ -73,8 +73,7 @@ TEST(Consistency, GradientFlowsIntoTheFlowsButNotTheBound) {
 }
 
 TEST(Consistency, MalformedShapesThrow) {
-  EXPECT_THROW(geo::visibility_mask(torch::zeros({1, 3, 4, 4}), torch::zeros({1, 3, 4, 4}), 0.01, 0.5),
-               c10::Error);
+  EXPECT_THROW(geo::visibility_mask(torch::zeros({1, 3, 4, 4}), torch::zeros({1, 3, 4, 4}), 0.01, 0.5), c10::Error);
   EXPECT_THROW(geo::backward_at_forward(torch::zeros({1, 2, 4, 4}), torch::zeros({2, 2, 4, 4}), geo::OutOfView::kZero),
                c10::Error);
 }

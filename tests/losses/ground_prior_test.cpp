@@ -7,9 +7,7 @@ namespace {
 // A level camera 2 units above a flat road: fy = 4, cy = 1.5 on an 8x4 image. Row v sees the road at
 // disparity (v - 1.5) / (4 * 2); rows 2..7 lie within 20 camera heights (slope > 0.05): 24 pixels.
 constexpr int64_t kH = 8, kW = 4;
-torch::Tensor camera() {
-  return torch::tensor({4., 0., 2., 0., 4., 1.5, 0., 0., 1.}, torch::kFloat64).view({1, 3, 3});
-}
+torch::Tensor camera() { return torch::tensor({4., 0., 2., 0., 4., 1.5, 0., 0., 1.}, torch::kFloat64).view({1, 3, 3}); }
 torch::Tensor road_disparity() {
   auto d = torch::full({1, 1, kH, kW}, 0.01, torch::kFloat64);  // above the horizon: far
   for (int64_t v = 2; v < kH; ++v) d[0][0][v].fill_((static_cast<double>(v) - 1.5) / 8.0);

@@ -35,8 +35,7 @@ TEST(Ssim, HandComputed4x4Case) {
   EXPECT_NEAR(s[0][0][0][1].item<double>(), expected(0.5, 0.5), 1e-12);
   // Photometric error at (1,1): 0.85 * (1 - s)/2 + 0.15 * |0.5 - 0| (y(1,1) = 0).
   const auto e = geo::photometric_error(x, y, 0.85);
-  EXPECT_NEAR(e[0][0][1][1].item<double>(), 0.85 * (1 - expected(4.0 / 9, 4.0 / 9)) / 2 + 0.15 * 0.5,
-              1e-12);
+  EXPECT_NEAR(e[0][0][1][1].item<double>(), 0.85 * (1 - expected(4.0 / 9, 4.0 / 9)) / 2 + 0.15 * 0.5, 1e-12);
 }
 
 TEST(Ssim, ConstantImagesClosedForm) {
@@ -87,8 +86,8 @@ TEST(Photometric, FusedKernelMatchesTheComposedOperationsInValueAndGradient) {
   for (auto hw : std::vector<std::pair<int64_t, int64_t>>{{1, 1}, {1, 5}, {4, 1}, {3, 4}, {7, 9}}) {
     auto x = torch::rand({2, 3, hw.first, hw.second}, torch::kFloat64);
     auto y = torch::rand({2, 3, hw.first, hw.second}, torch::kFloat64);
-    y[0][0] = x[0][0];        // equal plane: |x - y| = 0, SSIM = 1
-    y[1][2] = 1 - x[1][2];    // anti-correlated plane: negative SSIM
+    y[0][0] = x[0][0];      // equal plane: |x - y| = 0, SSIM = 1
+    y[1][2] = 1 - x[1][2];  // anti-correlated plane: negative SSIM
     x.requires_grad_();
     y.requires_grad_();
     for (double alpha : {0.0, 0.85, 1.0}) {

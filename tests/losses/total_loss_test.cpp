@@ -6,7 +6,6 @@
 
 namespace {
 
-
 // A world where the truth is known: a textured plane at depth 10 seen by a camera that moves
 // 0.5 m sideways. With fx = 40 the rigid flow is exactly 2 px at scale 0 and 1 px at scale 1.
 struct Scene {
@@ -197,7 +196,8 @@ TEST(TotalLoss, GeoNetsFlowReductionPoolsSourcesAndDropsTheMaskWithoutConsistenc
   rigid.tgt_pyr = {zeros};
   rigid.src_pyr = {{zeros}, {zeros}, {zeros}, {block}};
   const auto still = torch::zeros_like(ff);
-  const geo::PerSourceScale<torch::Tensor> fwd = {{still}, {still}, {still}, {ff}}, bwd = {{still}, {still}, {still}, {bf}};
+  const geo::PerSourceScale<torch::Tensor> fwd = {{still}, {still}, {still}, {ff}},
+                                           bwd = {{still}, {still}, {still}, {bf}};
   geo::LossConfig cfg;
   cfg.ssim_alpha = 0.0;
   cfg.image_range = {0.0, 1.0};
@@ -228,9 +228,8 @@ TEST(TotalLoss, StagesWithoutFlowLeaveFlowTermsUndefined) {
   ASSERT_EQ(values.size(), 3u);  // rigid, disp_smooth, total
   EXPECT_EQ(values[0].first, "rigid");
   EXPECT_EQ(values[2].first, "total");
-  EXPECT_NEAR(t.total.item<double>(), w.rigid * rigid.rigid.item<double>() +
-                                          w.disp_smooth * rigid.disp_smooth.item<double>(),
-              1e-12);
+  EXPECT_NEAR(t.total.item<double>(),
+              w.rigid * rigid.rigid.item<double>() + w.disp_smooth * rigid.disp_smooth.item<double>(), 1e-12);
 }
 
 TEST(TotalLoss, EveryTermBackPropagatesIntoDepthPoseAndFlow) {
@@ -295,8 +294,7 @@ TEST(TotalLoss, MalformedInputsNameTheArgument) {
     geo::rigid_terms(sc.in, geo::LossConfig{});
     FAIL();
   } catch (const c10::Error& e) {
-    EXPECT_NE(std::string(e.what_without_backtrace()).find("poses must have shape [1, 1, 6]"),
-              std::string::npos)
+    EXPECT_NE(std::string(e.what_without_backtrace()).find("poses must have shape [1, 1, 6]"), std::string::npos)
         << e.what_without_backtrace();
   }
   sc = shifted_plane(2, 0.0);

@@ -86,11 +86,9 @@ TEST(FeatureRefinement, ForwardIsCbamWrittenOut) {
 
 TEST(FeatureRefinement, ParameterCountIsSharedMlpPlusSpatialConv) {
   // C = 64, r = 16: MLP 64 -> 4 -> 64 without bias (2 * 64 * 4) + 7x7 conv over 2 channels (98).
-  EXPECT_EQ(geo::count_parameters(*geo::FeatureRefinement(geo::FeatureRefinementOptions(64))),
-            2 * 64 * 4 + 98);
+  EXPECT_EQ(geo::count_parameters(*geo::FeatureRefinement(geo::FeatureRefinementOptions(64))), 2 * 64 * 4 + 98);
   // C = 8 < r: the hidden width is clamped to 1.
-  EXPECT_EQ(geo::count_parameters(*geo::FeatureRefinement(geo::FeatureRefinementOptions(8))),
-            2 * 8 * 1 + 98);
+  EXPECT_EQ(geo::count_parameters(*geo::FeatureRefinement(geo::FeatureRefinementOptions(8))), 2 * 8 * 1 + 98);
 }
 
 // The fused pooling against amax/mean in value and gradient, with ties (ReLU zeros, repeated

@@ -29,10 +29,11 @@ TEST(Int8, QuantizingToNhwcIsAtensQuantization) {
   if (!has_int8()) GTEST_SKIP() << "this LibTorch has no quantized engine";
   // scale 0.5, zero point 10: -10 -> -20 + 10 clamped to 0; 1.2 -> 2.4 -> 2 + 10 = 12; 1.3 -> 13;
   // 200 -> 410 clamped to 255; 0 -> 10.
-  const auto hand = geo::quantize_to_nhwc(torch::tensor({-10.f, 1.2f, 1.3f, 200.f, 0.f, 0.f}).view({1, 2, 1, 3}), 0.5, 10);
+  const auto hand =
+      geo::quantize_to_nhwc(torch::tensor({-10.f, 1.2f, 1.3f, 200.f, 0.f, 0.f}).view({1, 2, 1, 3}), 0.5, 10);
   EXPECT_TRUE(hand.is_contiguous(at::MemoryFormat::ChannelsLast));
-  EXPECT_TRUE(torch::equal(hand.int_repr().contiguous().flatten(),
-                           torch::tensor({0, 12, 13, 255, 10, 10}, torch::kUInt8)));
+  EXPECT_TRUE(
+      torch::equal(hand.int_repr().contiguous().flatten(), torch::tensor({0, 12, 13, 255, 10, 10}, torch::kUInt8)));
   torch::manual_seed(5);
   const auto x = torch::randn({2, 9, 13, 70}) * 3;  // 9 channels: the PoseNet's snippet
   const auto mine = geo::quantize_to_nhwc(x, 0.037, 117), aten = at::quantize_per_tensor(x, 0.037, 117, torch::kQUInt8);
@@ -52,8 +53,8 @@ TEST(Int8, ConcatenatingRequantizesEachPart) {
   const auto mine = geo::cat_int8({a, b, c}, 0.05, 100);
   ASSERT_EQ(mine.sizes(), torch::IntArrayRef({2, 50, 5, 7}));
   EXPECT_TRUE(mine.is_contiguous(at::MemoryFormat::ChannelsLast));
-  const auto reference =
-      at::quantize_per_tensor(torch::cat({a.dequantize(), b.dequantize(), c.dequantize()}, 1), 0.05, 100, torch::kQUInt8);
+  const auto reference = at::quantize_per_tensor(torch::cat({a.dequantize(), b.dequantize(), c.dequantize()}, 1), 0.05,
+                                                 100, torch::kQUInt8);
   const auto diff = (mine.int_repr().to(torch::kInt32) - reference.int_repr().to(torch::kInt32)).abs();
   EXPECT_LE(diff.max().item<int>(), 1);
   EXPECT_LT(diff.to(torch::kFloat32).mean().item<double>(), 0.02);
@@ -68,7 +69,8 @@ TEST(Int8, FeatureRefinementIsTheFloatOneWithinOneStep) {
   torch::NoGradGuard no_grad;
   for (const int64_t zero_point : {0, 17}) {
     const auto x = torch::rand({2, 32, 5, 7}) * 3;
-    const auto q = at::quantize_per_tensor(x.contiguous(at::MemoryFormat::ChannelsLast), 0.02, zero_point, torch::kQUInt8);
+    const auto q =
+        at::quantize_per_tensor(x.contiguous(at::MemoryFormat::ChannelsLast), 0.02, zero_point, torch::kQUInt8);
     const double out_scale = 0.015;
     const auto mine = geo::int8_feature_refinement(*fr, q, out_scale, 3);
     EXPECT_EQ(mine.q_scale(), out_scale);
@@ -233,8 +235,9 @@ TEST(Int8, EverySizeAndCalibrationIsMemorySafe) {
   geo::PoseNetOptions p;
   p.learn_intrinsics = true;
   geo::PoseNet pose(p);
-  for (torch::nn::Module* m : {static_cast<torch::nn::Module*>(depth.get()), static_cast<torch::nn::Module*>(flow.get()),
-                               static_cast<torch::nn::Module*>(pose.get())}) {
+  for (torch::nn::Module* m :
+       {static_cast<torch::nn::Module*>(depth.get()), static_cast<torch::nn::Module*>(flow.get()),
+        static_cast<torch::nn::Module*>(pose.get())}) {
     randomize_batchnorm(*m);
     m->eval();
     geo::fold_batchnorm(*m);

@@ -68,7 +68,8 @@ TEST(Layers, Conv2dIsExactForEveryChannelCount) {
           }
           const auto g = torch::randn({2, co, 6, 7}).to(dtype);
           const auto grads = torch::autograd::grad({y}, {x, w, b}, {g});
-          const auto x64 = x.detach().to(torch::kFloat64).requires_grad_(), w64 = w.detach().to(torch::kFloat64).requires_grad_(),
+          const auto x64 = x.detach().to(torch::kFloat64).requires_grad_(),
+                     w64 = w.detach().to(torch::kFloat64).requires_grad_(),
                      b64 = b.detach().to(torch::kFloat64).requires_grad_();
           const auto ref = torch::conv2d(x64, w64, b64, 1, k / 2);
           const auto ref_grads = torch::autograd::grad({ref}, {x64, w64, b64}, {g.to(torch::kFloat64)});
@@ -78,7 +79,8 @@ TEST(Layers, Conv2dIsExactForEveryChannelCount) {
           const std::string what = c10::str(dtype, " k=", k, " in=", ci, " out=", co);
           ASSERT_EQ(y.sizes(), ref.sizes()) << what;
           for (const auto& out : {y, y_inference})
-            EXPECT_LE((out.to(torch::kFloat64) - ref).abs().max().item<double>(), tol * (1 + ref.abs().max().item<double>()))
+            EXPECT_LE((out.to(torch::kFloat64) - ref).abs().max().item<double>(),
+                      tol * (1 + ref.abs().max().item<double>()))
                 << what;
           for (int i = 0; i < 3; ++i)
             EXPECT_LE((grads[i].to(torch::kFloat64) - ref_grads[i]).abs().max().item<double>(),
@@ -187,7 +189,8 @@ TEST(Layers, UninitialisedWeightsAreForNetworksLoadedNext) {
   load_state(*loaded, path);
   std::filesystem::remove(path);
   for (const auto& p : a) EXPECT_TRUE(torch::equal(p.value(), b[p.key()])) << p.key();
-  for (const auto& p : saved->named_buffers()) EXPECT_TRUE(torch::equal(p.value(), loaded->named_buffers()[p.key()])) << p.key();
+  for (const auto& p : saved->named_buffers())
+    EXPECT_TRUE(torch::equal(p.value(), loaded->named_buffers()[p.key()])) << p.key();
   saved->eval();
   loaded->eval();
   torch::NoGradGuard no_grad;
@@ -225,7 +228,8 @@ class ThreadSum {
 };
 
 // PyTorch's BatchNorm2d or geo's, with the same settings and affine parameters.
-template <class BN = torch::nn::BatchNorm2d> BN bn_of(int64_t c) {
+template <class BN = torch::nn::BatchNorm2d>
+BN bn_of(int64_t c) {
   BN bn(torch::nn::BatchNormOptions(c).eps(1e-3).momentum(0.3));
   torch::NoGradGuard g;
   bn->weight.copy_(torch::tensor({1.5f, 0.5f, 2.0f}));

@@ -89,8 +89,7 @@ TEST(FlowNet, ResidualFlowShapesAt128x416AndOddSize) {
   net->eval();
   torch::NoGradGuard no_grad;
   const auto img = torch::rand({1, 3, 128, 416});
-  const auto in = geo::flow_net_input(img, img, img, torch::zeros({1, 2, 128, 416}),
-                                      torch::zeros({1, 1, 128, 416}));
+  const auto in = geo::flow_net_input(img, img, img, torch::zeros({1, 2, 128, 416}), torch::zeros({1, 1, 128, 416}));
   EXPECT_EQ(in.sizes(), (Sizes{1, 12, 128, 416}));
   const auto out = net(in);
   ASSERT_EQ(out.flow.size(), 4u);
@@ -100,8 +99,7 @@ TEST(FlowNet, ResidualFlowShapesAt128x416AndOddSize) {
   geo::FlowNet small_net(o);
   small_net->eval();
   EXPECT_EQ(small_net(torch::rand({1, 12, 75, 250})).flow[0].sizes(), (Sizes{1, 2, 75, 250}));
-  EXPECT_THROW(geo::flow_net_input(img, img, img, torch::zeros({1, 3, 128, 416}),
-                                   torch::zeros({1, 1, 128, 416})),
+  EXPECT_THROW(geo::flow_net_input(img, img, img, torch::zeros({1, 3, 128, 416}), torch::zeros({1, 1, 128, 416})),
                c10::Error);
 }
 
@@ -127,7 +125,8 @@ void expect_all_gradients(torch::nn::Module& net, const std::function<torch::Ten
     const auto mlp = name.find("mlp_");
     if (mlp != std::string::npos) {
       const auto spatial = grads.find(name.substr(0, mlp) + "spatial.weight");
-      if (spatial != grads.end() && spatial->second.defined() && spatial->second.abs().sum().item<double>() > 0) continue;
+      if (spatial != grads.end() && spatial->second.defined() && spatial->second.abs().sum().item<double>() > 0)
+        continue;
     }
     without.push_back(name + " (zero)");
   }

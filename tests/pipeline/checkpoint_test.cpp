@@ -58,7 +58,8 @@ TEST(NetworkSpec, YamlRoundTripAndOfAWholeConfig) {
   EXPECT_EQ(yaml.find("occ_alpha1"), std::string::npos);
   EXPECT_NE(yaml.find("ssim_alpha: 0.5"), std::string::npos);
   // Of a config: the data and loss keys it names, the rest ignored.
-  const Config c = parse_config("data: {height: 32, width: 96, seq_length: 5}\nloss: {ssim_alpha: 0.25, occ_alpha1: 0.5}\n");
+  const Config c =
+      parse_config("data: {height: 32, width: 96, seq_length: 5}\nloss: {ssim_alpha: 0.25, occ_alpha1: 0.5}\n");
   const NetworkSpec t = NetworkSpec::of(c);
   EXPECT_EQ(t.height, 32);
   EXPECT_EQ(t.seq_length, 5);
@@ -165,7 +166,8 @@ TEST(Checkpoint, ModelFileHoldsWeightsAndSpecOnly) {
     m.train_state();
     ADD_FAILURE() << "a model file has no train state";
   } catch (const std::runtime_error& e) {
-    EXPECT_EQ(std::string(e.what()), dir + "/m.pt: a geo_export model file, not a training checkpoint (it has no train state)");
+    EXPECT_EQ(std::string(e.what()),
+              dir + "/m.pt: a geo_export model file, not a training checkpoint (it has no train state)");
   }
 }
 

@@ -27,9 +27,9 @@ TEST(Networks, GeoNetBatchNormByDefaultAndTrainableSetOncePerStage) {
   for (const auto& m : n.depth->modules())
     if (const auto* bn = m->as<SyncBatchNorm2d>()) {
       ++bns;
-      EXPECT_EQ(bn->options.eps(), 1e-3);            // slim's epsilon
+      EXPECT_EQ(bn->options.eps(), 1e-3);               // slim's epsilon
       EXPECT_EQ(bn->options.momentum().value(), 1e-3);  // slim's decay 0.999
-      EXPECT_FALSE(bn->weight.requires_grad());     // scale=False: gamma stays 1
+      EXPECT_FALSE(bn->weight.requires_grad());         // scale=False: gamma stays 1
     }
   EXPECT_GT(bns, 20);
   StageConfig flow_only;

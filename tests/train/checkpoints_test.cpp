@@ -28,9 +28,7 @@ void fill_state(torch::serialize::OutputArchive& a, int64_t stage, int64_t it) {
   write_train_state(a, s);
 }
 
-TrainState state_of(const std::string& path) {
-  return CheckpointFile(path).train_state();
-}
+TrainState state_of(const std::string& path) { return CheckpointFile(path).train_state(); }
 
 TEST(CheckpointNames, RoundTrip) {
   EXPECT_EQ(checkpoint_name("stage-2", 42), "stage-2-00000042.pt");
@@ -84,13 +82,12 @@ TEST(CheckpointManager, NamesDecideWhatRotatesAndWhatIsATemporaryFile) {
     test::write_text(dir + "/checkpoints/" + f, "x");
   {
     CheckpointManager m(RunFolder(dir), 2);
-    for (int64_t it = 1; it <= 3; ++it)
-      m.save("best_fit", it, it == 1, [it](auto& a) { fill_state(a, 0, it); });
+    for (int64_t it = 1; it <= 3; ++it) m.save("best_fit", it, it == 1, [it](auto& a) { fill_state(a, 0, it); });
   }
   std::set<std::string> names;
   for (const auto& e : fs::directory_iterator(dir + "/checkpoints")) names.insert(e.path().filename().string());
-  EXPECT_EQ(names, (std::set<std::string>{"best-best_fit.pt", "best_fit-00000002.pt", "best_fit-00000003.pt",
-                                          "latest", "notes.tmp.txt"}));
+  EXPECT_EQ(names, (std::set<std::string>{"best-best_fit.pt", "best_fit-00000002.pt", "best_fit-00000003.pt", "latest",
+                                          "notes.tmp.txt"}));
   EXPECT_EQ(state_of(dir + "/checkpoints/best-best_fit.pt").iteration, 1);
 }
 
@@ -101,8 +98,7 @@ TEST(CheckpointManager, AFailedWriteKeepsTheLastCheckpointAndLatest) {
   // The disk is full for the next checkpoint (its temporary file is a link to /dev/full).
   const std::string next = dir + "/checkpoints/s1-00000002.pt";
   ASSERT_EQ(::symlink("/dev/full", (next + ".tmp." + std::to_string(::getpid())).c_str()), 0);
-  GEO_EXPECT_THROW_WITH(m.save("s1", 2, true, [](auto& a) { fill_state(a, 0, 2); }), next,
-                        "No space left on device");
+  GEO_EXPECT_THROW_WITH(m.save("s1", 2, true, [](auto& a) { fill_state(a, 0, 2); }), next, "No space left on device");
   EXPECT_EQ(m.latest(), dir + "/checkpoints/s1-00000001.pt");
   EXPECT_EQ(state_of(dir + "/checkpoints/best-s1.pt").iteration, 1);
   EXPECT_FALSE(fs::exists(next));

@@ -116,8 +116,8 @@ TEST(ComputeLosses, LearnedIntrinsicsReplaceTheDataCamera) {
 TEST(ComputeLosses, FrozenBatchNormKeepsItsRunningStatistics) {
   auto running = [](const Networks& n) {
     std::vector<torch::Tensor> out;
-    for (const torch::nn::Module* net : {static_cast<const torch::nn::Module*>(n.depth.get()),
-                                         static_cast<const torch::nn::Module*>(n.pose.get())})
+    for (const torch::nn::Module* net :
+         {static_cast<const torch::nn::Module*>(n.depth.get()), static_cast<const torch::nn::Module*>(n.pose.get())})
       for (const auto& m : net->modules())
         if (const auto* bn = m->as<SyncBatchNorm2d>()) out.push_back(bn->running_mean.clone());
     return out;
@@ -191,7 +191,8 @@ TEST(ComputeLosses, FlowInputGradientReachesDepthAndPoseOnlyInAJointStage) {
     EXPECT_GT(distance(kept.at(net), cut.at(net)), 1e-3 * norm(cut.at(net))) << net;
   }
   const auto flow_only_kept = gradients(true, false), flow_only_cut = gradients(false, false);
-  for (const char* net : {"depth", "pose", "flow"}) EXPECT_TRUE(same(flow_only_kept.at(net), flow_only_cut.at(net))) << net;
+  for (const char* net : {"depth", "pose", "flow"})
+    EXPECT_TRUE(same(flow_only_kept.at(net), flow_only_cut.at(net))) << net;
   EXPECT_EQ(norm(flow_only_kept.at("depth")), 0.0);
 }
 

@@ -47,8 +47,8 @@ LaunchInfo launch_of(const std::map<std::string, std::string>& env, const std::s
 
 TEST(Launch, TorchrunSlurmAndSingle) {
   EXPECT_FALSE(launch_of({}).distributed());
-  const auto t = launch_of({{"RANK", "3"}, {"WORLD_SIZE", "4"}, {"LOCAL_RANK", "1"}, {"MASTER_ADDR", "node7"},
-                            {"MASTER_PORT", "29999"}});
+  const auto t = launch_of(
+      {{"RANK", "3"}, {"WORLD_SIZE", "4"}, {"LOCAL_RANK", "1"}, {"MASTER_ADDR", "node7"}, {"MASTER_PORT", "29999"}});
   EXPECT_EQ(t.rank, 3);
   EXPECT_EQ(t.world_size, 4);
   EXPECT_EQ(t.local_rank, 1);
@@ -143,7 +143,7 @@ TEST(GradientAverager, HooksStartBucketsDuringBackwardInBucketOrder) {
   auto a = torch::full({3}, 2.f, torch::requires_grad()), b = torch::full({2}, 3.f, torch::requires_grad()),
        unused = torch::zeros({4}, torch::requires_grad());
   a.register_hook([&](torch::Tensor) { group.events.push_back("grad a"); });  // before the averager's hook
-  GradientAverager avg(group, 3 * sizeof(float));  // buckets (reverse order): unused | b | a
+  GradientAverager avg(group, 3 * sizeof(float));                             // buckets (reverse order): unused | b | a
   avg.attach({a, b, unused});
   for (int step = 0; step < 2; ++step) {
     group.events.clear();
@@ -152,8 +152,8 @@ TEST(GradientAverager, HooksStartBucketsDuringBackwardInBucketOrder) {
     ((x * a).sum() * b).sum().backward();  // d/da = x * sum(b) = 6x, d/db = sum(x * a) = 12
     avg.finish();
     // unused gets no gradient during backward, so no bucket can start before finish(): bucket order.
-    EXPECT_EQ(group.events, (std::vector<std::string>{"grad a", "start 4", "start 2", "start 3", "wait 4", "wait 2",
-                                                     "wait 3"}));
+    EXPECT_EQ(group.events,
+              (std::vector<std::string>{"grad a", "start 4", "start 2", "start 3", "wait 4", "wait 2", "wait 3"}));
     EXPECT_TRUE(torch::equal(a.grad(), torch::tensor({6.f, 12.f, 18.f})));  // (g + g) / 2
     EXPECT_TRUE(torch::equal(b.grad(), torch::full({2}, 12.f)));
     EXPECT_FALSE(unused.grad().defined());
@@ -186,20 +186,26 @@ using test::Proc;
 using test::wait_for;
 
 // geo_train `args` with `env` added to this process's environment; output to `log`.
-Proc spawn(const std::vector<std::string>& args, const std::map<std::string, std::string>& env, const std::string& log) {
+Proc spawn(const std::vector<std::string>& args, const std::map<std::string, std::string>& env,
+           const std::string& log) {
   return test::spawn(geo_train(), args, env, log);
 }
 
 std::string config_file(const std::string& dir, int iterations, bool shard, int checkpoint_interval = 2) {
   const std::string path = dir + "/c.yaml";
-  test::write_text(path, "model: {encoder_depth: 18, bn_momentum: 0.1}\n"
-                         "data: {root: " + world() + ", height: 64, width: 208, num_workers: 1, augment: {enabled: true}}\n"
-                         "stages:\n  - {name: s1, iterations: " + std::to_string(iterations) +
-                         ", train: [depth, pose], batch_size: 1}\n"
-                         "logging: {interval: 1, summary_interval: 0, checkpoint_interval: " +
-                         std::to_string(checkpoint_interval) + ", val_interval: 0, keep_last: 20}\n"
-                         "run: {threads: 1, seed: 3, distributed: {verify_interval: 1, timeout_s: 20, shard_data: " +
-                         (shard ? "true" : "false") + "}}\n");
+  test::write_text(path,
+                   "model: {encoder_depth: 18, bn_momentum: 0.1}\n"
+                   "data: {root: " +
+                       world() +
+                       ", height: 64, width: 208, num_workers: 1, augment: {enabled: true}}\n"
+                       "stages:\n  - {name: s1, iterations: " +
+                       std::to_string(iterations) +
+                       ", train: [depth, pose], batch_size: 1}\n"
+                       "logging: {interval: 1, summary_interval: 0, checkpoint_interval: " +
+                       std::to_string(checkpoint_interval) +
+                       ", val_interval: 0, keep_last: 20}\n"
+                       "run: {threads: 1, seed: 3, distributed: {verify_interval: 1, timeout_s: 20, shard_data: " +
+                       (shard ? "true" : "false") + "}}\n");
   return path;
 }
 
@@ -207,8 +213,12 @@ std::string config_file(const std::string& dir, int iterations, bool shard, int 
 std::vector<Proc> launch(int n, const std::vector<std::string>& args, const std::string& dir, int port) {
   std::vector<Proc> procs;
   for (int r = 0; r < n; ++r)
-    procs.push_back(spawn(args, {{"RANK", std::to_string(r)}, {"WORLD_SIZE", std::to_string(n)}, {"LOCAL_RANK", std::to_string(r)},
-                                 {"MASTER_ADDR", "127.0.0.1"}, {"MASTER_PORT", std::to_string(port)}},
+    procs.push_back(spawn(args,
+                          {{"RANK", std::to_string(r)},
+                           {"WORLD_SIZE", std::to_string(n)},
+                           {"LOCAL_RANK", std::to_string(r)},
+                           {"MASTER_ADDR", "127.0.0.1"},
+                           {"MASTER_PORT", std::to_string(port)}},
                           dir + "/rank" + std::to_string(r) + ".log"));
   return procs;
 }
@@ -273,7 +283,8 @@ TEST_F(Distributed, TwoProcessesOnTheSameBatchesTrainExactlyAsOne) {
   EXPECT_TRUE(bit_identical(weights(resolve_checkpoint(dir + "/two")), weights(resolve_checkpoint(dir + "/single"))));
   // Only rank 0 wrote the folder; rank 1 said nothing above warnings.
   EXPECT_NE(test::read_file(dir + "/rank0.log").find("distributed: 2 processes (gloo)"), std::string::npos);
-  EXPECT_EQ(test::read_file(dir + "/rank1.log").find("[info] s1"), std::string::npos) << test::read_file(dir + "/rank1.log");
+  EXPECT_EQ(test::read_file(dir + "/rank1.log").find("[info] s1"), std::string::npos)
+      << test::read_file(dir + "/rank1.log");
 }
 
 // metrics.csv of two runs equal field by field, numbers within `rel` relative.
@@ -316,7 +327,8 @@ TEST_F(Distributed, SyncBatchNormOnTheSameBatchesTrainsAsOne) {
   auto two = launch(2, {"--config", cfg, "--run-dir", dir + "/two", "--set", lr, "run.distributed.sync_batchnorm=true"},
                     dir, free_local_port());
   expect_all_exit(two, 0);
-  EXPECT_NE(test::read_file(dir + "/rank0.log").find("BatchNorm synchronised across the 2 processes"), std::string::npos)
+  EXPECT_NE(test::read_file(dir + "/rank0.log").find("BatchNorm synchronised across the 2 processes"),
+            std::string::npos)
       << test::read_file(dir + "/rank0.log");
   // Rounding: up to 2.3e-5 seen on an AVX2-only EPYC by step 3 (under 1e-5 with AVX-512); a wrong
   // count or statistic in the synchronised BatchNorm moves the losses by far more.
@@ -367,13 +379,15 @@ TEST_F(Distributed, TwoShardedProcessesLearnOnTheSyntheticWorld) {
     total.push_back(std::stod(field));
   }
   ASSERT_EQ(total.size(), 16u);
-  const double first = (total[0] + total[1] + total[2] + total[3]) / 4, last = (total[12] + total[13] + total[14] + total[15]) / 4;
+  const double first = (total[0] + total[1] + total[2] + total[3]) / 4,
+               last = (total[12] + total[13] + total[14] + total[15]) / 4;
   EXPECT_LT(last, 0.9 * first) << "first 4 iterations " << first << ", last 4 " << last;
 }
 
 TEST_F(Distributed, ALostProcessStopsTheOtherWithAMessage) {
   const auto dir = test::fresh_dir("dist_lost");
-  auto procs = launch(2, {"--config", config_file(dir, 100000, true, 100000), "--run-dir", dir + "/run"}, dir, free_local_port());
+  auto procs = launch(2, {"--config", config_file(dir, 100000, true, 100000), "--run-dir", dir + "/run"}, dir,
+                      free_local_port());
   wait_until_logged(dir + "/run", 2);
   ::kill(procs[1].pid, SIGKILL);
   const auto t0 = std::chrono::steady_clock::now();
@@ -388,7 +402,8 @@ TEST_F(Distributed, ALostProcessStopsTheOtherWithAMessage) {
 
 TEST_F(Distributed, ASigtermToOneStopsAllAtTheSameStepWithACheckpoint) {
   const auto dir = test::fresh_dir("dist_term");
-  auto procs = launch(2, {"--config", config_file(dir, 100000, true, 100000), "--run-dir", dir + "/run"}, dir, free_local_port());
+  auto procs = launch(2, {"--config", config_file(dir, 100000, true, 100000), "--run-dir", dir + "/run"}, dir,
+                      free_local_port());
   wait_until_logged(dir + "/run", 2);
   ::kill(procs[1].pid, SIGTERM);  // as a scheduler would, to any one of them
   expect_all_exit(procs, 130, 60);
@@ -404,22 +419,30 @@ TEST_F(Distributed, LaunchErrorsAreMessagesNotHangs) {
   EXPECT_NE(test::read_file(dir + "/half.log").find("WORLD_SIZE is set but RANK is not"), std::string::npos);
   // Rank 1 with nobody listening: an error after timeout_s (20 s here), not a hang.
   Proc lonely = spawn({"--config", cfg, "--set", "run.distributed.timeout_s=2", "--run-dir", dir + "/b"},
-                      {{"RANK", "1"}, {"WORLD_SIZE", "2"}, {"MASTER_ADDR", "127.0.0.1"}, {"MASTER_PORT", std::to_string(free_local_port())}},
+                      {{"RANK", "1"},
+                       {"WORLD_SIZE", "2"},
+                       {"MASTER_ADDR", "127.0.0.1"},
+                       {"MASTER_PORT", std::to_string(free_local_port())}},
                       dir + "/lonely.log");
   EXPECT_EQ(wait_for(lonely, 60), 1);
-  EXPECT_NE(test::read_file(dir + "/lonely.log").find("rank 1 could not reach the rendezvous at 127.0.0.1:"), std::string::npos)
+  EXPECT_NE(test::read_file(dir + "/lonely.log").find("rank 1 could not reach the rendezvous at 127.0.0.1:"),
+            std::string::npos)
       << test::read_file(dir + "/lonely.log");
   // Rank 0 with its peer never started: an error naming rank 1 within about timeout_s (one wait,
   // not one per rendezvous step: LibTorch 1.13's store gives up on missing workers silently).
   const auto t0 = std::chrono::steady_clock::now();
   Proc alone = spawn({"--config", cfg, "--set", "run.distributed.timeout_s=6", "--run-dir", dir + "/e"},
-                     {{"RANK", "0"}, {"WORLD_SIZE", "2"}, {"MASTER_ADDR", "127.0.0.1"}, {"MASTER_PORT", std::to_string(free_local_port())}},
+                     {{"RANK", "0"},
+                      {"WORLD_SIZE", "2"},
+                      {"MASTER_ADDR", "127.0.0.1"},
+                      {"MASTER_PORT", std::to_string(free_local_port())}},
                      dir + "/alone.log");
   EXPECT_EQ(wait_for(alone, 60), 1);
   const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf("rank 0 alone: exited after %.1f s (timeout_s 6)\n", waited);
   EXPECT_LT(waited, 10.0) << "twice the timeout is 12 s";
-  EXPECT_NE(test::read_file(dir + "/alone.log").find("rank 1"), std::string::npos) << test::read_file(dir + "/alone.log");
+  EXPECT_NE(test::read_file(dir + "/alone.log").find("rank 1"), std::string::npos)
+      << test::read_file(dir + "/alone.log");
   // Rank 0 on a port another program holds.
   const int s = ::socket(AF_INET, SOCK_STREAM, 0);
   sockaddr_in a{};
@@ -430,7 +453,10 @@ TEST_F(Distributed, LaunchErrorsAreMessagesNotHangs) {
   socklen_t n = sizeof a;
   ::getsockname(s, reinterpret_cast<sockaddr*>(&a), &n);
   Proc busy = spawn({"--config", cfg, "--set", "run.distributed.timeout_s=2", "--run-dir", dir + "/c"},
-                    {{"RANK", "0"}, {"WORLD_SIZE", "2"}, {"MASTER_ADDR", "127.0.0.1"}, {"MASTER_PORT", std::to_string(ntohs(a.sin_port))}},
+                    {{"RANK", "0"},
+                     {"WORLD_SIZE", "2"},
+                     {"MASTER_ADDR", "127.0.0.1"},
+                     {"MASTER_PORT", std::to_string(ntohs(a.sin_port))}},
                     dir + "/busy.log");
   EXPECT_EQ(wait_for(busy, 60), 1);
   EXPECT_NE(test::read_file(dir + "/busy.log").find("rank 0 could not open the rendezvous"), std::string::npos)
@@ -439,10 +465,12 @@ TEST_F(Distributed, LaunchErrorsAreMessagesNotHangs) {
   EXPECT_FALSE(fs::exists(dir + "/c"));  // nothing was created
   // Ranks launched with different WORLD_SIZEs: said as such by both, not Gloo's enforce message.
   const std::string port = std::to_string(free_local_port());
-  Proc r0 = spawn({"--config", cfg, "--set", "run.distributed.timeout_s=20", "--run-dir", dir + "/d"},
-                  {{"RANK", "0"}, {"WORLD_SIZE", "2"}, {"MASTER_ADDR", "127.0.0.1"}, {"MASTER_PORT", port}}, dir + "/r0.log");
-  Proc r1 = spawn({"--config", cfg, "--set", "run.distributed.timeout_s=20", "--run-dir", dir + "/d"},
-                  {{"RANK", "1"}, {"WORLD_SIZE", "3"}, {"MASTER_ADDR", "127.0.0.1"}, {"MASTER_PORT", port}}, dir + "/r1.log");
+  Proc r0 =
+      spawn({"--config", cfg, "--set", "run.distributed.timeout_s=20", "--run-dir", dir + "/d"},
+            {{"RANK", "0"}, {"WORLD_SIZE", "2"}, {"MASTER_ADDR", "127.0.0.1"}, {"MASTER_PORT", port}}, dir + "/r0.log");
+  Proc r1 =
+      spawn({"--config", cfg, "--set", "run.distributed.timeout_s=20", "--run-dir", dir + "/d"},
+            {{"RANK", "1"}, {"WORLD_SIZE", "3"}, {"MASTER_ADDR", "127.0.0.1"}, {"MASTER_PORT", port}}, dir + "/r1.log");
   EXPECT_EQ(wait_for(r1, 60), 1);
   EXPECT_EQ(wait_for(r0, 60), 1);
   for (const char* log : {"/r0.log", "/r1.log"})
@@ -457,14 +485,16 @@ TEST_F(Distributed, RanksWithDifferentConfigurationsAreRefusedByKey) {
   const auto dir = test::fresh_dir("dist_config");
   const auto cfg = config_file(dir, 2, true);
   const std::string port = std::to_string(free_local_port());
-  const std::map<std::string, std::string> env = {{"WORLD_SIZE", "2"}, {"MASTER_ADDR", "127.0.0.1"}, {"MASTER_PORT", port}};
+  const std::map<std::string, std::string> env = {
+      {"WORLD_SIZE", "2"}, {"MASTER_ADDR", "127.0.0.1"}, {"MASTER_PORT", port}};
   auto with_rank = [&](int r) {
     auto e = env;
     e["RANK"] = e["LOCAL_RANK"] = std::to_string(r);
     return e;
   };
   std::vector<Proc> procs;
-  procs.push_back(spawn({"--config", cfg, "--run-dir", dir + "/run", "--set", "run.threads=1"}, with_rank(0), dir + "/r0.log"));
+  procs.push_back(
+      spawn({"--config", cfg, "--run-dir", dir + "/run", "--set", "run.threads=1"}, with_rank(0), dir + "/r0.log"));
   procs.push_back(spawn({"--config", cfg, "--run-dir", dir + "/run", "--set", "stages[0].batch_size=2", "--set",
                          "model.use_fr=false", "--set", "run.threads=2"},
                         with_rank(1), dir + "/r1.log"));
@@ -472,7 +502,8 @@ TEST_F(Distributed, RanksWithDifferentConfigurationsAreRefusedByKey) {
   for (const char* log : {"/r0.log", "/r1.log"}) {
     const std::string text = test::read_file(dir + log);
     EXPECT_NE(text.find("the processes were started with different configurations"), std::string::npos) << text;
-    EXPECT_NE(text.find("rank 1 vs rank 0: model.use_fr: true vs false; stages[0].batch_size: 1 vs 2"), std::string::npos)
+    EXPECT_NE(text.find("rank 1 vs rank 0: model.use_fr: true vs false; stages[0].batch_size: 1 vs 2"),
+              std::string::npos)
         << text;
     EXPECT_EQ(text.find("run.threads"), std::string::npos) << text;
   }

@@ -37,7 +37,8 @@ size_t count(const std::string& text, const std::string& part) {
 TEST(ProgressSink, WarnsOnceWhenMostPixelsAreAutoMasked) {
   const auto traffic = stage_log(120, [](int64_t) { return 0.7; });
   EXPECT_EQ(count(traffic, "warning "), 1u) << traffic;
-  EXPECT_NE(traffic.find("stage s1: 70% of the pixels were auto-masked over iterations 1-50"), std::string::npos) << traffic;
+  EXPECT_NE(traffic.find("stage s1: 70% of the pixels were auto-masked over iterations 1-50"), std::string::npos)
+      << traffic;
   EXPECT_NE(traffic.find("geo_train --init RUN"), std::string::npos) << traffic;
 
   const auto forward = stage_log(120, [](int64_t i) { return i % 2 ? 0.26 : 0.5; });

@@ -29,7 +29,8 @@ stages:
   - {name: s2, iterations: 2, train: [depth, pose, flow], batch_size: 1}
 logging: {interval: 1, summary_interval: 2, checkpoint_interval: 2, val_interval: 2, keep_last: 5}
 run: {threads: 2, seed: 3}
-)", "memory.yaml", overrides);
+)",
+                      "memory.yaml", overrides);
 }
 
 TEST(SyntheticTraining, KilledAndResumedRunLogsTheSameLosses) {
@@ -52,8 +53,9 @@ TEST(SyntheticTraining, NeedsNoFilesAndChecksItsKeys) {
   EXPECT_EQ(data.val->size(), 1u);
   GEO_EXPECT_THROW_WITH(memory_config({"data.synthetic.preset=huge"}), "data.synthetic.preset", "tiny or kitti");
   GEO_EXPECT_THROW_WITH(memory_config({"data.synthetic.drives=0"}), "data.synthetic.drives");
-  GEO_EXPECT_THROW_WITH(open_training_data(memory_config({"data.synthetic.frames_per_drive=4", "data.seq_length=5"}).data),
-                        "shorter than one snippet");
+  GEO_EXPECT_THROW_WITH(
+      open_training_data(memory_config({"data.synthetic.frames_per_drive=4", "data.seq_length=5"}).data),
+      "shorter than one snippet");
 }
 
 #ifdef GEO_WITH_OPENCV

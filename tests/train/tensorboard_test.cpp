@@ -31,7 +31,9 @@ TEST(TensorBoard, ScalarEventBytesByHand) {
   // simple_value 1.0f (2, fixed32)}}}.
   const std::string e = encode_scalar_event(0.0, 3, "a", 1.0f);
   const std::string want = std::string("\x09", 1) + std::string(8, '\0') + "\x10\x03" + "\x2a\x0a" + "\x0a\x08" +
-                           "\x0a\x01" "a" + "\x15" + std::string("\x00\x00\x80\x3f", 4);
+                           "\x0a\x01"
+                           "a" +
+                           "\x15" + std::string("\x00\x00\x80\x3f", 4);
   EXPECT_EQ(e, want);
   // The TFRecord around it: 8-byte length, its masked CRC, the payload, its masked CRC.
   const std::string r = tfrecord(e);

@@ -152,7 +152,7 @@ TEST(Precision, Bf16NetworksWithFloat32Losses) {
   const auto bf16 = out.losses.values();
   ASSERT_EQ(bf16.size(), fp32.size());
   EXPECT_NE(bf16.back().second, fp32.back().second);  // the networks did run in bfloat16
-  for (size_t i = 0; i < fp32.size(); ++i)  // bfloat16 keeps 8 bits of mantissa
+  for (size_t i = 0; i < fp32.size(); ++i)            // bfloat16 keeps 8 bits of mantissa
     EXPECT_NEAR(bf16[i].second, fp32[i].second, 0.05 * std::abs(fp32[i].second) + 1e-3) << fp32[i].first;
   out.losses.total.backward();
   for (const auto& p : n.trainable_parameters()) {

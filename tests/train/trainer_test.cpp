@@ -44,14 +44,13 @@ stages:
   - {name: s2, iterations: 3, train: [depth, pose, flow], batch_size: 1}
 logging: {interval: 1, summary_interval: 0, checkpoint_interval: 2, val_interval: 0, keep_last: 5}
 run: {threads: 2, seed: 3}
-)" + extra, "tiny.yaml", {"data.root=" + world()});
+)" + extra,
+                      "tiny.yaml", {"data.root=" + world()});
 }
 
 using test::metrics;
 
-TrainState state_of(const std::string& checkpoint) {
-  return CheckpointFile(checkpoint).train_state();
-}
+TrainState state_of(const std::string& checkpoint) { return CheckpointFile(checkpoint).train_state(); }
 
 // val.csv rows of one stage: iteration -> score.
 std::map<int64_t, double> val_scores(const std::string& dir, const std::string& stage) {
@@ -148,7 +147,8 @@ TEST(Trainer, BestHoldsTheValidatedWeightsWhenTheIntervalsDiffer) {
   ASSERT_EQ(train(cfg, o), 0);
   const auto scores = val_scores(o.run_dir, "s1");
   ASSERT_EQ(scores.size(), 3u);  // iterations 3, 6, 9
-  const auto best = std::min_element(scores.begin(), scores.end(), [](auto& a, auto& b) { return a.second < b.second; });
+  const auto best =
+      std::min_element(scores.begin(), scores.end(), [](auto& a, auto& b) { return a.second < b.second; });
   const auto b = state_of(o.run_dir + "/checkpoints/best-s1.pt");
   EXPECT_EQ(b.iteration, best->first);
   EXPECT_NEAR(b.best_score, best->second, 1e-7);
@@ -359,8 +359,7 @@ TEST(TrainingData, AMissingNeighbourIsNamed) {
   DataConfig d = tiny_config().data;
   d.train_list = test::fresh_dir("neighbour") + "/list.txt";
   test::write_text(d.train_list, "2011_01_01/2011_01_01_drive_0001_sync 9 l\n");  // the drive's last frame
-  GEO_EXPECT_THROW_WITH(open_training_data(d), "has all its 3 frames on disk",
-                        "image_02/data/0000000010.png");
+  GEO_EXPECT_THROW_WITH(open_training_data(d), "has all its 3 frames on disk", "image_02/data/0000000010.png");
 }
 
 TEST(Trainer, ValidationHonoursOnBadSampleSkip) {
@@ -422,7 +421,8 @@ TEST(Trainer, ResumeRefusesAClipThatChanged) {
   const auto dir = test::fresh_dir("clip_resume");
   const std::string clip = dir + "/clip";
   std::filesystem::create_directories(clip);
-  for (const auto& e : std::filesystem::directory_iterator(world() + "/2011_01_01/2011_01_01_drive_0001_sync/image_02/data"))
+  for (const auto& e :
+       std::filesystem::directory_iterator(world() + "/2011_01_01/2011_01_01_drive_0001_sync/image_02/data"))
     std::filesystem::copy_file(e.path(), clip + "/" + e.path().filename().string());
   auto cfg = tiny_config();
   cfg.stages.resize(1);
@@ -442,7 +442,8 @@ TEST(Trainer, ResumeRefusesAClipThatChanged) {
   ASSERT_EQ(resume(o.run_dir, {}), 0);  // unchanged: the finished run says so
   std::filesystem::remove(clip + "/0000000009.png");
   const auto csv = test::read_file(o.run_dir + "/metrics.csv");
-  GEO_EXPECT_THROW_WITH(resume(o.run_dir, {}), "a clip changed since the run started: then " + record.substr(0, record.size() - 1),
+  GEO_EXPECT_THROW_WITH(resume(o.run_dir, {}),
+                        "a clip changed since the run started: then " + record.substr(0, record.size() - 1),
                         "; now clip '" + clip + "': 9 frames, 9 kept, digest ", "geo_train --init " + o.run_dir);
   EXPECT_EQ(test::read_file(o.run_dir + "/metrics.csv"), csv);
 }
@@ -470,7 +471,7 @@ TEST(Trainer, InitFromAnotherArchitectureOrABrokenFileIsOneClearLine) {
   other.model.encoder_depth = 34;
   other.model.use_fr = false;
   GEO_EXPECT_THROW_WITH(train(other, i), ck + ": its networks were trained with model.encoder_depth 18 (wanted 34), "
-                                             "model.use_fr true (wanted false); set those keys");
+                                              "model.use_fr true (wanted false); set those keys");
   EXPECT_FALSE(std::filesystem::exists(i.run_dir));  // a run that could not start leaves no folder
   // A truncated file given to --init: named, no LibTorch stack trace.
   std::filesystem::copy_file(ck, base + "/cut.pt");

@@ -78,8 +78,8 @@ inline void train_until_killed(const Config& config, const TrainOptions& options
 // both). What each logged, and the checkpoint the killed run left as latest.
 struct KilledAndResumed {
   std::string whole_dir, killed_dir;
-  std::string latest_when_killed;     // checkpoints/latest right after the kill
-  std::string whole, resumed;         // metrics.csv of each
+  std::string latest_when_killed;  // checkpoints/latest right after the kill
+  std::string whole, resumed;      // metrics.csv of each
 };
 inline KilledAndResumed killed_and_resumed(const Config& config, const std::string& base, int64_t kill_at,
                                            const std::string& device = "") {

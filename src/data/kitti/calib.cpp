@@ -11,12 +11,10 @@ namespace geo {
 
 const std::vector<double>& KeyValues::get(const std::string& key, size_t count) const {
   auto it = values.find(key);
-  if (it == values.end())
-    throw std::runtime_error(source + ": missing calibration entry '" + key + "'");
+  if (it == values.end()) throw std::runtime_error(source + ": missing calibration entry '" + key + "'");
   if (it->second.size() != count)
-    throw std::runtime_error(source + ": calibration entry '" + key + "' has " +
-                             std::to_string(it->second.size()) + " numbers, expected " +
-                             std::to_string(count));
+    throw std::runtime_error(source + ": calibration entry '" + key + "' has " + std::to_string(it->second.size()) +
+                             " numbers, expected " + std::to_string(count));
   return it->second;
 }
 
@@ -31,8 +29,8 @@ torch::Tensor KeyValues::matrix(const std::string& key, int64_t rows, int64_t co
 
 torch::Tensor KeyValues::projection(const std::string& key) const {
   const auto P = matrix(key, 3, 4);
-  const auto problem = camera_problem(P[0][0].item<double>(), P[1][1].item<double>(), P[0][2].item<double>(),
-                                      P[1][2].item<double>());
+  const auto problem =
+      camera_problem(P[0][0].item<double>(), P[1][1].item<double>(), P[0][2].item<double>(), P[1][2].item<double>());
   if (!problem.empty()) throw std::runtime_error(source + ": calibration entry '" + key + "': " + problem);
   return P;
 }
@@ -72,33 +70,29 @@ KeyValues parse_key_values(const std::string& text, const std::string& source) {
     if (key == "calib_time") continue;  // a date, not numbers (raw KITTI)
     const std::string where = source + " line " + std::to_string(line_no) + " ('" + key + "')";
     if (!seen.emplace(key, line_no).second)
-      throw std::runtime_error(where + ": key '" + key + "' is given twice (lines " + std::to_string(seen[key]) + " and " +
-                               std::to_string(line_no) + "): which one is meant cannot be told");
+      throw std::runtime_error(where + ": key '" + key + "' is given twice (lines " + std::to_string(seen[key]) +
+                               " and " + std::to_string(line_no) + "): which one is meant cannot be told");
     kv.values[key] = parse_doubles(rest, where);
   }
   return kv;
 }
 
-KeyValues read_key_values(const std::string& path) {
-  return parse_key_values(read_text_file(path), path);
+KeyValues read_key_values(const std::string& path) { return parse_key_values(read_text_file(path), path); }
+
+torch::Tensor RawCalib::K() const {
+  return P_rect.index({torch::indexing::Slice(), torch::indexing::Slice(0, 3)}).clone();
 }
 
-torch::Tensor RawCalib::K() const { return P_rect.index({torch::indexing::Slice(), torch::indexing::Slice(0, 3)}).clone(); }
-
-torch::Tensor RawCalib::img_from_velo() const {
-  return P_rect.matmul(R_rect).matmul(cam_from_velo);
-}
+torch::Tensor RawCalib::img_from_velo() const { return P_rect.matmul(R_rect).matmul(cam_from_velo); }
 
 RawCalib read_raw_calib(const std::string& date_dir, int camera, bool need_velo) {
-  if (camera != 2 && camera != 3)
-    throw std::invalid_argument("camera must be 2 or 3, got " + std::to_string(camera));
+  if (camera != 2 && camera != 3) throw std::invalid_argument("camera must be 2 or 3, got " + std::to_string(camera));
   const auto cam = read_key_values(date_dir + "/calib_cam_to_cam.txt");
   const std::string c = "0" + std::to_string(camera);
   RawCalib calib;
   calib.P_rect = cam.projection("P_rect_" + c);
   calib.R_rect = torch::eye(4, torch::kFloat64);
-  calib.R_rect.index_put_({torch::indexing::Slice(0, 3), torch::indexing::Slice(0, 3)},
-                          cam.rotation("R_rect_00"));
+  calib.R_rect.index_put_({torch::indexing::Slice(0, 3), torch::indexing::Slice(0, 3)}, cam.rotation("R_rect_00"));
   if (cam.has("S_rect_" + c)) {
     const auto& s = cam.get("S_rect_" + c, 2);
     calib.width = static_cast<int64_t>(s[0]);
@@ -107,10 +101,8 @@ RawCalib read_raw_calib(const std::string& date_dir, int camera, bool need_velo)
   calib.cam_from_velo = torch::eye(4, torch::kFloat64);
   if (need_velo) {
     const auto velo = read_key_values(date_dir + "/calib_velo_to_cam.txt");
-    calib.cam_from_velo.index_put_({torch::indexing::Slice(0, 3), torch::indexing::Slice(0, 3)},
-                                   velo.rotation("R"));
-    calib.cam_from_velo.index_put_({torch::indexing::Slice(0, 3), 3},
-                                   velo.matrix("T", 3, 1).squeeze(1));
+    calib.cam_from_velo.index_put_({torch::indexing::Slice(0, 3), torch::indexing::Slice(0, 3)}, velo.rotation("R"));
+    calib.cam_from_velo.index_put_({torch::indexing::Slice(0, 3), 3}, velo.matrix("T", 3, 1).squeeze(1));
   }
   return calib;
 }

@@ -34,11 +34,11 @@ KeyValues read_key_values(const std::string& path);
 
 // Raw KITTI calibration of one date folder for one colour camera (2 = left, 3 = right).
 struct RawCalib {
-  torch::Tensor P_rect;       // [3,4] P_rect_0c
-  torch::Tensor R_rect;       // [4,4] R_rect_00 padded with 1 (rectifying rotation of camera 0)
-  torch::Tensor cam_from_velo;// [4,4] [R|T] from calib_velo_to_cam.txt
+  torch::Tensor P_rect;           // [3,4] P_rect_0c
+  torch::Tensor R_rect;           // [4,4] R_rect_00 padded with 1 (rectifying rotation of camera 0)
+  torch::Tensor cam_from_velo;    // [4,4] [R|T] from calib_velo_to_cam.txt
   int64_t width = 0, height = 0;  // S_rect_0c (0 when the file has none)
-  torch::Tensor K() const;    // [3,3] left 3x3 of P_rect
+  torch::Tensor K() const;        // [3,3] left 3x3 of P_rect
   // x_img = P_rect * R_rect * cam_from_velo * x_velo  ([3,4], KITTI devkit).
   torch::Tensor img_from_velo() const;
 };

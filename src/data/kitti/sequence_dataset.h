@@ -15,7 +15,7 @@
 namespace geo {
 
 struct SequenceDatasetOptions {
-  std::string root;          // KITTI raw root (holds <date>/<drive>/...)
+  std::string root;  // KITTI raw root (holds <date>/<drive>/...)
   int64_t height = 128, width = 416, seq_length = 3;
   bool check_neighbours = true;  // drop entries whose first or last frame is missing
 };

@@ -27,7 +27,8 @@ std::string SplitEntry::scene() const {
 }
 
 std::string SplitEntry::image_path(const std::string& root, int64_t offset) const {
-  return root + "/" + folder + "/image_0" + std::to_string(camera()) + "/data/" + zero_padded(frame_at(offset), 10) + ".png";
+  return root + "/" + folder + "/image_0" + std::to_string(camera()) + "/data/" + zero_padded(frame_at(offset), 10) +
+         ".png";
 }
 
 namespace {
@@ -59,10 +60,13 @@ SplitEntry parse_split_line(const std::string& raw, const std::string& where) {
   std::istringstream in(e.line);
   std::string frame, side, extra;
   in >> e.folder >> frame >> side;
-  const bool numeric = !frame.empty() && std::all_of(frame.begin(), frame.end(), [](char c) { return c >= '0' && c <= '9'; });
+  const bool numeric =
+      !frame.empty() && std::all_of(frame.begin(), frame.end(), [](char c) { return c >= '0' && c <= '9'; });
   if (e.folder.empty() || !numeric || (side != "l" && side != "r") || (in >> extra))
-    throw std::runtime_error(where + ": expected 'folder frame l|r' or '<folder>/image_02/data/"
-                             "<frame>.png', got '" + e.line + "'");
+    throw std::runtime_error(where +
+                             ": expected 'folder frame l|r' or '<folder>/image_02/data/"
+                             "<frame>.png', got '" +
+                             e.line + "'");
   e.frame = parse_frame(frame, where, e.line);
   e.side = side[0];
   return e;
@@ -100,8 +104,8 @@ std::set<std::string> read_static_frames(const std::string& path) {
     std::string date, drive, frame;
     in >> date >> drive >> frame;
     if (frame.empty() || !std::all_of(frame.begin(), frame.end(), ::isdigit))
-      throw std::runtime_error(path + " entry " + std::to_string(line_no) +
-                               ": expected 'date drive frame', got '" + line + "'");
+      throw std::runtime_error(path + " entry " + std::to_string(line_no) + ": expected 'date drive frame', got '" +
+                               line + "'");
     keys.insert(static_key(drive, std::stoll(frame)));
   }
   return keys;

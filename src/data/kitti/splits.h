@@ -12,16 +12,17 @@
 namespace geo {
 
 struct SplitEntry {
-  std::string folder;   // drive folder relative to the root, e.g. 2011_09_26/2011_09_26_drive_0022_sync
-  int64_t frame = 0;    // frame index
-  char side = 'l';      // 'l' (camera 02) or 'r' (camera 03)
-  std::string line;     // the line as written (for messages)
+  std::string folder;  // drive folder relative to the root, e.g. 2011_09_26/2011_09_26_drive_0022_sync
+  int64_t frame = 0;   // frame index
+  char side = 'l';     // 'l' (camera 02) or 'r' (camera 03)
+  std::string line;    // the line as written (for messages)
   // The snippet's frames in order, the target in the middle, when they are not frame - L/2 ..
   // frame + L/2 (raw_drive_snippets: GeoNet's frame lists without the static frames); else empty.
   std::vector<int64_t> snippet;
 
   int64_t frame_at(int64_t offset) const {  // the frame `offset` places from the target
-    return snippet.empty() ? frame + offset : snippet.at(static_cast<size_t>(offset + static_cast<int64_t>(snippet.size()) / 2));
+    return snippet.empty() ? frame + offset
+                           : snippet.at(static_cast<size_t>(offset + static_cast<int64_t>(snippet.size()) / 2));
   }
 
   int camera() const { return side == 'r' ? 3 : 2; }

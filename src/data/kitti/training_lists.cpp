@@ -31,7 +31,8 @@ RawTrainingLists raw_training_lists(const DataConfig& d, const std::string& root
     throw ConfigError("data.train_list: no training list found (" +
                       (d.train_list.empty() ? "looked for " + root + "/splits/" + list_split +
                                                   "/train_files.txt and the shipped configs/splits/" + list_split
-                                            : "'" + d.train_list + "' does not exist") + ")");
+                                            : "'" + d.train_list + "' does not exist") +
+                      ")");
   if (!out.val_list.empty() && !fs::exists(out.val_list)) out.val_list.clear();
   // GeoNet's flow data keeps the Eigen test drives: only the KITTI 2015 scenes are left out.
   const std::string scenes_file = stereo_drives ? "" : find_split_file(root, "eigen", "test_scenes.txt");
@@ -82,7 +83,8 @@ TrainingDrives training_drives(const DataConfig& d) {
   if (!root.empty() && !fs::exists(root + "/splits") && fs::is_directory(root + "/raw/splits")) root += "/raw";
   // Lists found at the root when training ran cannot be read from here: unknown, not "none".
   if (d.train_list.empty() && !fs::is_directory(root)) {
-    out.unknown = "the training data root '" + d.root + "' is not a folder here (a relative root resolves from where "
+    out.unknown = "the training data root '" + d.root +
+                  "' is not a folder here (a relative root resolves from where "
                   "geo_eval runs): the split lists training read cannot be checked";
     return out;
   }

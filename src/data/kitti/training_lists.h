@@ -14,15 +14,15 @@ namespace geo {
 
 // The lists of a KITTI raw split (every data.split but odometry) and what is left out of them.
 struct RawTrainingLists {
-  std::string train_list, val_list;      // val_list: "" when there is none
-  bool from_drives = false;              // kitti_raw_stereo: training snippets from every drive on disk
-                                         // (raw_drive_snippets); train_list then only names the root
-  std::set<std::string> test_scenes;     // drives left out: the Eigen test scenes, and for
-                                         // raw_minus_kitti2015 also KITTI 2015's (stereo/test_scenes_stereo.txt);
-                                         // kitti_raw_stereo only KITTI 2015's
-  std::set<std::string> static_frames;   // static_key()s left out (configs/splits/static_frames.txt;
-                                         // none with data.remove_static false)
-  std::vector<std::string> exclusions;   // the files those come from
+  std::string train_list, val_list;     // val_list: "" when there is none
+  bool from_drives = false;             // kitti_raw_stereo: training snippets from every drive on disk
+                                        // (raw_drive_snippets); train_list then only names the root
+  std::set<std::string> test_scenes;    // drives left out: the Eigen test scenes, and for
+                                        // raw_minus_kitti2015 also KITTI 2015's (stereo/test_scenes_stereo.txt);
+                                        // kitti_raw_stereo only KITTI 2015's
+  std::set<std::string> static_frames;  // static_key()s left out (configs/splits/static_frames.txt;
+                                        // none with data.remove_static false)
+  std::vector<std::string> exclusions;  // the files those come from
 };
 // `root`: the raw folder (data.root resolved). Throws ConfigError naming data.train_list when there is
 // no training list.

@@ -6,8 +6,8 @@
 
 namespace geo {
 
-torch::Tensor velodyne_depth(const torch::Tensor& points, const torch::Tensor& img_from_velo,
-                             int64_t height, int64_t width, VelodyneDepthOptions options) {
+torch::Tensor velodyne_depth(const torch::Tensor& points, const torch::Tensor& img_from_velo, int64_t height,
+                             int64_t width, VelodyneDepthOptions options) {
   check_shape(points, "velodyne points", {-1, 4});
   check_shape(img_from_velo, "img_from_velo", {3, 4});
   auto pts = points.to(torch::kFloat64).contiguous();
@@ -20,7 +20,7 @@ torch::Tensor velodyne_depth(const torch::Tensor& points, const torch::Tensor& i
   for (int64_t i = 0; i < pts.size(0); ++i) {
     const double x = p[i][0], y = p[i][1], z = p[i][2];
     if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) continue;  // counted by the caller
-    if (x < 0) continue;  // behind the scanner (reference code)
+    if (x < 0) continue;                                                        // behind the scanner (reference code)
     double img[3];
     for (int r = 0; r < 3; ++r) img[r] = m[r][0] * x + m[r][1] * y + m[r][2] * z + m[r][3];
     if (!(img[2] > 0)) continue;

@@ -41,9 +41,10 @@ void check_packed_cache_complete(const std::string& dir) {
   std::error_code ec;
   if (fs::exists(dir + "/index.txt", ec)) return;  // PackedSnippets checks what it holds
   if (has_packed_cache_files(dir))
-    throw std::runtime_error("packed cache " + dir + " is incomplete: it has " +
-                             (fs::exists(dir + "/frames.bin", ec) ? "frames.bin" : "frames.bin.tmp") +
-                             " but no index.txt (geo_prepare did not finish): re-run geo_prepare, or remove the folder");
+    throw std::runtime_error(
+        "packed cache " + dir + " is incomplete: it has " +
+        (fs::exists(dir + "/frames.bin", ec) ? "frames.bin" : "frames.bin.tmp") +
+        " but no index.txt (geo_prepare did not finish): re-run geo_prepare, or remove the folder");
 }
 
 std::string new_pack_id() {
@@ -55,7 +56,8 @@ std::string new_pack_id() {
 }
 
 PackedWriter::PackedWriter(const std::string& dir, int64_t height, int64_t width, int64_t seq_length, std::string pack)
-    : dir_(dir), pack_(pack.empty() ? new_pack_id() : std::move(pack)), height_(height), width_(width), seq_length_(seq_length) {
+    : dir_(dir), pack_(pack.empty() ? new_pack_id() : std::move(pack)), height_(height), width_(width),
+      seq_length_(seq_length) {
   if (pack_.find_first_of(" \t\r\n") != std::string::npos)
     throw std::invalid_argument("packed cache identifier '" + pack_ + "' holds white space");
   fs::create_directories(dir);
@@ -66,14 +68,13 @@ PackedWriter::PackedWriter(const std::string& dir, int64_t height, int64_t width
 void PackedWriter::add(const Snippet& s) {
   TORCH_CHECK(s.frames.dim() == 4 && s.frames.size(0) == seq_length_ && s.frames.size(1) == 3 &&
                   s.frames.size(2) == height_ && s.frames.size(3) == width_,
-              "snippet '", s.id, "' must be [", seq_length_, ",3,", height_, ",", width_, "], got ",
-              s.frames.sizes());
+              "snippet '", s.id, "' must be [", seq_length_, ",3,", height_, ",", width_, "], got ", s.frames.sizes());
   auto u8 = (s.frames.clamp(0, 1) * 255).round().to(torch::kUInt8).contiguous();
   frames_.write(reinterpret_cast<const char*>(u8.data_ptr<uint8_t>()), u8.numel());
   if (!frames_) throw std::runtime_error(dir_ + "/frames.bin.tmp: write failed (disk full?)");
   auto K = s.K.to(torch::kFloat64);
-  intrinsics_.push_back({K[0][0].item<double>(), K[1][1].item<double>(), K[0][2].item<double>(),
-                         K[1][2].item<double>()});
+  intrinsics_.push_back(
+      {K[0][0].item<double>(), K[1][1].item<double>(), K[0][2].item<double>(), K[1][2].item<double>()});
   ids_.push_back(s.id);
 }
 
@@ -85,8 +86,8 @@ void PackedWriter::finish() {
   idx << "geo-packed " << kPackedFormatVersion << "\nheight " << height_ << "\nwidth " << width_ << "\nseq_length "
       << seq_length_ << "\ncount " << ids_.size() << "\npack " << pack_ << "\n";
   for (size_t i = 0; i < ids_.size(); ++i)
-    idx << intrinsics_[i][0] << " " << intrinsics_[i][1] << " " << intrinsics_[i][2] << " "
-        << intrinsics_[i][3] << " " << ids_[i] << "\n";
+    idx << intrinsics_[i][0] << " " << intrinsics_[i][1] << " " << intrinsics_[i][2] << " " << intrinsics_[i][3] << " "
+        << ids_[i] << "\n";
   fs::rename(dir_ + "/frames.bin.tmp", dir_ + "/frames.bin");
   write_file_atomic(dir_ + "/index.txt", idx.str());
 }
@@ -149,10 +150,11 @@ PackedSnippets::PackedSnippets(const std::string& dir) : dir_(dir) {
     std::getline(ls, id);
     // Intrinsics of an image at most 16k pixels wide: positive focal lengths, finite values.
     const bool plausible = k[0] > 0 && k[1] > 0 && std::all_of(k.begin(), k.end(), [](double x) {
-      return std::isfinite(x) && std::abs(x) < 1e6;
-    });
+                             return std::isfinite(x) && std::abs(x) < 1e6;
+                           });
     if (!plausible)
-      throw std::runtime_error(index + " line " + std::to_string(line_no) + ": implausible intrinsics '" + trim(line) + "'");
+      throw std::runtime_error(index + " line " + std::to_string(line_no) + ": implausible intrinsics '" + trim(line) +
+                               "'");
     intrinsics_.push_back(k);
     ids_.push_back(trim(id));
   }

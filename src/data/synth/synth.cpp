@@ -54,8 +54,7 @@ double value_noise(Vec3 p, uint64_t seed) {
   for (int dz = 0; dz < 2; ++dz)
     for (int dy = 0; dy < 2; ++dy)
       for (int dx = 0; dx < 2; ++dx)
-        acc += (dx ? tx : 1 - tx) * (dy ? ty : 1 - ty) * (dz ? tz : 1 - tz) *
-               lattice(ix + dx, iy + dy, iz + dz, seed);
+        acc += (dx ? tx : 1 - tx) * (dy ? ty : 1 - ty) * (dz ? tz : 1 - tz) * lattice(ix + dx, iy + dy, iz + dz, seed);
   return acc;
 }
 // Three octaves, wavelengths 4, 1.6 and 0.64 m times `scale`; result in [0,1].
@@ -74,8 +73,7 @@ void parallel_rows(int64_t rows, int threads, const std::function<void(int64_t, 
   int n = threads > 0 ? threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   n = static_cast<int>(std::min<int64_t>(n, rows));
   std::vector<std::thread> pool;
-  for (int i = 0; i < n; ++i)
-    pool.emplace_back(fn, rows * i / n, rows * (i + 1) / n);
+  for (int i = 0; i < n; ++i) pool.emplace_back(fn, rows * i / n, rows * (i + 1) / n);
   for (auto& t : pool) t.join();
 }
 
@@ -106,8 +104,7 @@ SynthOptions SynthOptions::preset_named(const std::string& name) {
     // KITTI's intrinsics scaled to 64x208 (fx 721.5377 * 208/1242, ...).
     o.height = 64;
     o.width = 208;
-    o.intrinsics = {721.5377 * 208 / 1242, 721.5377 * 64 / 375, 609.5593 * 208 / 1242,
-                    172.854 * 64 / 375};
+    o.intrinsics = {721.5377 * 208 / 1242, 721.5377 * 64 / 375, 609.5593 * 208 / 1242, 172.854 * 64 / 375};
     o.lidar_beams = 32;  // a sparser scan keeps the tiny world small
     o.lidar_azimuth_step_deg = 1.0;
   } else if (name == "kitti") {
@@ -137,7 +134,8 @@ torch::Tensor RigidPose::matrix() const {
 }
 
 SynthScene::SynthScene(uint64_t seed, int64_t frames, double turns, bool traffic) : seed_(seed) {
-  if (!(turns > 0 && turns <= 10)) throw std::invalid_argument("synthetic world: turns must be in (0, 10], got " + std::to_string(turns));
+  if (!(turns > 0 && turns <= 10))
+    throw std::invalid_argument("synthetic world: turns must be in (0, 10], got " + std::to_string(turns));
   std::mt19937_64 rng(mix(seed + 12345));
   auto U = [&](double a, double b) { return std::uniform_real_distribution<double>(a, b)(rng); };
   speed_ = U(0.8, 1.2);  // metres per frame (KITTI: about 1 m at 10 Hz)
@@ -153,7 +151,8 @@ SynthScene::SynthScene(uint64_t seed, int64_t frames, double turns, bool traffic
     travel_.push_back(0);
     while (static_cast<int64_t>(travel_.size()) < frames + 64) {
       const auto n = static_cast<int64_t>(std::llround(standing ? U(6, 14) : U(8, 16)));
-      if (standing) stands.emplace_back(static_cast<int64_t>(travel_.size()), static_cast<int64_t>(travel_.size()) + n - 1);
+      if (standing)
+        stands.emplace_back(static_cast<int64_t>(travel_.size()), static_cast<int64_t>(travel_.size()) + n - 1);
       for (int64_t i = 0; i < n; ++i)
         travel_.push_back(travel_.back() + (standing ? 0 : (i == 0 || i == n - 1 ? 0.5 : 1.0) * speed_));
       standing = !standing;
@@ -331,11 +330,11 @@ std::array<float, 3> SynthScene::shade(const Hit& hit, int64_t frame) const {
     const double n = fbm(p, box.texture_scale, seed_ + 31 * hit.id);
     double k = 0.55 + 0.6 * n;
     const double up = kCameraHeight - p.y;  // height above the road
-    if (box.material == 1 && std::abs(hit.normal.x) > 0.5 && up > 1.0 &&
-        frac(p.z / 3.0) > 0.3 && frac(p.z / 3.0) < 0.8 && frac(up / 3.0) > 0.35 && frac(up / 3.0) < 0.8)
-      k *= 0.35;  // windows
-    if (box.material == 2 && frac(up / 0.6) < 0.5) k *= 0.55;   // striped poles
-    if (box.material == 4 && up > 0.9) k *= 0.45;               // car windows
+    if (box.material == 1 && std::abs(hit.normal.x) > 0.5 && up > 1.0 && frac(p.z / 3.0) > 0.3 &&
+        frac(p.z / 3.0) < 0.8 && frac(up / 3.0) > 0.35 && frac(up / 3.0) < 0.8)
+      k *= 0.35;                                               // windows
+    if (box.material == 2 && frac(up / 0.6) < 0.5) k *= 0.55;  // striped poles
+    if (box.material == 4 && up > 0.9) k *= 0.45;              // car windows
     r = box.colour[0] * k;
     g = box.colour[1] * k;
     b = box.colour[2] * k;
@@ -442,7 +441,7 @@ torch::Tensor render_lidar(const SynthScene& scene, int64_t frame, const SynthOp
         const auto c = scene.shade(hit, frame);
         const float t = static_cast<float>(hit.t);
         rows[b].insert(rows[b].end(), {float(dv.x) * t, float(dv.y) * t, float(dv.z) * t,
-                                        0.299f * c[0] + 0.587f * c[1] + 0.114f * c[2]});
+                                       0.299f * c[0] + 0.587f * c[1] + 0.114f * c[2]});
       }
     }
   });

@@ -30,20 +30,20 @@ struct SynthOptions {
   std::string preset = "tiny";
   int64_t height = 64, width = 208;
   SynthIntrinsics intrinsics;
-  int supersample = 3;            // rays per pixel = supersample^2 (anti-aliasing)
-  int train_drives = 3;           // drives for training/validation
-  int test_drives = 1;            // drives held out (listed as test scenes)
+  int supersample = 3;   // rays per pixel = supersample^2 (anti-aliasing)
+  int train_drives = 3;  // drives for training/validation
+  int test_drives = 1;   // drives held out (listed as test scenes)
   int64_t frames_per_drive = 42;
-  int flow_pairs = 20;            // KITTI-2015-style pairs
-  int64_t odometry_frames = 60;   // one odometry sequence ("09")
-  int lidar_beams = 64;           // Velodyne HDL-64E has 64, from -24.8 to +2 degrees
+  int flow_pairs = 20;           // KITTI-2015-style pairs
+  int64_t odometry_frames = 60;  // one odometry sequence ("09")
+  int lidar_beams = 64;          // Velodyne HDL-64E has 64, from -24.8 to +2 degrees
   double lidar_azimuth_step_deg = 0.2;
   uint64_t seed = 1;
-  int threads = 0;                // 0 = all cores
-  double turns = 1.0;             // how winding the road is: the sway's frequency x turns (heading
-                                  // change per frame x turns^2); rotation is what pins a learned focal length
-  bool traffic = false;           // stop-and-go traffic (SynthScene): standing stretches, a car ahead
-                                  // keeping its gap, overtaking trucks, oncoming cars
+  int threads = 0;       // 0 = all cores
+  double turns = 1.0;    // how winding the road is: the sway's frequency x turns (heading
+                         // change per frame x turns^2); rotation is what pins a learned focal length
+  bool traffic = false;  // stop-and-go traffic (SynthScene): standing stretches, a car ahead
+                         // keeping its gap, overtaking trucks, oncoming cars
 
   // "tiny" (64x208, CI) or "kitti" (375x1242, KITTI's intrinsics). Unknown names throw.
   static SynthOptions preset_named(const std::string& name);
@@ -61,10 +61,10 @@ struct RigidPose {
 };
 
 struct SynthBox {
-  Vec3 lo, hi;           // extent at frame 0
-  Vec3 velocity;         // metres per frame (0 for static objects)
+  Vec3 lo, hi;                  // extent at frame 0
+  Vec3 velocity;                // metres per frame (0 for static objects)
   bool follows_camera = false;  // moves along z with the camera's travel (a car keeping its gap)
-  int material = 0;      // 1 wall, 2 pole, 3 box, 4 car, 5 backdrop (0 = ground plane)
+  int material = 0;             // 1 wall, 2 pole, 3 box, 4 car, 5 backdrop (0 = ground plane)
   std::array<float, 3> colour{0.5f, 0.5f, 0.5f};
   double texture_scale = 1.0;
 };
@@ -91,9 +91,9 @@ class SynthScene {
   Vec3 offset(int id, int64_t frame) const;
 
   struct Hit {
-    double t = 0;      // ray parameter (camera z for camera rays, metres for unit rays)
-    int id = -2;       // box index, -1 ground, -2 nothing (sky)
-    Vec3 point;        // world point
+    double t = 0;  // ray parameter (camera z for camera rays, metres for unit rays)
+    int id = -2;   // box index, -1 ground, -2 nothing (sky)
+    Vec3 point;    // world point
     Vec3 normal;
   };
   Hit cast(const Vec3& origin, const Vec3& dir, int64_t frame, double t_max = 1e9) const;
@@ -111,10 +111,10 @@ class SynthScene {
 };
 
 struct SynthFrame {
-  torch::Tensor image;  // [3,H,W] float32 in [0,1]
-  torch::Tensor depth;  // [1,H,W] float32, camera z in metres, 0 = sky
-  torch::Tensor object; // [H,W] int32, box id, -1 ground, -2 sky
-  RigidPose pose;       // camera-to-world
+  torch::Tensor image;   // [3,H,W] float32 in [0,1]
+  torch::Tensor depth;   // [1,H,W] float32, camera z in metres, 0 = sky
+  torch::Tensor object;  // [H,W] int32, box id, -1 ground, -2 sky
+  RigidPose pose;        // camera-to-world
 };
 SynthFrame render_frame(const SynthScene& scene, int64_t frame, const SynthOptions& options);
 // KITTI 2015's obj_map of a frame: 0 = static scene (ground, buildings, poles, boxes, sky),

@@ -13,8 +13,7 @@ class SynthSnippets : public SnippetSource {
     int drive;
     int64_t frame;
   };
-  SynthSnippets(std::shared_ptr<const Frames> frames, std::vector<Target> targets, torch::Tensor K,
-                int64_t seq_length)
+  SynthSnippets(std::shared_ptr<const Frames> frames, std::vector<Target> targets, torch::Tensor K, int64_t seq_length)
       : frames_(std::move(frames)), targets_(std::move(targets)), K_(std::move(K)), seq_length_(seq_length) {}
 
   size_t size() const override { return targets_.size(); }
@@ -56,7 +55,8 @@ SynthOptions synth_world_at(const std::string& preset, int64_t height, int64_t w
 
 SynthSnippetSets render_synth_snippets(const SynthOptions& world, int64_t seq_length) {
   if (seq_length < 3 || seq_length % 2 == 0)
-    throw std::invalid_argument("synthetic snippets: seq_length " + std::to_string(seq_length) + " must be odd and >= 3");
+    throw std::invalid_argument("synthetic snippets: seq_length " + std::to_string(seq_length) +
+                                " must be odd and >= 3");
   if (world.train_drives < 1 || world.frames_per_drive < seq_length)
     throw std::invalid_argument("synthetic snippets: " + std::to_string(world.train_drives) + " drives of " +
                                 std::to_string(world.frames_per_drive) + " frames hold no " +

@@ -33,9 +33,9 @@ std::string cam_to_cam_text(const SynthOptions& o) {
   s << "calib_time: 01-Jan-2011 00:00:00 (geo_synth)\ncorner_dist: 0\n";
   for (int c = 0; c < 4; ++c) {
     const std::string n = "0" + std::to_string(c);
-    s << "S_" << n << ": " << size << "\nK_" << n << ": " << format_numbers(o.intrinsics.K())
-      << "\nD_" << n << ": 0 0 0 0 0\nR_" << n << ": " << I << "\nT_" << n << ": 0 0 0\nS_rect_"
-      << n << ": " << size << "\nR_rect_" << n << ": " << I << "\nP_rect_" << n << ": " << P << "\n";
+    s << "S_" << n << ": " << size << "\nK_" << n << ": " << format_numbers(o.intrinsics.K()) << "\nD_" << n
+      << ": 0 0 0 0 0\nR_" << n << ": " << I << "\nT_" << n << ": 0 0 0\nS_rect_" << n << ": " << size << "\nR_rect_"
+      << n << ": " << I << "\nP_rect_" << n << ": " << P << "\n";
   }
   return s.str();
 }
@@ -43,17 +43,15 @@ std::string cam_to_cam_text(const SynthOptions& o) {
 std::string velo_to_cam_text() {
   auto T = synth_cam_from_velo();
   using torch::indexing::Slice;
-  return "calib_time: 01-Jan-2011 00:00:00 (geo_synth)\nR: " +
-         format_numbers(T.index({Slice(0, 3), Slice(0, 3)})) + "\nT: " +
-         format_numbers(T.index({Slice(0, 3), 3})) + "\ndelta_f: 0 0\ndelta_c: 0 0\n";
+  return "calib_time: 01-Jan-2011 00:00:00 (geo_synth)\nR: " + format_numbers(T.index({Slice(0, 3), Slice(0, 3)})) +
+         "\nT: " + format_numbers(T.index({Slice(0, 3), 3})) + "\ndelta_f: 0 0\ndelta_c: 0 0\n";
 }
 
 // Poses relative to the first frame: T_0^-1 T_i (KITTI odometry convention).
 torch::Tensor relative_poses(const SynthScene& scene, int64_t first, int64_t count) {
   auto base = inverse_transform(scene.camera(first).matrix().unsqueeze(0));
   std::vector<torch::Tensor> out;
-  for (int64_t i = 0; i < count; ++i)
-    out.push_back(base.matmul(scene.camera(first + i).matrix().unsqueeze(0)));
+  for (int64_t i = 0; i < count; ++i) out.push_back(base.matmul(scene.camera(first + i).matrix().unsqueeze(0)));
   return torch::cat(out);
 }
 
@@ -84,7 +82,8 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
     const bool is_test = d >= o.train_drives;
     const SynthScene scene(synth_drive_seed(o.seed, 0, d), o.frames_per_drive, o.turns, o.traffic);
     const std::string folder = synth_drive_folder(d + 1), dir = raw + "/" + folder;
-    for (const char* sub : {"/image_02/data", "/velodyne_points/data", "/proj_depth/groundtruth/image_02", "/obj_map/image_02"})
+    for (const char* sub :
+         {"/image_02/data", "/velodyne_points/data", "/proj_depth/groundtruth/image_02", "/obj_map/image_02"})
       fs::create_directories(dir + sub);
     for (int64_t f = 0; f < o.frames_per_drive; ++f) {
       const auto frame = render_frame(scene, f, o);
@@ -147,20 +146,20 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
   }
   const std::string P = format_numbers(projection(o));
   using torch::indexing::Slice;
-  write_file_atomic(seq + "/calib.txt",
-                    "P0: " + P + "\nP1: " + P + "\nP2: " + P + "\nP3: " + P + "\nTr: " +
-                        format_numbers(synth_cam_from_velo().index({Slice(0, 3)})) + "\n");
+  write_file_atomic(seq + "/calib.txt", "P0: " + P + "\nP1: " + P + "\nP2: " + P + "\nP3: " + P + "\nTr: " +
+                                            format_numbers(synth_cam_from_velo().index({Slice(0, 3)})) + "\n");
   write_file_atomic(seq + "/times.txt", times.str());
   write_poses(root + "/odometry/poses/09.txt", relative_poses(odo, 0, o.odometry_frames));
-  write_file_atomic(root + "/README.txt",
-                    kReadmeStart + " (preset " + o.preset +
-                        ", seed " + std::to_string(o.seed) + ", " + std::to_string(o.width) + "x" +
-                        std::to_string(o.height) + (o.traffic ? ", stop-and-go traffic" : "") +
-                        ").\nraw/ = KITTI raw layout with Eigen-style "
-                        "splits in raw/splits; kitti2015/ = KITTI 2015 flow layout (obj_map: the moving objects); odometry/ = "
-                        "KITTI odometry layout.\nMoving objects per raw frame: raw/<drive>/obj_map/image_02 (uint8, 0 static).\nDense ground-truth depth: raw/<drive>/proj_depth/"
-                        "groundtruth/image_02 and kitti2015/training/depth (uint16, depth x 256).\ncamera_height.txt = "
-                        "the camera's height above the road in metres (geo_eval --scaling camera-height).\n");
+  write_file_atomic(
+      root + "/README.txt",
+      kReadmeStart + " (preset " + o.preset + ", seed " + std::to_string(o.seed) + ", " + std::to_string(o.width) +
+          "x" + std::to_string(o.height) + (o.traffic ? ", stop-and-go traffic" : "") +
+          ").\nraw/ = KITTI raw layout with Eigen-style "
+          "splits in raw/splits; kitti2015/ = KITTI 2015 flow layout (obj_map: the moving objects); odometry/ = "
+          "KITTI odometry layout.\nMoving objects per raw frame: raw/<drive>/obj_map/image_02 (uint8, 0 "
+          "static).\nDense ground-truth depth: raw/<drive>/proj_depth/"
+          "groundtruth/image_02 and kitti2015/training/depth (uint16, depth x 256).\ncamera_height.txt = "
+          "the camera's height above the road in metres (geo_eval --scaling camera-height).\n");
   std::ostringstream height;
   height << kSynthCameraHeight << "\n";
   write_file_atomic(root + "/camera_height.txt", height.str());
@@ -169,8 +168,8 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
 double synth_world_bytes(const SynthOptions& o) {
   const double image = 3.0 * o.height * o.width, scan = 16.0 * o.lidar_beams * (360.0 / o.lidar_azimuth_step_deg);
   const double frames = static_cast<double>(o.train_drives + o.test_drives) * static_cast<double>(o.frames_per_drive);
-  return frames * (image + 3.0 * o.height * o.width + scan) + o.flow_pairs * (3 * image + 4 * 6.0 * o.height * o.width) +
-         static_cast<double>(o.odometry_frames) * image;
+  return frames * (image + 3.0 * o.height * o.width + scan) +
+         o.flow_pairs * (3 * image + 4 * 6.0 * o.height * o.width) + static_cast<double>(o.odometry_frames) * image;
 }
 
 bool prepare_synth_root(const std::string& root, const SynthOptions& options, bool force) {
@@ -185,12 +184,14 @@ bool prepare_synth_root(const std::string& root, const SynthOptions& options, bo
                              std::to_string(static_cast<int64_t>(space.available / 1000000000)) +
                              " GB free: fewer --drives, --frames, --flow-pairs or --odometry-frames");
   if (!fs::exists(root) || fs::is_empty(root)) return false;
-  if (!force) throw std::runtime_error("--out '" + root + "' exists and is not empty (use --force to replace the world there)");
+  if (!force)
+    throw std::runtime_error("--out '" + root + "' exists and is not empty (use --force to replace the world there)");
   std::ifstream readme(root + "/README.txt");
   std::string first;
   std::getline(readme, first);
   if (first.rfind(kReadmeStart, 0) != 0)
-    throw std::runtime_error("--out '" + root + "' is not empty and holds no world written by geo_synth (no README.txt "
+    throw std::runtime_error("--out '" + root +
+                             "' is not empty and holds no world written by geo_synth (no README.txt "
                              "of one): --force replaces only such a world; choose another --out");
   for (const char* part : {"raw", "kitti2015", "odometry", "README.txt", "camera_height.txt"}) {
     std::string error;

@@ -54,7 +54,8 @@ cv::Matx33d fit_rotation(const std::vector<Pair>& pairs, const std::vector<size_
       const double x = r[0], y = r[1];
       const int i = static_cast<int>(2 * k);
       A.at<double>(i, 0) = c.fx * -x * y, A.at<double>(i, 1) = c.fx * (1 + x * x), A.at<double>(i, 2) = c.fx * -y;
-      A.at<double>(i + 1, 0) = c.fy * -(1 + y * y), A.at<double>(i + 1, 1) = c.fy * x * y, A.at<double>(i + 1, 2) = c.fy * x;
+      A.at<double>(i + 1, 0) = c.fy * -(1 + y * y), A.at<double>(i + 1, 1) = c.fy * x * y,
+                          A.at<double>(i + 1, 2) = c.fy * x;
       b.at<double>(i) = c.fx * (p.xb - x);
       b.at<double>(i + 1) = c.fy * (p.yb - y);
     }
@@ -78,8 +79,13 @@ cv::Mat motion_grey(const torch::Tensor& rgb) {
   TORCH_CHECK(rgb.dim() == 3 && rgb.size(0) == 3, "frame must be [3,H,W], got ", rgb.sizes());
   const auto scaled = rgb.is_floating_point() ? rgb.to(torch::kFloat32) * 255.0f : rgb.to(torch::kFloat32);
   // ITU-R BT.601 luma, as OpenCV's RGB -> grey.
-  const auto grey = (0.299f * scaled[0] + 0.587f * scaled[1] + 0.114f * scaled[2]).round().clamp(0, 255).to(torch::kUInt8).contiguous();
-  return cv::Mat(static_cast<int>(grey.size(0)), static_cast<int>(grey.size(1)), CV_8UC1, grey.data_ptr<uint8_t>()).clone();
+  const auto grey = (0.299f * scaled[0] + 0.587f * scaled[1] + 0.114f * scaled[2])
+                        .round()
+                        .clamp(0, 255)
+                        .to(torch::kUInt8)
+                        .contiguous();
+  return cv::Mat(static_cast<int>(grey.size(0)), static_cast<int>(grey.size(1)), CV_8UC1, grey.data_ptr<uint8_t>())
+      .clone();
 }
 
 cv::Mat motion_grey(const cv::Mat& decoded) {
@@ -143,7 +149,8 @@ CameraMotion camera_motion(const cv::Mat& a, const cv::Mat& b, const torch::Tens
   for (size_t i : best) is_still[i] = 1;
   for (size_t i = 0; i < pairs.size(); ++i) {
     const double u = pairs[i].xa * cam.fx + cam.cx, v = pairs[i].ya * cam.fy + cam.cy;
-    const int cx = std::clamp(static_cast<int>(4 * u / a.cols), 0, 3), cy = std::clamp(static_cast<int>(3 * v / a.rows), 0, 2);
+    const int cx = std::clamp(static_cast<int>(4 * u / a.cols), 0, 3),
+              cy = std::clamp(static_cast<int>(3 * v / a.rows), 0, 2);
     ++in_cell[cy * 4 + cx];
     still_cell[cy * 4 + cx] += is_still[i];
   }

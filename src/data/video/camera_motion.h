@@ -39,7 +39,8 @@ constexpr int64_t kMinTrackedFeatures = 12;
 
 // a, b: 8-bit grey images of one size; K: [3,3] intrinsics at that size (a nominal one will do: the
 // rotation's image motion depends on it only weakly).
-CameraMotion camera_motion(const cv::Mat& a, const cv::Mat& b, const torch::Tensor& K, const CameraMotionOptions& options);
+CameraMotion camera_motion(const cv::Mat& a, const cv::Mat& b, const torch::Tensor& K,
+                           const CameraMotionOptions& options);
 
 // The test a clip's frames take in decoding order (FrameSelector's camera_moved): the camera moved
 // before a frame when it moved since the last kept frame (slow creeping adds up) or since the frame

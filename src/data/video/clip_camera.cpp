@@ -42,9 +42,10 @@ torch::Tensor from_calib_file(const std::string& path, int64_t width, int64_t he
                       "nor P2 (KITTI odometry calib.txt)");
   }
   if (cal_w > 0 && cal_h > 0 && (cal_w != width || cal_h != height)) {
-    spdlog::warn("data.camera.calib_file '{}' is for {}x{} frames but '{}' has {}x{}: its K is scaled to them "
-                 "(right when the frames were resized, wrong when they were cropped)",
-                 path, cal_w, cal_h, clip, width, height);
+    spdlog::warn(
+        "data.camera.calib_file '{}' is for {}x{} frames but '{}' has {}x{}: its K is scaled to them "
+        "(right when the frames were resized, wrong when they were cropped)",
+        path, cal_w, cal_h, clip, width, height);
     K = resized_intrinsics(K, cal_h, cal_w, height, width);
   }
   return K.to(torch::kFloat64);
@@ -78,10 +79,11 @@ torch::Tensor clip_camera(const CameraConfig& camera, int64_t width, int64_t hei
     K = torch::tensor({f, 0.0, 0.5 * (width - 1.0), 0.0, f, 0.5 * (height - 1.0), 0.0, 0.0, 1.0}, torch::kFloat64)
             .view({3, 3});
   } else {
-    throw ConfigError("data.camera: no camera given for '" + clip + "' (" + std::to_string(width) + "x" +
-                      std::to_string(height) + "): set data.camera.intrinsics=[fx,fy,cx,cy] (pixels of the original " +
-                      "frames), data.camera.calib_file=<KITTI calib file> or data.camera.fov_deg=<horizontal field of view>, "
-                      "or learn it: model.learn_intrinsics=true");
+    throw ConfigError(
+        "data.camera: no camera given for '" + clip + "' (" + std::to_string(width) + "x" + std::to_string(height) +
+        "): set data.camera.intrinsics=[fx,fy,cx,cy] (pixels of the original " +
+        "frames), data.camera.calib_file=<KITTI calib file> or data.camera.fov_deg=<horizontal field of view>, "
+        "or learn it: model.learn_intrinsics=true");
   }
   const auto problem = camera_problem(K[0][0].item<double>(), K[1][1].item<double>(), K[0][2].item<double>(),
                                       K[1][2].item<double>(), width, height);

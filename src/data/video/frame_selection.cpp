@@ -52,7 +52,9 @@ bool FrameSelector::offer(int64_t index, const torch::Tensor& thumbnail, const s
 
 double FrameSelector::moving_share() const {
   const int64_t after_first = looked_at() - 1;
-  return after_first > 0 ? static_cast<double>(static_cast<int64_t>(kept_.size()) - 1) / static_cast<double>(after_first) : 1.0;
+  return after_first > 0
+             ? static_cast<double>(static_cast<int64_t>(kept_.size()) - 1) / static_cast<double>(after_first)
+             : 1.0;
 }
 
 ClipRuns split_clip(int64_t n, double val_fraction, int64_t val_block, int64_t seq_length) {

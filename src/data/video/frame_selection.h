@@ -45,8 +45,8 @@ class FrameSelector {
   int64_t decoded() const { return decoded_; }
   int64_t looked_at() const { return decoded_ - by_rate_; }
   int64_t skipped_by_rate() const { return by_rate_; }
-  int64_t skipped_static() const { return static_; }      // under static_threshold of the pixels changed
-  int64_t skipped_standing() const { return standing_; }  // pixels changed, the camera stood
+  int64_t skipped_static() const { return static_; }         // under static_threshold of the pixels changed
+  int64_t skipped_standing() const { return standing_; }     // pixels changed, the camera stood
   double largest_change() const { return largest_change_; }  // over the frames looked at
   // The share of the frames looked at after the first where the camera had moved since the last
   // kept frame (1 when only one was looked at).
@@ -71,7 +71,7 @@ constexpr double kFewMovingFrames = 1.0 / 3.0;
 // short for one validation snippet gives no validation block.
 struct ClipRuns {
   std::vector<std::vector<int64_t>> train, val;  // positions 0..n-1, each run in order
-  int64_t edge_dropped = 0;                       // frames left out at block edges
+  int64_t edge_dropped = 0;                      // frames left out at block edges
 };
 ClipRuns split_clip(int64_t n, double val_fraction, int64_t val_block, int64_t seq_length);
 

@@ -18,7 +18,8 @@ namespace geo {
 
 bool is_image_name(const std::string& path) {
   auto ext = fs::path(path).extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
   for (const char* e : {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp"})
     if (ext == e) return true;
   return false;
@@ -60,7 +61,8 @@ FrameStream::FrameStream(const std::string& path, const std::string& label)
   video_ = true;
   capture_.open(path, cv::CAP_FFMPEG);
   if (!capture_.isOpened())
-    throw std::runtime_error(where_ + "OpenCV cannot open it as a video (not a video, or a codec this OpenCV "
+    throw std::runtime_error(where_ +
+                             "OpenCV cannot open it as a video (not a video, or a codec this OpenCV "
                              "lacks); a folder of its frames works too");
   const double fps = capture_.get(cv::CAP_PROP_FPS);
   if (std::isfinite(fps) && fps > 0 && fps < 1000) fps_ = fps;
@@ -77,7 +79,8 @@ void FrameStream::check_video_end() {
   for (int i = 0; i < 8; ++i)
     if (capture_.grab()) ++later;
   if (later > 0)
-    throw std::runtime_error(where_ + "frame " + std::to_string(decoded + 1) + (frame_count_ > 0 ? " of " + std::to_string(frame_count_) : "") +
+    throw std::runtime_error(where_ + "frame " + std::to_string(decoded + 1) +
+                             (frame_count_ > 0 ? " of " + std::to_string(frame_count_) : "") +
                              " cannot be decoded while later ones can (a damaged file): re-encode or cut the video "
                              "(for example ffmpeg -i IN -c:v mjpeg -q:v 2 OUT.avi), or give a folder of its frames");
   if (frame_count_ > 0 && decoded + 1 < frame_count_)
@@ -92,8 +95,8 @@ void FrameStream::check_size(const cv::Mat& m, const std::string& what) {
     width_ = m.cols;
     height_ = m.rows;
   } else if (m.cols != width_ || m.rows != height_) {
-    throw std::runtime_error(where_ + what + " is " + std::to_string(m.cols) + "x" + std::to_string(m.rows) + " but " + first_ +
-                             " is " + std::to_string(width_) + "x" + std::to_string(height_) +
+    throw std::runtime_error(where_ + what + " is " + std::to_string(m.cols) + "x" + std::to_string(m.rows) + " but " +
+                             first_ + " is " + std::to_string(width_) + "x" + std::to_string(height_) +
                              ": the frames of one clip must have one size");
   }
 }
@@ -118,7 +121,8 @@ bool FrameStream::next(std::string& name, cv::Mat* bgr) {
   name = fs::path(file).stem().string();
   if (bgr) {
     cv::Mat m = cv::imread(file, cv::IMREAD_UNCHANGED);  // 16-bit and grey images as they are (mat_to_tensor)
-    if (m.empty()) throw std::runtime_error(where_ + "cannot read image '" + file + "' (missing, empty or not an image)");
+    if (m.empty())
+      throw std::runtime_error(where_ + "cannot read image '" + file + "' (missing, empty or not an image)");
     check_size(m, "'" + file + "'");
     *bgr = m;
   }

@@ -34,19 +34,19 @@ constexpr int kJpegQuality = 95;  // frames of videos kept in memory: visually l
 // One clip's chosen frames at the training size.
 struct Clip {
   std::string path;
-  std::vector<std::string> files;    // frame folder: the chosen frames' files
+  std::vector<std::string> files;        // frame folder: the chosen frames' files
   std::vector<std::vector<uchar>> jpeg;  // video: the chosen frames, cropped and resized, as JPEG
-  std::vector<int64_t> index;        // decoding-order number of each chosen frame
+  std::vector<int64_t> index;            // decoding-order number of each chosen frame
   CropWindow window;
-  int64_t height = 0, width = 0;     // training size
-  torch::Tensor K;                   // [3,3] float32 at the training size
-  int64_t total = 0;                 // frames decoded
+  int64_t height = 0, width = 0;  // training size
+  torch::Tensor K;                // [3,3] float32 at the training size
+  int64_t total = 0;              // frames decoded
 };
 
 // BGR frame -> the training frame [3,H,W] float32 in [0,1]: crop to `window`, resize to H x W.
 cv::Mat crop_resize(const cv::Mat& bgr, const CropWindow& w, int64_t height, int64_t width) {
-  cv::Mat roi = bgr(cv::Rect(static_cast<int>(w.x0), static_cast<int>(w.y0), static_cast<int>(w.width),
-                             static_cast<int>(w.height)));
+  cv::Mat roi = bgr(
+      cv::Rect(static_cast<int>(w.x0), static_cast<int>(w.y0), static_cast<int>(w.width), static_cast<int>(w.height)));
   cv::Mat out;
   const bool shrink = w.width > width || w.height > height;
   cv::resize(roi, out, cv::Size(static_cast<int>(width), static_cast<int>(height)), 0, 0,
@@ -63,7 +63,8 @@ cv::Mat read_colour(const std::string& path) {
 torch::Tensor clip_frame(const Clip& c, size_t i) {
   if (!c.jpeg.empty()) {
     cv::Mat m = cv::imdecode(c.jpeg.at(i), cv::IMREAD_COLOR);
-    if (m.empty()) throw std::runtime_error("clip '" + c.path + "': frame " + std::to_string(c.index.at(i)) + " cannot be decoded");
+    if (m.empty())
+      throw std::runtime_error("clip '" + c.path + "': frame " + std::to_string(c.index.at(i)) + " cannot be decoded");
     return mat_to_tensor(m, c.path);
   }
   return mat_to_tensor(crop_resize(read_colour(c.files.at(i)), c.window, c.height, c.width), c.files.at(i));
@@ -170,7 +171,8 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
     }
   }
   const int64_t total = stream.index() + 1, W0 = stream.width(), H0 = stream.height();
-  if (total == 0) throw std::runtime_error("clip '" + path + "': no frame could be decoded (an empty or damaged video)");
+  if (total == 0)
+    throw std::runtime_error("clip '" + path + "': no frame could be decoded (an empty or damaged video)");
   const auto kept = static_cast<int64_t>(c.index.size());
   if (total < d.seq_length)
     throw std::runtime_error("clip '" + path + "' has " + std::to_string(total) + " frame" + (total == 1 ? "" : "s") +
@@ -179,24 +181,27 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
     throw std::runtime_error(
         "clip '" + path + "': only " + std::to_string(kept) + " of its " + std::to_string(total) +
         " frames move (at most " + fixed(100 * selector.largest_change(), 1) + "% of the pixels changed between the " +
-        "frames looked at; data.video.static_threshold is " + fixed(100 * v.static_threshold, 1) + "%): a clip without " +
+        "frames looked at; data.video.static_threshold is " + fixed(100 * v.static_threshold, 1) +
+        "%): a clip without " +
         "camera motion teaches neither depth nor motion. Lower data.video.static_threshold if the camera does move");
   char fps_text[32];
   std::snprintf(fps_text, sizeof fps_text, "%.4g fps", source_fps);
   const std::string rate = source_fps > 0 ? fps_text : "rate unknown";
   const int64_t stride = frame_rate_stride(source_fps, v.fps);
-  *report = "clip '" + path + "': " + std::to_string(total) + " frames (" + std::to_string(W0) + "x" + std::to_string(H0) +
-            ", " + rate + "); " + ordinal(stride) + (stride > 1 ? " for " + fixed(v.fps, 0) + " fps" : "") + ", " +
+  *report = "clip '" + path + "': " + std::to_string(total) + " frames (" + std::to_string(W0) + "x" +
+            std::to_string(H0) + ", " + rate + "); " + ordinal(stride) +
+            (stride > 1 ? " for " + fixed(v.fps, 0) + " fps" : "") + ", " +
             std::to_string(selector.skipped_static() + selector.skipped_standing()) + " static frames left out (" +
             std::to_string(selector.skipped_static()) + " with under " + fixed(100 * v.static_threshold, 1) +
             "% of the pixels changed, " + std::to_string(selector.skipped_standing()) +
-            " with the camera standing while other things moved): " + std::to_string(kept) + " kept; the camera moved in " +
-            fixed(100 * selector.moving_share(), 0) + "% of the frames looked at";
+            " with the camera standing while other things moved): " + std::to_string(kept) +
+            " kept; the camera moved in " + fixed(100 * selector.moving_share(), 0) + "% of the frames looked at";
   if (selector.moving_share() < kFewMovingFrames)
-    *warning = "clip '" + path + "': the camera moved in only " + fixed(100 * selector.moving_share(), 0) + "% of its " +
-               std::to_string(selector.looked_at()) + " frames looked at (it stood in the others): such a " +
-               "clip is unlikely to teach depth. A longer clip with more driving helps, or start from a model trained " +
-               "on forward driving (geo_train --init RUN)";
+    *warning =
+        "clip '" + path + "': the camera moved in only " + fixed(100 * selector.moving_share(), 0) + "% of its " +
+        std::to_string(selector.looked_at()) + " frames looked at (it stood in the others): such a " +
+        "clip is unlikely to teach depth. A longer clip with more driving helps, or start from a model trained " +
+        "on forward driving (geo_train --init RUN)";
   if (c.window.width != W0 || c.window.height != H0)
     *report += "; cropped to " + std::to_string(c.window.width) + "x" + std::to_string(c.window.height) + " at (" +
                std::to_string(c.window.x0) + ", " + std::to_string(c.window.y0) + ")";
@@ -270,7 +275,8 @@ VideoData open_video_clips(const DataConfig& d) {
       auto& items = set == &runs.train ? train : val;
       for (const auto& [r, p] : snippet_targets(*set, d.seq_length)) {
         ClipSnippets::Item item{ci, {}};
-        for (int64_t o = -d.seq_length / 2; o <= d.seq_length / 2; ++o) item.positions.push_back((*set)[r][static_cast<size_t>(p + o)]);
+        for (int64_t o = -d.seq_length / 2; o <= d.seq_length / 2; ++o)
+          item.positions.push_back((*set)[r][static_cast<size_t>(p + o)]);
         items.push_back(std::move(item));
         (set == &runs.train ? n_train : n_val)++;
       }
@@ -278,9 +284,11 @@ VideoData open_video_clips(const DataConfig& d) {
     line += "; " + std::to_string(n_train) + " training snippets";
     if (n_val > 0)
       line += ", " + std::to_string(n_val) + " validation snippets in " + std::to_string(runs.val.size()) + " block" +
-              (runs.val.size() == 1 ? "" : "s") + " (" + std::to_string(runs.edge_dropped) + " frames left out at their edges)";
+              (runs.val.size() == 1 ? "" : "s") + " (" + std::to_string(runs.edge_dropped) +
+              " frames left out at their edges)";
     else
-      line += ", no validation block (clip too short for data.video.val_fraction " + fixed(d.video.val_fraction, 2) + ")";
+      line +=
+          ", no validation block (clip too short for data.video.val_fraction " + fixed(d.video.val_fraction, 2) + ")";
     out.report.push_back(line);
     out.records.push_back(clip_record(clips->back()));
   }
