@@ -60,8 +60,10 @@ void read_state(torch::nn::Module& module, torch::serialize::InputArchive& archi
   // Weights that are NaN or infinite (a diverged run saved with valid CRCs) would predict nothing
   // but NaN, written out as zero depth: refused by name.
   std::vector<std::string> non_finite;
+  // (A finite sum, one pass, says so for all but sums beyond float's range, checked element by element.)
   for (const auto& [name, t] : loaded)
-    if (t.is_floating_point() && !torch::isfinite(t).all().item<bool>()) non_finite.push_back(name);
+    if (t.is_floating_point() && !std::isfinite(t.sum().item<double>()) && !torch::isfinite(t).all().item<bool>())
+      non_finite.push_back(name);
   if (!non_finite.empty())
     throw std::runtime_error(what + ": holds NaN or infinite values in " + list(non_finite) +
                              " (nothing was loaded; a run that diverged: use an earlier checkpoint)");

@@ -44,7 +44,18 @@ bool ConvBnImpl::uses_packed(const torch::Tensor& x, const torch::Tensor& packed
   return true;
 }
 
+void ConvBnImpl::prepack_once() {
+  if (!pending_w32_.defined()) return;
+  std::call_once(pack_once_, [this] {
+    torch::NoGradGuard no_grad;
+    prepack(pending_w32_, pending_b32_);
+    if (prepacked()) folded_weight_ = torch::Tensor();  // folded_weight() computes it again when asked
+    pending_w32_ = pending_b32_ = torch::Tensor();
+  });
+}
+
 torch::Tensor ConvBnImpl::forward(const torch::Tensor& x) {
+  prepack_once();
   const auto& o = conv->options;
   const auto k = *o.kernel_size();
   const int64_t pad = onednn_channel_padding(x);
@@ -63,6 +74,7 @@ torch::Tensor ConvBnImpl::forward_upsampled(const torch::Tensor& x) {
       (*o.kernel_size())[0] == 3 && (*o.kernel_size())[1] == 3 && (*o.stride())[0] == 1 && (*o.stride())[1] == 1,
       "forward_upsampled needs a 3x3 stride-1 ConvBn");
   if (x.size(2) * x.size(3) < kMinSubpixelArea) return forward(upsample2(x, UpsampleMode::kNearest));
+  prepack_once();
   if (uses_packed(x, packed_phase_weight_)) {
     const int64_t B = x.size(0), Co = conv->weight.size(0), h = x.size(2), w = x.size(3);
     const auto y = interleave_phases(
@@ -79,9 +91,10 @@ void ConvBnImpl::fold_batchnorm(torch::Dtype dtype) {
   const auto weight = conv->weight * scale.view({-1, 1, 1, 1}), bias = bn->bias - bn->running_mean * scale;
   folded_weight_ = weight.to(dtype).contiguous();
   folded_bias_ = bias.to(dtype);
-  if (conv->weight.device().is_cpu() && at::hasMKLDNN() && at::globalContext().userEnabledMkldnn())
-    prepack(weight, bias.to(torch::kFloat32));        // oneDNN adds a float32 bias to bf16 products
-  if (prepacked()) folded_weight_ = torch::Tensor();  // folded_weight() computes it again when asked
+  if (conv->weight.device().is_cpu() && at::hasMKLDNN() && at::globalContext().userEnabledMkldnn()) {
+    pending_w32_ = weight;                    // packed at the first call (prepack_once)
+    pending_b32_ = bias.to(torch::kFloat32);  // oneDNN adds a float32 bias to bf16 products
+  }
 }
 
 torch::Tensor ConvBnImpl::folded_weight() const {

@@ -9,6 +9,7 @@
 
 #include <functional>
 #include <memory>
+#include <mutex>
 
 namespace geo {
 
@@ -32,12 +33,14 @@ struct ConvBnImpl : torch::nn::Module {
   // On CPU, where LibTorch has oneDNN (MKL-DNN), the folded kernels (and forward_upsampled's phase
   // kernels) are also reordered once into oneDNN's blocked layout, so a call reorders only the
   // activations, not the weights (PyTorch's torch.utils.mkldnn; at::conv2d reorders the weights
-  // on every call). Same results up to rounding. A prepacked module keeps only the packed kernel
+  // on every call). Same results up to rounding. The reorder happens at the first float call (once,
+  // whichever thread makes it), not here: a model that runs in int8 never pays it (40% of opening
+  // the paper's model). A prepacked module keeps only the packed kernel
   // (the plain folded one is computed again where a call needs it): a loaded model holds its
   // weights about twice (the parameters and the packed kernels), not four times.
   void fold_batchnorm(torch::Dtype dtype = torch::kFloat32);
   bool folded() const { return folded_bias_.defined(); }
-  bool prepacked() const { return packed_weight_.defined(); }
+  bool prepacked() const { return packed_weight_.defined(); }  // (after the first float call)
   // The folded kernel and bias (undefined before fold_batchnorm): what the int8 path quantizes.
   torch::Tensor folded_weight() const;
   const torch::Tensor& folded_bias() const { return folded_bias_; }
@@ -52,11 +55,16 @@ struct ConvBnImpl : torch::nn::Module {
   torch::Tensor conv_bn_relu(const torch::Tensor& x, const ConvFn& conv_fn);
   // The folded float32 kernel and bias -> the oneDNN-blocked ones (none where oneDNN cannot run them).
   void prepack(const torch::Tensor& w32, const torch::Tensor& b32);
+  // The oneDNN kernels, made at the first call after folding (pack_once_).
+  void prepack_once();
   // `packed` is defined and applies to x (a CPU tensor of the folded type); a training module throws.
   bool uses_packed(const torch::Tensor& x, const torch::Tensor& packed) const;
   torch::Tensor folded_weight_, folded_bias_;
   // oneDNN-blocked kernels (CPU, folded): the conv's, and forward_upsampled's four 2x2 phase kernels.
   torch::Tensor packed_weight_, packed_phase_weight_, packed_bias_, packed_phase_bias_;
+  // Folded and not yet packed: the float32 kernel and bias the packing starts from.
+  torch::Tensor pending_w32_, pending_b32_;
+  std::once_flag pack_once_;
 };
 TORCH_MODULE(ConvBn);
 

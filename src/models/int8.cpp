@@ -137,9 +137,7 @@ struct Quantized {
 
 // w [Co,Ci,k,k] float -> int8 per output channel (symmetric), prepacked with its float bias.
 c10::IValue pack(const torch::Tensor& weight, const torch::Tensor& bias, int64_t stride, int64_t padding) {
-  const auto w = weight.to(torch::kFloat32).contiguous();
-  const auto scales = (w.abs().amax({1, 2, 3}) / 127.0).clamp_min(1e-12).to(torch::kFloat64);
-  const auto qw = at::quantize_per_channel(w, scales, torch::zeros({w.size(0)}, torch::kLong), 0, torch::kQInt8);
+  const auto qw = quantize_weight_per_channel(weight);
   torch::jit::Stack stack{qw,
                           bias.defined() ? c10::IValue(bias.to(torch::kFloat32)) : c10::IValue(),
                           std::vector<int64_t>{stride, stride},

@@ -16,6 +16,11 @@ struct FeatureRefinementImpl;
 // at::quantize_per_tensor computes (ties rounded up rather than to even), vectorised.
 torch::Tensor quantize_to_nhwc(const torch::Tensor& x, double scale, int64_t zero_point);
 
+// A convolution's kernel w [Co,...] float -> qint8 per output channel, symmetric (scale
+// max|w_c| / 127, zero point 0): what at::quantize_per_channel computes with those scales, exactly,
+// in vectorised passes (~5x faster: a quarter of opening an int8 model took ATen's).
+torch::Tensor quantize_weight_per_channel(const torch::Tensor& weight);
+
 // quint8 [B,Ci,H,W] tensors concatenated along the channels into quint8 channels-last with (scale,
 // zero_point), each requantized on the way (quantized::cat's result in one vectorised pass: it took
 // ~2 ms of each int8 encoder-decoder here).

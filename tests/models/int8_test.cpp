@@ -42,6 +42,25 @@ TEST(Int8, QuantizingToNhwcIsAtensQuantization) {
   EXPECT_TRUE(torch::equal(mine.int_repr().contiguous(), aten.int_repr().contiguous()));
 }
 
+// Weights per output channel: ATen's quantization with max|w_c| / 127 scales, exactly (random
+// kernels, a zero channel, a 1x1 kernel, a float16 one).
+TEST(Int8, WeightsQuantizePerChannelAsAten) {
+  if (!has_int8()) GTEST_SKIP() << "this LibTorch has no quantized engine";
+  torch::manual_seed(8);
+  auto w = torch::randn({17, 9, 3, 3}) * torch::rand({17, 1, 1, 1}) * 4;
+  w[3].zero_();
+  for (const auto& k : {w, torch::randn({5, 64, 1, 1}), torch::randn({6, 4, 7, 7}).to(torch::kHalf)}) {
+    const auto mine = geo::quantize_weight_per_channel(k);
+    const auto f = k.to(torch::kFloat32);
+    const auto scales = (f.abs().amax({1, 2, 3}) / 127.0).clamp_min(1e-12).to(torch::kFloat64);
+    const auto aten = at::quantize_per_channel(f, scales, torch::zeros({f.size(0)}, torch::kLong), 0, torch::kQInt8);
+    EXPECT_TRUE(torch::equal(mine.q_per_channel_scales(), aten.q_per_channel_scales()));
+    EXPECT_TRUE(torch::equal(mine.q_per_channel_zero_points(), aten.q_per_channel_zero_points()));
+    EXPECT_TRUE(torch::equal(mine.int_repr(), aten.int_repr())) << k.sizes();
+    EXPECT_EQ(mine.q_per_channel_axis(), 0);
+  }
+}
+
 // Concatenation with requantization: the float concatenation of the dequantized parts, quantized
 // with the output's scale, within one step (rounding), and a part of the output's own scale copied.
 TEST(Int8, ConcatenatingRequantizesEachPart) {
