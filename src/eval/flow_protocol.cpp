@@ -65,9 +65,9 @@ torch::Tensor flow_calib_K(const std::string& root, const std::string& name) {
                            "/training/calib_cam_to_cam/" + name + ".txt)");
 }
 
-}  // namespace
-
-EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, PredictionSource& source) {
+// The pairs to score: the split file's (training/image_2/000123_10.png lines), else every
+// <pair>_10.png of training/image_2, in order.
+std::vector<std::string> flow_pair_names(const EvalOptions& o, const std::string& root) {
   std::vector<std::string> names;
   if (!o.split_file.empty()) {
     for (const auto& line : read_lines(o.split_file)) {
@@ -87,12 +87,78 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
     std::sort(names.begin(), names.end());
   }
   if (names.empty()) throw std::runtime_error("no flow pairs to evaluate under " + root);
-  FlowScores full, rigid;
+  return names;
+}
+
+// KITTI 2015's obj_map of a pair (> 0: a moving object) where the file exists, checked against the
+// ground truth's size; undefined otherwise.
+torch::Tensor foreground_of(const std::string& objects, int64_t H, int64_t W) {
+  if (!fs::exists(objects)) return {};
+  auto foreground = read_object_map(objects) > 0;
+  if (foreground.size(0) != H || foreground.size(1) != W)
+    throw std::runtime_error("object map '" + objects + "' is " + std::to_string(foreground.size(0)) + "x" +
+                             std::to_string(foreground.size(1)) + ", its flow ground truth " + std::to_string(H) + "x" +
+                             std::to_string(W));
+  return foreground;
+}
+
+// What the KITTI 2015 protocol counts over the pairs besides the scores, and the result it makes.
+struct FlowTally {
   int64_t with_previous = 0, with_objects = 0, px_occ = 0, px_noc = 0;
   std::vector<std::string> without_gt;  // pairs whose flow_occ or flow_noc has no valid pixel
   int64_t predictions_resized = 0;      // prediction files whose size differs from the ground truth
   std::string resized;                  // the first of them
   bool from_files = false;              // predictions meant at the ground truth's size
+
+  // The scores (rigid ones when `split_stages`) and counts, with a warning for what was left out.
+  EvalResult result(const std::vector<std::string>& names, const EvalOptions& o, const std::string& root,
+                    const FlowScores& full, const FlowScores& rigid, bool split_stages, bool model) const {
+    const int64_t scored = static_cast<int64_t>(names.size() - without_gt.size());
+    if (scored == 0) throw std::runtime_error("no flow pair under " + root + " has valid ground-truth pixels");
+    if (!without_gt.empty())
+      spdlog::warn(
+          "{} of {} pairs have no valid ground-truth pixel (flow_occ or flow_noc) and are left out of the "
+          "means; first: {}",
+          without_gt.size(), names.size(), without_gt.front());
+    if (predictions_resized > 0)
+      spdlog::warn(
+          "{} of {} flow predictions differ in size from their ground truth and were resized ({}, vectors "
+          "scaled); first: {}",
+          predictions_resized, names.size(), o.flow_resize == FlowResize::kNearest ? "nearest" : "bilinear", resized);
+    if (with_objects > 0 && with_objects < scored)
+      spdlog::warn(
+          "{} of {} pairs have no object map (training/obj_map/<pair>_10.png): background and foreground "
+          "errors are over the other {} only",
+          scored - with_objects, scored, with_objects);
+    EvalResult r;
+    full.put(r, "", scored);
+    if (split_stages) rigid.put(r, "rigid_", scored);
+    r.counts = {{"pairs", scored},
+                {"pixels_all", px_occ},
+                {"pixels_noc", px_noc},
+                {"pairs_without_ground_truth", static_cast<int64_t>(without_gt.size())},
+                {"pairs_with_object_map", with_objects}};
+    if (with_objects > 0)
+      r.counts.insert(r.counts.end(), {{"pixels_bg", full.bg.pixels}, {"pixels_fg", full.fg.pixels}});
+    if (from_files) r.counts.emplace_back("predictions_resized", predictions_resized);
+    if (model) {
+      r.counts.emplace_back("pairs_with_frame_09", with_previous);
+      if (with_previous < static_cast<int64_t>(names.size()))
+        spdlog::warn(
+            "{} of {} pairs have no previous frame (training/image_2/<pair>_09.png, KITTI 2015's multi-view "
+            "extension): the PoseNet saw the duplicate-frame snippet (tgt, tgt, src) for them",
+            static_cast<int64_t>(names.size()) - with_previous, names.size());
+    }
+    return r;
+  }
+};
+
+}  // namespace
+
+EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, PredictionSource& source) {
+  const auto names = flow_pair_names(o, root);
+  FlowScores full, rigid;
+  FlowTally tally;
   const bool split_stages = source.model() && source.model()->has_flow();  // rigid flow apart from the full flow
   Progress progress("kitti2015", static_cast<int64_t>(names.size()), 0, "pairs");
   for (size_t i = 0; i < names.size(); ++i) {
@@ -107,8 +173,8 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
     const torch::Tensor& flow = answer.full;
     const torch::Tensor& rigid_flow = answer.rigid;
     const int64_t frame_h = answer.frame_height, frame_w = answer.frame_width;
-    with_previous += answer.used_previous;
-    from_files = from_files || answer.meant_at_ground_truth_size;
+    tally.with_previous += answer.used_previous;
+    tally.from_files = tally.from_files || answer.meant_at_ground_truth_size;
     require_finite(flow, "the flow prediction for pair " + names[i]);
     const auto occ = read_flow_png(gocc), noc = read_flow_png(gnoc);
     require_same_size(gnoc, noc.flow.size(1), noc.flow.size(2), gocc, occ.flow.size(1), occ.flow.size(2));
@@ -116,72 +182,30 @@ EvalResult eval_kitti2015(const EvalOptions& o, const std::string& root, Predict
     // A file-based prediction is meant at the ground truth's size (KITTI's devkit rejects others):
     // geo rescales it like a model's output, loudly.
     if (answer.meant_at_ground_truth_size && (flow.size(1) != occ.flow.size(1) || flow.size(2) != occ.flow.size(2))) {
-      if (resized.empty())
-        resized = names[i] + " (" + std::to_string(flow.size(1)) + "x" + std::to_string(flow.size(2)) + " vs " +
-                  std::to_string(occ.flow.size(1)) + "x" + std::to_string(occ.flow.size(2)) + ")";
-      ++predictions_resized;
+      if (tally.resized.empty())
+        tally.resized = names[i] + " (" + std::to_string(flow.size(1)) + "x" + std::to_string(flow.size(2)) + " vs " +
+                        std::to_string(occ.flow.size(1)) + "x" + std::to_string(occ.flow.size(2)) + ")";
+      ++tally.predictions_resized;
     }
     const int64_t n_occ = (occ.valid > 0.5).sum().item<int64_t>(), n_noc = (noc.valid > 0.5).sum().item<int64_t>();
     if (n_occ == 0 || n_noc == 0) {  // an all-invalid ground truth would count as EPE 0
-      without_gt.push_back(names[i]);
+      tally.without_gt.push_back(names[i]);
       progress.update(static_cast<int64_t>(i + 1));
       continue;
     }
-    torch::Tensor foreground;  // [H,W] bool: KITTI 2015's obj_map > 0
-    if (fs::exists(objects)) {
-      foreground = read_object_map(objects) > 0;
-      if (foreground.size(0) != occ.flow.size(1) || foreground.size(1) != occ.flow.size(2))
-        throw std::runtime_error("object map '" + objects + "' is " + std::to_string(foreground.size(0)) + "x" +
-                                 std::to_string(foreground.size(1)) + ", its flow ground truth " +
-                                 std::to_string(occ.flow.size(1)) + "x" + std::to_string(occ.flow.size(2)));
-      ++with_objects;
-    }
     const int64_t H = occ.flow.size(1), W = occ.flow.size(2);
+    const auto foreground = foreground_of(objects, H, W);  // [H,W] bool, where the pair has an object map
+    tally.with_objects += foreground.defined();
     full.add(occ, noc, foreground, resize_flow(flow, H, W, o.flow_resize));
     if (split_stages) {
       require_finite(rigid_flow, "the rigid flow prediction for pair " + names[i]);
       rigid.add(occ, noc, foreground, resize_flow(rigid_flow, H, W, o.flow_resize));
     }
-    px_occ += n_occ;
-    px_noc += n_noc;
+    tally.px_occ += n_occ;
+    tally.px_noc += n_noc;
     progress.update(static_cast<int64_t>(i + 1));
   }
-  const int64_t scored = static_cast<int64_t>(names.size() - without_gt.size());
-  if (scored == 0) throw std::runtime_error("no flow pair under " + root + " has valid ground-truth pixels");
-  if (!without_gt.empty())
-    spdlog::warn(
-        "{} of {} pairs have no valid ground-truth pixel (flow_occ or flow_noc) and are left out of the "
-        "means; first: {}",
-        without_gt.size(), names.size(), without_gt.front());
-  if (predictions_resized > 0)
-    spdlog::warn(
-        "{} of {} flow predictions differ in size from their ground truth and were resized ({}, vectors "
-        "scaled); first: {}",
-        predictions_resized, names.size(), o.flow_resize == FlowResize::kNearest ? "nearest" : "bilinear", resized);
-  if (with_objects > 0 && with_objects < scored)
-    spdlog::warn(
-        "{} of {} pairs have no object map (training/obj_map/<pair>_10.png): background and foreground "
-        "errors are over the other {} only",
-        scored - with_objects, scored, with_objects);
-  EvalResult r;
-  full.put(r, "", scored);
-  if (split_stages) rigid.put(r, "rigid_", scored);
-  r.counts = {{"pairs", scored},
-              {"pixels_all", px_occ},
-              {"pixels_noc", px_noc},
-              {"pairs_without_ground_truth", static_cast<int64_t>(without_gt.size())},
-              {"pairs_with_object_map", with_objects}};
-  if (with_objects > 0) r.counts.insert(r.counts.end(), {{"pixels_bg", full.bg.pixels}, {"pixels_fg", full.fg.pixels}});
-  if (from_files) r.counts.emplace_back("predictions_resized", predictions_resized);
-  if (source.model()) {
-    r.counts.emplace_back("pairs_with_frame_09", with_previous);
-    if (with_previous < static_cast<int64_t>(names.size()))
-      spdlog::warn(
-          "{} of {} pairs have no previous frame (training/image_2/<pair>_09.png, KITTI 2015's multi-view "
-          "extension): the PoseNet saw the duplicate-frame snippet (tgt, tgt, src) for them",
-          static_cast<int64_t>(names.size()) - with_previous, names.size());
-  }
-  return r;
+  return tally.result(names, o, root, full, rigid, split_stages, source.model() != nullptr);
 }
 
 }  // namespace geo
