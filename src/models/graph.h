@@ -25,6 +25,11 @@ namespace geo {
 
 // Float arithmetic: each operation as the modules compute it.
 struct FloatOps {
+  // A residual block's shortcut is computed before its body: the order the float networks have
+  // always computed it in, which fixes the order autograd sums the block input's gradients in (a
+  // different order changes training's rounding, and 400 iterations later its result). The int8
+  // policies take the body first: their quantized points are numbered in that order.
+  static constexpr bool kShortcutFirst = true;
   torch::Tensor quantize(const torch::Tensor& x) { return x; }
   torch::Tensor dequantize(const torch::Tensor& x) { return x; }
   torch::Tensor conv(ConvBnImpl& m, const torch::Tensor& x) { return m.forward(x); }
@@ -42,19 +47,23 @@ struct FloatOps {
 // GeoNet's resconv (BottleneckImpl): 1x1 -> 3x3/stride -> 1x1 + projection shortcut, then ReLU.
 template <class Ops>
 torch::Tensor bottleneck_graph(BottleneckImpl& b, Ops& ops, const torch::Tensor& x) {
+  torch::Tensor shortcut;
+  if constexpr (Ops::kShortcutFirst) shortcut = ops.conv(*b.proj, x);
   auto r = ops.conv(*b.c1, x);
   r = ops.conv(*b.c2, r);
   r = ops.conv(*b.c3, r);
-  const auto shortcut = ops.conv(*b.proj, x);
+  if constexpr (!Ops::kShortcutFirst) shortcut = ops.conv(*b.proj, x);
   return ops.add_relu(r, shortcut);
 }
 
 // ResNet-18/34's basic block (BasicBlockImpl): 3x3/stride -> 3x3 + shortcut, then ReLU.
 template <class Ops>
 torch::Tensor basic_block_graph(BasicBlockImpl& b, Ops& ops, const torch::Tensor& x) {
+  torch::Tensor shortcut;
+  if constexpr (Ops::kShortcutFirst) shortcut = b.proj ? ops.conv(*b.proj, x) : x;
   auto r = ops.conv(*b.c1, x);
   r = ops.conv(*b.c2, r);
-  const auto shortcut = b.proj ? ops.conv(*b.proj, x) : x;
+  if constexpr (!Ops::kShortcutFirst) shortcut = b.proj ? ops.conv(*b.proj, x) : x;
   return ops.add_relu(r, shortcut);
 }
 

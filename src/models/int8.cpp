@@ -73,6 +73,7 @@ namespace {
 
 // Float arithmetic (FloatOps) recording the range each quantized point takes.
 struct Observe : FloatOps {
+  static constexpr bool kShortcutFirst = false;  // the points' order (graph.h)
   std::vector<Int8Graph::State::Point>& points;
   size_t i = 0;
   explicit Observe(std::vector<Int8Graph::State::Point>& p) : points(p) {}
@@ -93,6 +94,7 @@ struct Observe : FloatOps {
 };
 
 struct Quantized {
+  static constexpr bool kShortcutFirst = false;  // the points' order (graph.h)
   Int8Graph::State& st;
   size_t i = 0;
   const Int8Graph::State::Point& next() {
