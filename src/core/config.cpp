@@ -431,37 +431,20 @@ std::string to_yaml(const Config& config) {
 
 void Config::validate() const {
   Checker c(lines, source);
-  {
-    Checker::Scope s(c, "model");
-    model.validate(c);
-  }
-  {
-    Checker::Scope s(c, "data");
-    data.validate(c);
-  }
-  {
-    Checker::Scope s(c, "loss");
-    loss.validate(c);
-  }
+  c.section("model", model);
+  c.section("data", data);
+  c.section("loss", loss);
   c.require(!stages.empty(), "stages", stages.size(), "must list at least one stage");
   std::set<std::string> names;
   for (size_t i = 0; i < stages.size(); ++i) {
-    Checker::Scope s(c, "stages[" + std::to_string(i) + "]");
-    stages[i].validate(c);
+    const std::string key = "stages[" + std::to_string(i) + "]";
+    c.section(key, stages[i]);
+    Checker::Scope s(c, key);
     c.require(names.insert(stages[i].name).second, "name", stages[i].name, "stage names must be unique");
   }
-  {
-    Checker::Scope s(c, "optimizer");
-    optimizer.validate(c);
-  }
-  {
-    Checker::Scope s(c, "logging");
-    logging.validate(c);
-  }
-  {
-    Checker::Scope s(c, "run");
-    run.validate(c);
-  }
+  c.section("optimizer", optimizer);
+  c.section("logging", logging);
+  c.section("run", run);
   c.fail_if_any();
 }
 

@@ -39,6 +39,13 @@ class Checker {
     std::string saved_;
   };
 
+  // A section's checks (section.validate(*this)) under the key prefix `name`.
+  template <class Section>
+  void section(const std::string& name, const Section& s) {
+    Scope scope(*this, name);
+    s.validate(*this);
+  }
+
   template <class T>
   void require(bool ok, const char* key, const T& value, const std::string& rule) {
     if (ok) return;

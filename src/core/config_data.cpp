@@ -37,14 +37,8 @@ void DataConfig::validate(Checker& c) const {
             "must name at least one KITTI odometry sequence when data.split is odometry");
   c.require(!split.empty(), "split", split,
             "must not be empty (eigen_zhou, kitti_raw_stereo, raw_minus_kitti2015, odometry, ...)");
-  {
-    Checker::Scope s(c, "augment");
-    augment.validate(c);
-  }
-  {
-    Checker::Scope s(c, "synthetic");
-    synthetic.validate(c);
-  }
+  c.section("augment", augment);
+  c.section("synthetic", synthetic);
   c.require(format != DataFormat::kVideo || !videos.empty(), "videos", videos,
             "must name at least one video file or frame folder when data.format is video");
   // The clips' settings apply to data.videos only: given to other data they would go unused.

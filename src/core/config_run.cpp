@@ -23,8 +23,7 @@ void RunConfig::validate(Checker& c) const {
   c.require(seed >= 0, "seed", seed, "must be >= 0");
   c.require(is_device_name(device), "device", device, kDeviceNameRule);
   c.require(threads >= 0 && threads <= 1024, "threads", threads, "must be in 0..1024 (0 = all cores)");
-  Checker::Scope s(c, "distributed");
-  distributed.validate(c);
+  c.section("distributed", distributed);
 }
 
 void DistributedConfig::validate(Checker& c) const {

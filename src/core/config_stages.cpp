@@ -54,8 +54,7 @@ void StageConfig::validate(Checker& c) const {
   if (uses_flow())
     c.require(weights.flow > 0 || weights.flow_smooth > 0 || weights.flow_consistency > 0, "train", train.names(),
               "trains flow, so at least one flow loss weight must be > 0");
-  Checker::Scope s(c, "weights");
-  weights.validate(c);
+  c.section("weights", weights);
 }
 
 }  // namespace geo

@@ -45,7 +45,7 @@ bool ConvBnImpl::uses_packed(const torch::Tensor& x, const torch::Tensor& packed
 }
 
 void ConvBnImpl::prepack_once() {
-  if (!pending_w32_.defined()) return;
+  if (!pack_pending_) return;
   std::call_once(pack_once_, [this] {
     torch::NoGradGuard no_grad;
     prepack(pending_w32_, pending_b32_);
@@ -94,6 +94,7 @@ void ConvBnImpl::fold_batchnorm(torch::Dtype dtype) {
   if (conv->weight.device().is_cpu() && at::hasMKLDNN() && at::globalContext().userEnabledMkldnn()) {
     pending_w32_ = weight;                    // packed at the first call (prepack_once)
     pending_b32_ = bias.to(torch::kFloat32);  // oneDNN adds a float32 bias to bf16 products
+    pack_pending_ = true;
   }
 }
 

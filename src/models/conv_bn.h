@@ -64,6 +64,7 @@ struct ConvBnImpl : torch::nn::Module {
   torch::Tensor packed_weight_, packed_phase_weight_, packed_bias_, packed_phase_bias_;
   // Folded and not yet packed: the float32 kernel and bias the packing starts from.
   torch::Tensor pending_w32_, pending_b32_;
+  bool pack_pending_ = false;  // set once when folding; read by every call (the tensors above are not)
   std::once_flag pack_once_;
 };
 TORCH_MODULE(ConvBn);
