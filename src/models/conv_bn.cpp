@@ -48,8 +48,12 @@ void ConvBnImpl::prepack_once() {
   if (!pack_pending_) return;
   std::call_once(pack_once_, [this] {
     torch::NoGradGuard no_grad;
-    prepack(pending_w32_, pending_b32_);
-    if (prepacked()) folded_weight_ = torch::Tensor();  // folded_weight() computes it again when asked
+    // (float32: the kernel computed from the parameters now; bf16: kept from folding)
+    const auto w32 = pending_w32_.defined() ? pending_w32_ : folded_weight();
+    const auto kernel = folded_weight_.defined() ? folded_weight_ : w32;
+    prepack(kernel, w32, pending_b32_);
+    // Packed: folded_weight() computes the plain kernel again when asked; not packed: kept for the calls.
+    folded_weight_ = prepacked() ? torch::Tensor() : kernel;
     pending_w32_ = pending_b32_ = torch::Tensor();
   });
 }
@@ -88,10 +92,20 @@ void ConvBnImpl::fold_batchnorm(torch::Dtype dtype) {
   if (folded()) return;
   torch::NoGradGuard no_grad;
   const auto scale = bn->weight / torch::sqrt(bn->running_var + bn->options.eps());
-  const auto weight = conv->weight * scale.view({-1, 1, 1, 1}), bias = bn->bias - bn->running_mean * scale;
-  folded_weight_ = weight.to(dtype).contiguous();
+  const auto bias = bn->bias - bn->running_mean * scale;
   folded_bias_ = bias.to(dtype);
-  if (conv->weight.device().is_cpu() && at::hasMKLDNN() && at::globalContext().userEnabledMkldnn()) {
+  const bool onednn = conv->weight.device().is_cpu() && at::hasMKLDNN() && at::globalContext().userEnabledMkldnn();
+  // In float32 with oneDNN the folded kernel is computed where it is used (packed at the first float
+  // call, quantized by the int8 path) from the parameters, which stay float32: a model that runs in
+  // int8 never holds a float copy of its kernels beside the parameters.
+  if (onednn && dtype == torch::kFloat32) {
+    pending_b32_ = folded_bias_;
+    pack_pending_ = true;
+    return;
+  }
+  const auto weight = conv->weight * scale.view({-1, 1, 1, 1});
+  folded_weight_ = weight.to(dtype).contiguous();
+  if (onednn) {
     pending_w32_ = weight;                    // packed at the first call (prepack_once)
     pending_b32_ = bias.to(torch::kFloat32);  // oneDNN adds a float32 bias to bf16 products
     pack_pending_ = true;
@@ -105,21 +119,21 @@ torch::Tensor ConvBnImpl::folded_weight() const {
   return (conv->weight * scale.view({-1, 1, 1, 1})).to(folded_bias_.scalar_type()).contiguous();
 }
 
-void ConvBnImpl::prepack(const torch::Tensor& w32, const torch::Tensor& b32) {
+void ConvBnImpl::prepack(const torch::Tensor& kernel, const torch::Tensor& w32, const torch::Tensor& b32) {
   const auto& o = conv->options;
   const auto k = *o.kernel_size();
   const std::vector<int64_t> pad = {k[0] / 2, k[1] / 2};
   try {
-    const auto w = pad_channels(folded_weight_, onednn_channel_padding(folded_weight_));  // as forward pads x
+    const auto w = pad_channels(kernel, onednn_channel_padding(kernel));  // as forward pads x
     packed_weight_ = at::mkldnn_reorder_conv2d_weight(w.contiguous().to_mkldnn(), pad, *o.stride(), {1, 1}, 1);
     packed_bias_ = b32;
     if (upsampled && k[0] == 3 && k[1] == 3 && (*o.stride())[0] == 1 && (*o.stride())[1] == 1) {
       packed_phase_weight_ = at::mkldnn_reorder_conv2d_weight(
-          phase_kernels(w32).to(folded_weight_.scalar_type()).contiguous().to_mkldnn(), {1, 1}, {1, 1}, {1, 1}, 1);
+          phase_kernels(w32).to(kernel.scalar_type()).contiguous().to_mkldnn(), {1, 1}, {1, 1}, {1, 1}, 1);
       packed_phase_bias_ = b32.repeat({4});
     }
     // A CPU without oneDNN's kernels for this type (bf16 without AVX-512) fails here, not later.
-    packed_conv(torch::zeros({1, w.size(1), k[0], k[1]}, folded_weight_.options()), packed_weight_, packed_bias_, pad,
+    packed_conv(torch::zeros({1, w.size(1), k[0], k[1]}, kernel.options()), packed_weight_, packed_bias_, pad,
                 *o.stride());
   } catch (const c10::Error&) {
     packed_weight_ = packed_phase_weight_ = packed_bias_ = packed_phase_bias_ = torch::Tensor();

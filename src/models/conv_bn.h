@@ -53,8 +53,9 @@ struct ConvBnImpl : torch::nn::Module {
   using ConvFn = std::function<torch::Tensor(const torch::Tensor&, const torch::Tensor&, const torch::Tensor&)>;
   // conv_fn(x, weight, bias) -> BatchNorm -> ReLU, or the folded conv -> ReLU.
   torch::Tensor conv_bn_relu(const torch::Tensor& x, const ConvFn& conv_fn);
-  // The folded float32 kernel and bias -> the oneDNN-blocked ones (none where oneDNN cannot run them).
-  void prepack(const torch::Tensor& w32, const torch::Tensor& b32);
+  // The folded kernel (in the folded type; w32 the same in float32) and the float32 bias -> the
+  // oneDNN-blocked ones (none where oneDNN cannot run them).
+  void prepack(const torch::Tensor& kernel, const torch::Tensor& w32, const torch::Tensor& b32);
   // The oneDNN kernels, made at the first call after folding (pack_once_).
   void prepack_once();
   // `packed` is defined and applies to x (a CPU tensor of the folded type); a training module throws.
@@ -62,7 +63,8 @@ struct ConvBnImpl : torch::nn::Module {
   torch::Tensor folded_weight_, folded_bias_;
   // oneDNN-blocked kernels (CPU, folded): the conv's, and forward_upsampled's four 2x2 phase kernels.
   torch::Tensor packed_weight_, packed_phase_weight_, packed_bias_, packed_phase_bias_;
-  // Folded and not yet packed: the float32 kernel and bias the packing starts from.
+  // Folded and not yet packed: the float32 kernel (bf16 folding only; float32 computes it from the
+  // parameters) and bias the packing starts from.
   torch::Tensor pending_w32_, pending_b32_;
   bool pack_pending_ = false;  // set once when folding; read by every call (the tensors above are not)
   std::once_flag pack_once_;

@@ -106,6 +106,11 @@ TEST(Layers, FoldedBatchNormGivesTheSameOutputAndRefusesToTrain) {
   EXPECT_EQ(fold_batchnorm(*cb), 1);
   EXPECT_TRUE(cb->folded());
   EXPECT_FALSE(cb->prepacked());  // oneDNN's kernels are made at the first call, not before
+  {  // float32 with oneDNN: the folded kernel is computed where it is used, not held beside the weights
+    const auto a = cb->folded_weight(), b = cb->folded_weight();
+    EXPECT_TRUE(torch::equal(a, b));
+    EXPECT_EQ(a.data_ptr() != b.data_ptr(), at::hasMKLDNN());
+  }
   EXPECT_LT((cb(x) - ref).abs().max().item<double>(), 1e-5);
   EXPECT_EQ(cb->prepacked(), at::hasMKLDNN());  // oneDNN-blocked kernels where LibTorch has oneDNN
   // The folded kernel (not kept beside a packed one: computed again when asked) is w * gamma / sqrt(var + eps).
