@@ -91,8 +91,7 @@ torch::Tensor ConvBnImpl::forward_upsampled(const torch::Tensor& x) {
 void ConvBnImpl::fold_batchnorm(torch::Dtype dtype) {
   if (folded()) return;
   torch::NoGradGuard no_grad;
-  const auto scale = bn->weight / torch::sqrt(bn->running_var + bn->options.eps());
-  const auto bias = bn->bias - bn->running_mean * scale;
+  const auto bias = bn->bias - bn->running_mean * bn_scale();
   folded_bias_ = bias.to(dtype);
   const bool onednn = conv->weight.device().is_cpu() && at::hasMKLDNN() && at::globalContext().userEnabledMkldnn();
   // In float32 with oneDNN the folded kernel is computed where it is used (packed at the first float
@@ -103,7 +102,7 @@ void ConvBnImpl::fold_batchnorm(torch::Dtype dtype) {
     pack_pending_ = true;
     return;
   }
-  const auto weight = conv->weight * scale.view({-1, 1, 1, 1});
+  const auto weight = scaled_kernel();
   folded_weight_ = weight.to(dtype).contiguous();
   if (onednn) {
     pending_w32_ = weight;                    // packed at the first call (prepack_once)
@@ -115,9 +114,12 @@ void ConvBnImpl::fold_batchnorm(torch::Dtype dtype) {
 torch::Tensor ConvBnImpl::folded_weight() const {
   if (folded_weight_.defined() || !folded()) return folded_weight_;
   torch::NoGradGuard no_grad;
-  const auto scale = bn->weight / torch::sqrt(bn->running_var + bn->options.eps());
-  return (conv->weight * scale.view({-1, 1, 1, 1})).to(folded_bias_.scalar_type()).contiguous();
+  return scaled_kernel().to(folded_bias_.scalar_type()).contiguous();
 }
+
+torch::Tensor ConvBnImpl::bn_scale() const { return bn->weight / torch::sqrt(bn->running_var + bn->options.eps()); }
+
+torch::Tensor ConvBnImpl::scaled_kernel() const { return conv->weight * bn_scale().view({-1, 1, 1, 1}); }
 
 void ConvBnImpl::prepack(const torch::Tensor& kernel, const torch::Tensor& w32, const torch::Tensor& b32) {
   const auto& o = conv->options;

@@ -37,7 +37,8 @@ struct ConvBnImpl : torch::nn::Module {
   // whichever thread makes it), not here: a model that runs in int8 never pays it (40% of opening
   // the paper's model). A prepacked module keeps only the packed kernel
   // (the plain folded one is computed again where a call needs it): a loaded model holds its
-  // weights about twice (the parameters and the packed kernels), not four times.
+  // weights about twice (the parameters and the packed kernels), not four times; in float32 no
+  // folded kernel is held before the packing either (an int8 model never makes a float one).
   void fold_batchnorm(torch::Dtype dtype = torch::kFloat32);
   bool folded() const { return folded_bias_.defined(); }
   bool prepacked() const { return packed_weight_.defined(); }  // (after the first float call)
@@ -53,6 +54,10 @@ struct ConvBnImpl : torch::nn::Module {
   using ConvFn = std::function<torch::Tensor(const torch::Tensor&, const torch::Tensor&, const torch::Tensor&)>;
   // conv_fn(x, weight, bias) -> BatchNorm -> ReLU, or the folded conv -> ReLU.
   torch::Tensor conv_bn_relu(const torch::Tensor& x, const ConvFn& conv_fn);
+  // BatchNorm's per-channel factor γ/√(σ²+ε), and the kernel times it in the parameters' type (the
+  // folded kernel before any change of type).
+  torch::Tensor bn_scale() const;
+  torch::Tensor scaled_kernel() const;
   // The folded kernel (in the folded type; w32 the same in float32) and the float32 bias -> the
   // oneDNN-blocked ones (none where oneDNN cannot run them).
   void prepack(const torch::Tensor& kernel, const torch::Tensor& w32, const torch::Tensor& b32);
