@@ -18,13 +18,11 @@
 
 namespace geo::app {
 
-// Runs a tool's work once its options are parsed: the process-wide memory setting every tool
-// applies, every core for LibTorch (a tool's --threads or run.threads may set fewer), logging at
+// Runs a tool's work once its options are parsed: every core for LibTorch (a tool's --threads or run.threads may set fewer), logging at
 // info, and any exception as one error line naming what is wrong with exit code 1 (a tool's own
 // codes, e.g. 130 for an interrupted training, come back from `body`).
 template <class Body>
 int run_tool(Body&& body) {
-  keep_freed_memory();
   use_all_cores();
   try {
     setup_logging("info");

@@ -408,6 +408,7 @@ Row loader_row(const geo::Config& config, const Options& o) {
 
 // The whole measurement; `command_line` is written into the markdown report.
 int bench(Options& o, const std::string& command_line) {
+  geo::keep_freed_memory();  // (it times training steps)
   if (!o.precision.empty()) o.overrides.push_back("run.precision=" + o.precision);
   const std::string config_file = o.config_path.empty() ? "" : geo::resolve_config_path(o.config_path);
   const geo::Config config = config_file.empty() ? geo::parse_config("", "<defaults>", o.overrides)

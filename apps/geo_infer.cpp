@@ -460,6 +460,7 @@ struct ScratchRun {
 // signal stopped the training). Whatever can refuse the run is checked before the training: the
 // output folder, a clip to train on, the camera.
 std::string refined_model(const InferOptions& o, geo::StepTimes& times, ScratchRun& scratch) {
+  geo::keep_freed_memory();  // refining trains
   const bool video = fs::is_regular_file(o.input) && geo::FrameStream(o.input, "--input").is_video();
   if (!video && !fs::is_directory(o.input))
     throw std::runtime_error("--refine " + std::to_string(o.refine) + " trains on a clip: '" + o.input +
@@ -516,7 +517,8 @@ int infer(const InferOptions& o) {
   geo::Model model = times.time("load the model", [&] { return geo::Model::load(checkpoint, load); });
   const int64_t h = model.spec().height, w = model.spec().width;
   if (int8 && o.calibration_frames == 0 && model.has_int8_calibration()) {
-    times.time("int8 (the file's calibration)", [&] { model.quantize_int8({}); });
+    // geo_infer never saves the model: its float kernels go as the int8 ones come (3/4 of its memory)
+    times.time("int8 (the file's calibration)", [&] { model.quantize_int8({}, false); });
     spdlog::info("int8: with the calibration {} keeps (--calibration-frames N calibrates on the input instead)",
                  o.checkpoint);
   } else if (int8) {
@@ -527,7 +529,7 @@ int infer(const InferOptions& o) {
       throw std::runtime_error(
           "--precision int8: this model's FlowNet calibrates on pairs: give at least 2 frames "
           "(--calibration-frames, and an input of 2 or more frames)");
-    times.time("int8 calibration", [&] { model.quantize_int8(calibration); });
+    times.time("int8 calibration", [&] { model.quantize_int8(calibration, false); });
     spdlog::info(
         "int8: calibrated on the first {} frame(s) of the input{}", calibration.size(),
         model.has_int8_calibration() || o.calibration_frames > 0

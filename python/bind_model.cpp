@@ -46,9 +46,10 @@ FrameSource& frames_arg(py::handle frames, std::optional<TensorFrames>& held) {
 
 // Model.load's and Model.create's keyword arguments.
 LoadOptions load_options(const std::string& device, const std::string& precision, int threads,
-                         const py::object& calibration) {
+                         const py::object& calibration, bool keep_float_weights) {
   LoadOptions options;
   options.device = device, options.precision = precision, options.threads = threads;
+  options.keep_float_weights = keep_float_weights;
   if (!calibration.is_none()) options.calibration = images_arg(calibration.cast<py::sequence>(), "calibration");
   return options;
 }
@@ -119,21 +120,22 @@ void bind_model(py::module_& m) {
       .def_static(
           "load",
           [](const std::string& path, const std::string& device, const std::string& precision, int threads,
-             const py::object& calibration) {
-            const LoadOptions options = load_options(device, precision, threads, calibration);
+             const py::object& calibration, bool keep_float_weights) {
+            const LoadOptions options = load_options(device, precision, threads, calibration, keep_float_weights);
             py::gil_scoped_release release;
             return Model::load(path, options);
           },
           "path"_a, py::kw_only(), "device"_a = "cpu", "precision"_a = "fp32", "threads"_a = 0,
-          "calibration"_a = py::none(),
+          "calibration"_a = py::none(), "keep_float_weights"_a = true,
           "A geo_export model file, a training checkpoint or a run folder. device: cpu, cuda, cuda:N or auto;\n"
           "precision: fp32, bf16, auto or int8 (CPU; calibration: a few frames like those the model will see, in\n"
-          "order: see quantize_int8); threads > 0 sets LibTorch's intra-op threads (process-wide).")
+          "order: see quantize_int8; keep_float_weights: see quantize_int8); threads > 0 sets LibTorch's\n"
+          "intra-op threads (process-wide).")
       .def_static(
           "create",
           [](const std::string& config_yaml, const std::string& device, const std::string& precision, int threads,
              const py::object& calibration) {
-            const LoadOptions options = load_options(device, precision, threads, calibration);
+            const LoadOptions options = load_options(device, precision, threads, calibration, true);
             py::gil_scoped_release release;
             return Model::create(config_yaml, options);
           },
@@ -144,16 +146,18 @@ void bind_model(py::module_& m) {
           "at 128x416): for measuring speed or trying a program before a model is trained.")
       .def(
           "quantize_int8",
-          [](Model& model, const py::sequence& frames) {
+          [](Model& model, const py::sequence& frames, bool keep_float_weights) {
             const auto xs = images_arg(frames, "frames");
             py::gil_scoped_release release;
-            model.quantize_int8(xs);
+            model.quantize_int8(xs, keep_float_weights);
           },
-          "frames"_a = py::list(),
+          "frames"_a = py::list(), py::kw_only(), "keep_float_weights"_a = true,
           "Switches this fp32 CPU model to int8: the DepthNet, PoseNet and FlowNet calibrated on frames (like\n"
           "those the model will see, in order; consecutive pairs calibrate the FlowNet and PoseNet); without\n"
-          "frames, with the calibration its file keeps (has_int8_calibration). Not while another thread uses\n"
-          "the model.")
+          "frames, with the calibration its file keeps (has_int8_calibration). keep_float_weights=False: for\n"
+          "inference only, the float kernels go as the int8 ones are made (~3/4 less memory); save() then\n"
+          "refuses and the model runs in int8 only. Not while another thread uses the model.")
+      .def_property_readonly("float_weights_released", &Model::float_weights_released)
       .def_property_readonly("has_int8_calibration", &Model::has_int8_calibration,
                              "Whether the file keeps an int8 calibration (geo_export --int8, or save() after\n"
                              "quantize_int8): quantize_int8() then needs no frames.")

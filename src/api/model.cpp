@@ -10,6 +10,10 @@
 #include "geometry/trajectory.h"
 #include "models/conv.h"
 #include "models/int8.h"
+
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
 #include "pipeline/checkpoint.h"
 #include "pipeline/networks.h"
 #include "api/model_impl.h"
@@ -199,7 +203,7 @@ Model Model::create(const std::string& config_yaml, const LoadOptions& options) 
     Model model(impl);
     if (options.precision == "int8") {
       if (options.calibration.empty()) throw needs_calibration();
-      model.quantize_int8(options.calibration);
+      model.quantize_int8(options.calibration, options.keep_float_weights);
     }
     return model;
   });
@@ -228,7 +232,7 @@ Model Model::load(const std::string& path, const LoadOptions& options) {
     make_ready(*impl, options, has_flow, file);
     Model model(impl);
     // int8: calibrated on the frames given, else with the file's own calibration.
-    if (options.precision == "int8") model.quantize_int8(options.calibration);
+    if (options.precision == "int8") model.quantize_int8(options.calibration, options.keep_float_weights);
     return model;
   });
 }
@@ -247,9 +251,26 @@ void Model::check_int8_possible() const {
   if (select_int8_engine().empty()) throw Error("this LibTorch has no quantized engine (onednn, x86, fbgemm, qnnpack)");
 }
 
-void Model::quantize_int8(const std::vector<torch::Tensor>& frames) {
+void Model::quantize_int8(const std::vector<torch::Tensor>& frames, bool keep_float_weights) {
   guarded("geo::Model::quantize_int8", [&] {
     auto& nets = impl_->nets;
+    const bool release = !keep_float_weights;
+    // The networks into int8 (quantize_one: with the file's ranges, or those observed); from the first kernel let go on, there is no float model to go back to.
+    const auto quantize_all = [&](const auto& quantize_one) {
+      if (release) impl_->float_released = true;
+      try {
+        quantize_one(*nets.depth->net, impl_->depth_ranges);
+        quantize_one(*nets.pose, impl_->pose_ranges);
+        if (nets.flow) quantize_one(*nets.flow->net, impl_->flow_ranges);
+      } catch (const std::exception& e) {
+        if (!release) throw;
+        throw Error(std::string(e.what()) + " (its float weights were let go as it went: load the model again)");
+      }
+      impl_->spec.precision = "int8";
+#ifdef __GLIBC__
+      if (release) malloc_trim(0);  // what quantizing freed lies amid the heap: give its pages back
+#endif
+    };
     if (frames.empty()) {  // the calibration the file keeps
       const std::string& file = impl_->spec.source;
       if (!impl_->depth_ranges) throw needs_calibration();
@@ -261,10 +282,7 @@ void Model::quantize_int8(const std::vector<torch::Tensor>& frames) {
                     "calibrate it again (geo_export --int8, or LoadOptions::calibration)");
       check_int8_possible();
       const int64_t H = impl_->spec.height, W = impl_->spec.width;
-      geo::quantize_int8(*nets.depth->net, *impl_->depth_ranges, H, W);
-      geo::quantize_int8(*nets.pose, *impl_->pose_ranges, H, W);
-      if (nets.flow) geo::quantize_int8(*nets.flow->net, *impl_->flow_ranges, H, W);
-      impl_->spec.precision = "int8";
+      quantize_all([&](auto& net, const auto& ranges) { geo::quantize_int8(net, *ranges, H, W, release); });
       return;
     }
     check_int8_possible();
@@ -275,10 +293,6 @@ void Model::quantize_int8(const std::vector<torch::Tensor>& frames) {
                   "(consecutive), one without at least 1");
     std::vector<EncoderDecoderImpl*> nets_int8{nets.depth->net.get()};
     if (nets.flow) nets_int8.push_back(nets.flow->net.get());
-    auto back_to_fp32 = [&] {
-      for (auto* n : nets_int8) n->int8.reset();
-      nets.pose->int8.reset();
-    };
     try {
       for (auto* n : nets_int8) observe_int8(*n);
       observe_int8(*nets.pose);
@@ -295,15 +309,19 @@ void Model::quantize_int8(const std::vector<torch::Tensor>& frames) {
       for (size_t i = 0; i + L <= frames.size(); ++i)
         pose(std::vector<torch::Tensor>(frames.begin() + static_cast<std::ptrdiff_t>(i),
                                         frames.begin() + static_cast<std::ptrdiff_t>(i + L)));
-      for (auto* n : nets_int8) geo::quantize_int8(*n);
-      geo::quantize_int8(*nets.pose);
+      quantize_all([&](auto& net, const auto&) { geo::quantize_int8(net, release); });
     } catch (...) {
-      back_to_fp32();  // as it was
+      if (!impl_->float_released) {  // as it was
+        for (auto* n : nets_int8) n->int8.reset();
+        nets.pose->int8.reset();
+      }
       throw;
     }
-    impl_->spec.precision = "int8";
   });
 }
+
+bool Model::float_weights_released() const { return impl_->float_released; }
+
 torch::Device Model::device() const { return impl_->device; }
 
 torch::Tensor Model::depth(const torch::Tensor& image) const {
@@ -431,6 +449,10 @@ torch::Tensor Model::intrinsics(const torch::Tensor& from, const torch::Tensor& 
 
 void Model::save(const std::string& path, bool half, bool force) const {
   guarded("writing geo model '" + path + "'", [&] {
+    if (impl_->float_released)
+      throw Error(
+          "this int8 model let go of its float weights (release_float_weights): save it before that, "
+          "or load its file again");
     check_model_file_target("path", path, impl_->spec.source, force);
     write_model_file(path, impl_->nets, half);
   });

@@ -21,6 +21,7 @@ struct Model::Impl {
   std::vector<std::string> training_configs;  // CheckpointFile::lineage() of a training checkpoint
   // The int8 calibration the file keeps, per network (a file written in int8), else nullopt.
   std::optional<torch::Tensor> depth_ranges, pose_ranges, flow_ranges;
+  bool float_released = false;  // Model::release_float_weights
 };
 
 // Runs `f`, turning any failure into a geo::Error that says what was being done.

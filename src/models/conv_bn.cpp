@@ -44,7 +44,12 @@ bool ConvBnImpl::uses_packed(const torch::Tensor& x, const torch::Tensor& packed
   return true;
 }
 
+namespace {
+constexpr const char* kReleased = "ConvBn: its float kernel was let go for int8-only inference; it runs in int8 only";
+}  // namespace
+
 void ConvBnImpl::prepack_once() {
+  TORCH_CHECK(!released_, kReleased);
   if (!pack_pending_) return;
   std::call_once(pack_once_, [this] {
     torch::NoGradGuard no_grad;
@@ -112,9 +117,19 @@ void ConvBnImpl::fold_batchnorm(torch::Dtype dtype) {
 }
 
 torch::Tensor ConvBnImpl::folded_weight() const {
+  TORCH_CHECK(!released_, kReleased);
   if (folded_weight_.defined() || !folded()) return folded_weight_;
   torch::NoGradGuard no_grad;
   return scaled_kernel().to(folded_bias_.scalar_type()).contiguous();
+}
+
+void ConvBnImpl::release_float_kernel() {
+  TORCH_CHECK(folded() && !is_training(), "ConvBn: only a folded module (inference) lets go of its float kernel");
+  torch::NoGradGuard no_grad;
+  conv->weight.set_data(torch::empty({0}, conv->weight.options()));
+  folded_weight_ = pending_w32_ = torch::Tensor();
+  packed_weight_ = packed_phase_weight_ = packed_bias_ = packed_phase_bias_ = torch::Tensor();
+  released_ = true;
 }
 
 torch::Tensor ConvBnImpl::bn_scale() const { return bn->weight / torch::sqrt(bn->running_var + bn->options.eps()); }

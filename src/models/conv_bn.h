@@ -45,6 +45,11 @@ struct ConvBnImpl : torch::nn::Module {
   // The folded kernel and bias (undefined before fold_batchnorm): what the int8 path quantizes.
   torch::Tensor folded_weight() const;
   const torch::Tensor& folded_bias() const { return folded_bias_; }
+  // Inference in int8 only: lets go of the float kernel (the conv's weight and any folded or packed
+  // copy; BatchNorm's per-channel parameters stay) once the int8 path holds its own. The module then
+  // refuses to run in float (a c10::Error saying so); nothing brings the kernel back.
+  void release_float_kernel();
+  bool float_kernel_released() const { return released_; }
   Conv2d conv{nullptr};
   SyncBatchNorm2d bn{nullptr};  // synchronised across processes in data-parallel training
   bool relu;
@@ -72,6 +77,7 @@ struct ConvBnImpl : torch::nn::Module {
   // parameters) and bias the packing starts from.
   torch::Tensor pending_w32_, pending_b32_;
   bool pack_pending_ = false;  // set once when folding; read by every call (the tensors above are not)
+  bool released_ = false;      // release_float_kernel()
   std::once_flag pack_once_;
 };
 TORCH_MODULE(ConvBn);

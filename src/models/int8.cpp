@@ -57,11 +57,20 @@ struct Int8Graph::State {
     }
   };
 
-  State(torch::nn::Module& n, std::vector<Conv2dImpl*> h, std::vector<ConvBnImpl*> u)
-      : net(n), heads(std::move(h)), upconvs(std::move(u)) {}
+  State(torch::nn::Module& n, std::vector<Conv2dImpl*> h, std::vector<ConvBnImpl*> u, std::vector<ConvBnImpl*> f)
+      : net(n), heads(std::move(h)), upconvs(std::move(u)), in_float(std::move(f)) {}
   torch::nn::Module& net;
   std::vector<Conv2dImpl*> heads;
   std::vector<ConvBnImpl*> upconvs;
+  std::vector<ConvBnImpl*> in_float;
+  // The ConvBn layers that run in int8: every one of the network's but those in `in_float`.
+  std::vector<ConvBnImpl*> int8_layers() const {
+    std::vector<ConvBnImpl*> layers;
+    for (const auto& m : net.modules(/*include_self=*/false))
+      if (auto* cb = m->as<ConvBnImpl>(); cb && std::find(in_float.begin(), in_float.end(), cb) == in_float.end())
+        layers.push_back(cb);
+    return layers;
+  }
   std::vector<Point> points;
   bool quantized = false;
   std::unordered_map<const torch::nn::Module*, c10::IValue> packed;
@@ -152,8 +161,9 @@ c10::IValue pack(const torch::Tensor& weight, const torch::Tensor& bias, int64_t
 
 }  // namespace
 
-Int8Graph::Int8Graph(torch::nn::Module& net, std::vector<Conv2dImpl*> heads, std::vector<ConvBnImpl*> upconvs)
-    : state_(std::make_unique<State>(net, std::move(heads), std::move(upconvs))) {}
+Int8Graph::Int8Graph(torch::nn::Module& net, std::vector<Conv2dImpl*> heads, std::vector<ConvBnImpl*> upconvs,
+                     std::vector<ConvBnImpl*> in_float)
+    : state_(std::make_unique<State>(net, std::move(heads), std::move(upconvs), std::move(in_float))) {}
 Int8Graph::~Int8Graph() = default;
 
 bool Int8Graph::quantized() const { return state_->quantized; }
@@ -199,7 +209,8 @@ std::vector<torch::Tensor> Int8EncoderDecoder::forward(const torch::Tensor& x) {
   return run(x, [this](auto& ops, const torch::Tensor& in) { return encoder_decoder_graph(net_, ops, in); });
 }
 
-Int8PoseNet::Int8PoseNet(PoseNetImpl& net) : Int8Graph(net, {}, {}), net_(net) {}
+// (pose_graph runs the last convolution in float)
+Int8PoseNet::Int8PoseNet(PoseNetImpl& net) : Int8Graph(net, {}, {}, {net.convs.back().get()}), net_(net) {}
 
 torch::Tensor Int8PoseNet::forward(const torch::Tensor& x) {
   return run(x, [this](auto& ops,
@@ -207,7 +218,7 @@ torch::Tensor Int8PoseNet::forward(const torch::Tensor& x) {
       .at(0);
 }
 
-void Int8Graph::quantize() {
+void Int8Graph::quantize(bool release_float) {
   auto& st = *state_;
   TORCH_CHECK(!st.points.empty(), "int8: nothing was observed: run the network on calibration inputs first");
   TORCH_CHECK(!select_int8_engine().empty(), "int8: this LibTorch has no quantized engine");
@@ -215,20 +226,24 @@ void Int8Graph::quantize() {
   st.conv = op("quantized::conv2d", "new");
   st.conv_relu = op("quantized::conv2d_relu", "new");
   st.add_relu = op("quantized::add_relu", "");
-  for (const auto& m : st.net.modules(/*include_self=*/false)) {
-    if (auto* cb = m->as<ConvBnImpl>()) {
-      TORCH_CHECK(cb->folded(), "int8: BatchNorm must be folded before quantizing");
-      const auto& o = cb->conv->options;
-      st.packed[cb] = pack(cb->folded_weight(), cb->folded_bias(), (*o.stride())[0], (*o.kernel_size())[0] / 2);
-    }
+  torch::NoGradGuard no_grad;
+  // Layer by layer, so that with release_float each float kernel goes as its int8 one comes (the
+  // int8 kernels take the memory the float ones leave: the peak stays the float model's).
+  for (auto* cb : st.int8_layers()) {
+    TORCH_CHECK(cb->folded(), "int8: BatchNorm must be folded before quantizing");
+    const auto& o = cb->conv->options;
+    const auto w = cb->folded_weight();
+    st.packed[cb] = pack(w, cb->folded_bias(), (*o.stride())[0], (*o.kernel_size())[0] / 2);
+    if (std::find(st.upconvs.begin(), st.upconvs.end(), cb) != st.upconvs.end())
+      st.packed_phases[cb] =
+          pack(phase_kernels(w.to(torch::kFloat32)), cb->folded_bias().to(torch::kFloat32).repeat({4}), 1, 1);
+    if (release_float) cb->release_float_kernel();
   }
   for (auto* h : st.heads) {
     const auto& o = h->options;
     st.packed[h] = pack(h->weight, h->bias, (*o.stride())[0], (*o.kernel_size())[0] / 2);
+    if (release_float) h->weight.set_data(torch::empty({0}, h->weight.options()));
   }
-  for (auto* u : st.upconvs)
-    st.packed_phases[u] = pack(phase_kernels(u->folded_weight().to(torch::kFloat32)),
-                               u->folded_bias().to(torch::kFloat32).repeat({4}), 1, 1);
   st.quantized = true;
 }
 
@@ -257,10 +272,10 @@ void Int8Graph::set_ranges(const torch::Tensor& ranges) {
 namespace {
 
 template <class Int8Net, class Net>
-void quantize_with_ranges(Net& net, const torch::Tensor& ranges, const torch::Tensor& probe) {
+void quantize_with_ranges(Net& net, const torch::Tensor& ranges, const torch::Tensor& probe, bool release_float) {
   auto int8 = std::make_shared<Int8Net>(net);
   int8->set_ranges(ranges);
-  int8->quantize();
+  int8->quantize(release_float);
   // One call checks that the ranges are this network's (one per point). At the network's own input
   // size: LibTorch 1.13's oneDNN int8 convolutions, on 2 threads, failed ("could not create a
   // primitive descriptor for a reorder primitive") on a 2x7 input after a first call on 2x2.
@@ -275,25 +290,27 @@ void quantize_with_ranges(Net& net, const torch::Tensor& ranges, const torch::Te
 }
 
 template <class Net>
-void quantize_observed(Net& net) {
+void quantize_observed(Net& net, bool release_float) {
   TORCH_CHECK(net.int8, "int8: the network was not observed (observe_int8) before quantize_int8");
-  net.int8->quantize();
+  net.int8->quantize(release_float);
 }
 
 }  // namespace
 
 void observe_int8(EncoderDecoderImpl& net) { net.int8 = std::make_shared<Int8EncoderDecoder>(net); }
 void observe_int8(PoseNetImpl& net) { net.int8 = std::make_shared<Int8PoseNet>(net); }
-void quantize_int8(EncoderDecoderImpl& net) { quantize_observed(net); }
-void quantize_int8(PoseNetImpl& net) { quantize_observed(net); }
+void quantize_int8(EncoderDecoderImpl& net, bool release_float) { quantize_observed(net, release_float); }
+void quantize_int8(PoseNetImpl& net, bool release_float) { quantize_observed(net, release_float); }
 
-void quantize_int8(EncoderDecoderImpl& net, const torch::Tensor& ranges, int64_t height, int64_t width) {
-  quantize_with_ranges<Int8EncoderDecoder>(net, ranges,
-                                           torch::zeros({1, net.encoder->options.in_channels, height, width}));
+void quantize_int8(EncoderDecoderImpl& net, const torch::Tensor& ranges, int64_t height, int64_t width,
+                   bool release_float) {
+  quantize_with_ranges<Int8EncoderDecoder>(
+      net, ranges, torch::zeros({1, net.encoder->options.in_channels, height, width}), release_float);
 }
 
-void quantize_int8(PoseNetImpl& net, const torch::Tensor& ranges, int64_t height, int64_t width) {
-  quantize_with_ranges<Int8PoseNet>(net, ranges, torch::zeros({1, 3 * net.options.seq_length, height, width}));
+void quantize_int8(PoseNetImpl& net, const torch::Tensor& ranges, int64_t height, int64_t width, bool release_float) {
+  quantize_with_ranges<Int8PoseNet>(net, ranges, torch::zeros({1, 3 * net.options.seq_length, height, width}),
+                                    release_float);
 }
 
 }  // namespace geo

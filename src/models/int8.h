@@ -33,8 +33,11 @@ class Int8Graph {
  public:
   virtual ~Int8Graph();
   // Ranges seen -> scales and zero points, weights quantized and prepacked. Throws when nothing was
-  // observed or the engine cannot run a convolution.
-  void quantize();
+  // observed or the engine cannot run a convolution. release_float (inference only): each layer that
+  // runs in int8 lets go of its float kernel once its int8 one is made (ConvBnImpl::
+  // release_float_kernel; the heads' too), so the network holds its kernels once; it then cannot run
+  // in float again (nor be saved), even when quantizing fails part of the way.
+  void quantize(bool release_float = false);
   bool quantized() const;
   int64_t points() const;  // quantized points (activations) of the network
   // The calibrated range (low, high) of each point [points,2]: what a model file keeps of the
@@ -47,8 +50,10 @@ class Int8Graph {
  protected:
   // net: the network whose BatchNorm-folded ConvBn layers run in int8; heads: its convolutions
   // without BatchNorm that run in int8 too; upconvs: its ConvBn layers after a nearest x2 upsampling
-  // (their 2x2 phase kernels are packed as well).
-  Int8Graph(torch::nn::Module& net, std::vector<Conv2dImpl*> heads, std::vector<ConvBnImpl*> upconvs);
+  // (their 2x2 phase kernels are packed as well); in_float: its ConvBn layers the graph runs in float
+  // (neither packed nor let go).
+  Int8Graph(torch::nn::Module& net, std::vector<Conv2dImpl*> heads, std::vector<ConvBnImpl*> upconvs,
+            std::vector<ConvBnImpl*> in_float = {});
   // Observing: the float graph, recording ranges; quantized: the int8 graph. graph(ops, x) is the
   // network written once against either pass (models/int8.cpp).
   template <class Graph>
@@ -83,12 +88,15 @@ class Int8PoseNet : public Int8Graph {
 void observe_int8(EncoderDecoderImpl& net);
 void observe_int8(PoseNetImpl& net);
 // Ends calibrating: net's forward runs in int8 from now on. Throws when net was not observed.
-void quantize_int8(EncoderDecoderImpl& net);
-void quantize_int8(PoseNetImpl& net);
+// release_float: see Int8Graph::quantize.
+void quantize_int8(EncoderDecoderImpl& net, bool release_float = false);
+void quantize_int8(PoseNetImpl& net, bool release_float = false);
 // net in int8 with calibrated ranges kept from an earlier calibration (Int8Graph::ranges); throws
 // when they are not one per point of this network (checked by one call on a height x width input:
 // the size the network will see).
-void quantize_int8(EncoderDecoderImpl& net, const torch::Tensor& ranges, int64_t height, int64_t width);
-void quantize_int8(PoseNetImpl& net, const torch::Tensor& ranges, int64_t height, int64_t width);
+void quantize_int8(EncoderDecoderImpl& net, const torch::Tensor& ranges, int64_t height, int64_t width,
+                   bool release_float = false);
+void quantize_int8(PoseNetImpl& net, const torch::Tensor& ranges, int64_t height, int64_t width,
+                   bool release_float = false);
 
 }  // namespace geo

@@ -223,6 +223,26 @@ TEST(Api, Int8FilesKeepTheirCalibration) {
   EXPECT_EQ(later.spec().precision, "int8");
   EXPECT_TRUE(torch::equal(later.depth(a), int8.depth(a)));
   EXPECT_TRUE(torch::equal(later.pose({a, b, c}), int8.pose({a, b, c})));
+  // Inference only: the float kernels go as the int8 ones come, the outputs are the same bit for
+  // bit, saving is refused; from the file's calibration or from frames.
+  Model lean = Model::load(dir + "/int8.pt");
+  lean.quantize_int8({}, false);
+  EXPECT_TRUE(lean.float_weights_released());
+  EXPECT_FALSE(later.float_weights_released());
+  EXPECT_TRUE(torch::equal(lean.depth(a), int8.depth(a)));
+  EXPECT_TRUE(torch::equal(lean.pose({a, b, c}), int8.pose({a, b, c})));  // (its last conv in float, kept)
+  EXPECT_TRUE(torch::equal(lean.flow(a, b), later.flow(a, b)));
+  GEO_EXPECT_THROW_WITH(lean.save(dir + "/again.pt"), "let go of its float weights");
+  EXPECT_FALSE(std::filesystem::exists(dir + "/again.pt"));
+  LoadOptions lean_options = o;
+  lean_options.keep_float_weights = false;
+  const Model lean_load = Model::load(dir + "/int8.pt", lean_options);
+  EXPECT_TRUE(lean_load.float_weights_released());
+  EXPECT_TRUE(torch::equal(lean_load.depth(a), int8.depth(a)));
+  Model lean_frames = Model::load(checkpoint());
+  lean_frames.quantize_int8({a, b, c}, false);
+  EXPECT_TRUE(torch::equal(lean_frames.depth(a), int8.depth(a)));
+  EXPECT_TRUE(torch::equal(lean_frames.flow(a, b), int8.flow(a, b)));
   Model plain = Model::load(checkpoint());
   EXPECT_FALSE(plain.has_int8_calibration());
   GEO_EXPECT_THROW_WITH(plain.quantize_int8({}), "precision 'int8' needs calibration frames");

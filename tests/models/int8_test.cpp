@@ -142,6 +142,19 @@ TEST(Int8, CalibratedDepthNetFollowsTheFloatOne) {
     const double error = (int8[s] - reference[s]).abs().mean().item<double>();
     EXPECT_LT(error, tolerance() * spread) << "scale " << s << ": error " << error << ", spread " << spread;
   }
+  // Inference only: quantized from its ranges letting every float kernel go (each layer and head
+  // runs in int8), the same outputs.
+  const auto ranges = plain->ranges();
+  net->net->int8.reset();
+  geo::quantize_int8(*net->net, ranges, 64, 96, /*release_float=*/true);
+  for (const auto& m : net->modules()) {
+    if (const auto* cb = m->as<geo::ConvBnImpl>()) {
+      EXPECT_EQ(cb->conv->weight.numel(), 0);
+    }
+  }
+  for (const auto& p : net->net->pred) EXPECT_EQ(p->weight.numel(), 0);
+  const auto released = net(images.narrow(0, 4, 2)).disp;
+  for (size_t s = 0; s < 4; ++s) EXPECT_TRUE(torch::equal(released[s], int8[s])) << s;
 }
 
 TEST(Int8, FlowNetFollowsTheFloatOne) {
@@ -214,6 +227,27 @@ TEST(Int8, PoseNetFollowsTheFloatOne) {
   EXPECT_TRUE(torch::equal(net->predict(snippet(5).first, snippet(5).second).poses, before));
   EXPECT_THROW(geo::quantize_int8(*net, ranges.narrow(0, 0, 6), 64, 128), c10::Error);
   EXPECT_FALSE(net->int8);  // a refused calibration leaves the float network
+  // Inference only: conv1-conv6's float kernels go, conv7 (run in float) and the heads keep theirs;
+  // the same poses and camera bit for bit, and a released layer refuses to run in float.
+  geo::quantize_int8(*net, ranges, 64, 128);
+  const auto K = net->predict(snippet(5).first, snippet(5).second).K;
+  net->int8.reset();
+  geo::quantize_int8(*net, ranges, 64, 128, /*release_float=*/true);
+  for (size_t i = 0; i + 1 < net->convs.size(); ++i) {
+    EXPECT_TRUE(net->convs[i]->float_kernel_released()) << "conv" << i + 1;
+    EXPECT_EQ(net->convs[i]->conv->weight.numel(), 0) << "conv" << i + 1;
+  }
+  EXPECT_FALSE(net->convs.back()->float_kernel_released());
+  EXPECT_EQ(net->convs.back()->conv->weight.numel(), 256 * 256 * 9);
+  EXPECT_GT(net->pred->weight.numel(), 0);
+  EXPECT_TRUE(torch::equal(net->predict(snippet(5).first, snippet(5).second).poses, before));
+  EXPECT_TRUE(torch::equal(net->predict(snippet(5).first, snippet(5).second).K, K));
+  try {
+    net->convs[0]->forward(torch::rand({1, 9, 64, 128}));
+    ADD_FAILURE() << "a released layer ran in float";
+  } catch (const c10::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("let go for int8-only inference"), std::string::npos) << e.what();
+  }
 }
 
 TEST(Int8, QuantizingNeedsCalibrationAFoldedNetworkAndInference) {
