@@ -44,6 +44,8 @@ struct ConvBnImpl : torch::nn::Module {
   bool prepacked() const { return packed_weight_.defined(); }  // (after the first float call)
   // The folded kernel and bias (undefined before fold_batchnorm): what the int8 path quantizes.
   torch::Tensor folded_weight() const;
+  // BatchNorm's per-channel factor γ/√(σ²+ε): the folded kernel is the conv's weight times it.
+  torch::Tensor bn_scale() const;
   const torch::Tensor& folded_bias() const { return folded_bias_; }
   // Inference in int8 only: lets go of the float kernel (the conv's weight and any folded or packed
   // copy; BatchNorm's per-channel parameters stay) once the int8 path holds its own. The module then
@@ -59,9 +61,7 @@ struct ConvBnImpl : torch::nn::Module {
   using ConvFn = std::function<torch::Tensor(const torch::Tensor&, const torch::Tensor&, const torch::Tensor&)>;
   // conv_fn(x, weight, bias) -> BatchNorm -> ReLU, or the folded conv -> ReLU.
   torch::Tensor conv_bn_relu(const torch::Tensor& x, const ConvFn& conv_fn);
-  // BatchNorm's per-channel factor γ/√(σ²+ε), and the kernel times it in the parameters' type (the
-  // folded kernel before any change of type).
-  torch::Tensor bn_scale() const;
+  // The kernel times bn_scale() in the parameters' type (the folded kernel before any change of type).
   torch::Tensor scaled_kernel() const;
   // The folded kernel (in the folded type; w32 the same in float32) and the float32 bias -> the
   // oneDNN-blocked ones (none where oneDNN cannot run them).

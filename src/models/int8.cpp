@@ -146,9 +146,11 @@ struct Quantized {
   torch::Tensor dequantize(const torch::Tensor& y) { return y.dequantize().contiguous(); }
 };
 
-// w [Co,Ci,k,k] float -> int8 per output channel (symmetric), prepacked with its float bias.
-c10::IValue pack(const torch::Tensor& weight, const torch::Tensor& bias, int64_t stride, int64_t padding) {
-  const auto qw = quantize_weight_per_channel(weight);
+// w [Co,Ci,k,k] float (times factor [Co] per output channel, when given) -> int8 per output
+// channel (symmetric), prepacked with its float bias.
+c10::IValue pack(const torch::Tensor& weight, const torch::Tensor& bias, int64_t stride, int64_t padding,
+                 const torch::Tensor& factor = {}) {
+  const auto qw = quantize_weight_per_channel(weight, factor);
   torch::jit::Stack stack{qw,
                           bias.defined() ? c10::IValue(bias.to(torch::kFloat32)) : c10::IValue(),
                           std::vector<int64_t>{stride, stride},
@@ -232,11 +234,12 @@ void Int8Graph::quantize(bool release_float) {
   for (auto* cb : st.int8_layers()) {
     TORCH_CHECK(cb->folded(), "int8: BatchNorm must be folded before quantizing");
     const auto& o = cb->conv->options;
-    const auto w = cb->folded_weight();
-    st.packed[cb] = pack(w, cb->folded_bias(), (*o.stride())[0], (*o.kernel_size())[0] / 2);
+    // The folded kernel quantized from the weight and BatchNorm's factor, not made in float.
+    st.packed[cb] =
+        pack(cb->conv->weight, cb->folded_bias(), (*o.stride())[0], (*o.kernel_size())[0] / 2, cb->bn_scale());
     if (std::find(st.upconvs.begin(), st.upconvs.end(), cb) != st.upconvs.end())
-      st.packed_phases[cb] =
-          pack(phase_kernels(w.to(torch::kFloat32)), cb->folded_bias().to(torch::kFloat32).repeat({4}), 1, 1);
+      st.packed_phases[cb] = pack(phase_kernels(cb->folded_weight().to(torch::kFloat32)),
+                                  cb->folded_bias().to(torch::kFloat32).repeat({4}), 1, 1);
     if (release_float) cb->release_float_kernel();
   }
   for (auto* h : st.heads) {

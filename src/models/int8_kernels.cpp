@@ -150,21 +150,54 @@ GEO_MULTIVERSIONED void requantize_into(const uint8_t* __restrict__ x, int64_t C
   }
 }
 
+// max |w_i c| over a row of n values, by the bits of |w_i c| as unsigned integers (for finite
+// non-negative floats their order is the numbers' order: an integer maximum, which vectorises).
+GEO_MULTIVERSIONED float row_abs_max(const float* __restrict__ w, int64_t n, float c) {
+  uint32_t m = 0;
+  for (int64_t i = 0; i < n; ++i) m = std::max(m, __builtin_bit_cast(uint32_t, w[i] * c) & 0x7fffffffu);
+  return __builtin_bit_cast(float, m);
+}
+
+// ATen's per-channel quantization of the row w c: nearbyint((w_i c) x inverse) (to even, the
+// product and the scaling each rounded to float32 as ATen's two multiplications are) clamped to int8.
+GEO_MULTIVERSIONED void quantize_row(const float* __restrict__ w, int64_t n, float c, float inverse,
+                                     int8_t* __restrict__ q) {
+  for (int64_t i = 0; i < n; ++i) {
+    const float product = w[i] * c;
+    float v = std::nearbyint(product * inverse);
+    v = v < -128.0f ? -128.0f : v;
+    v = v > 127.0f ? 127.0f : v;
+    q[i] = static_cast<int8_t>(static_cast<int32_t>(v));
+  }
+}
+
 }  // namespace
 
-torch::Tensor quantize_weight_per_channel(const torch::Tensor& weight) {
+torch::Tensor quantize_weight_per_channel(const torch::Tensor& weight, const torch::Tensor& channel_factor) {
   const auto w = weight.to(torch::kFloat32).contiguous();
-  const auto rows = w.view({w.size(0), -1});
-  const auto scales = (torch::maximum(-rows.amin(1), rows.amax(1)) / 127.0).clamp_min(1e-12).to(torch::kFloat64);
-  // ATen's per-channel quantization: round(w * (1 / float(scale))) to even, clamped to int8. The
-  // rounding by adding and taking away 1.5 * 2^23 (exact to even for |x| < 2^22; here |x| <= 127):
-  // torch::round is a scalar loop in LibTorch 1.13 (a sixth of opening an int8 model).
-  auto shape = std::vector<int64_t>(static_cast<size_t>(w.dim()), 1);
-  shape[0] = w.size(0);
-  const auto inverse = (1.0 / scales.to(torch::kFloat32)).view(shape);
-  constexpr float kRound = 12582912.0f;                                                       // 1.5 * 2^23
-  const auto q = (w * inverse).add_(kRound).sub_(kRound).clamp_(-128, 127).to(torch::kInt8);  // (no fused multiply-add)
-  return at::_make_per_channel_quantized_tensor(q, scales, torch::zeros({w.size(0)}, torch::kLong), 0);
+  const int64_t Co = w.size(0), n = Co > 0 ? w.numel() / Co : 0;
+  const auto factor =
+      channel_factor.defined() ? channel_factor.to(torch::kFloat32).contiguous() : torch::ones({Co}, torch::kFloat32);
+  TORCH_CHECK(factor.dim() == 1 && factor.size(0) == Co, "int8: a channel factor per output channel (", Co, "), got ",
+              factor.sizes());
+  const float* wp = w.data_ptr<float>();
+  const float* fp = factor.data_ptr<float>();
+  auto abs_max = torch::empty({Co}, torch::kFloat32);
+  float* mp = abs_max.data_ptr<float>();
+  const int64_t grain = std::max<int64_t>(1, 65536 / std::max<int64_t>(n, 1));
+  at::parallel_for(0, Co, grain, [&](int64_t c0, int64_t c1) {
+    for (int64_t c = c0; c < c1; ++c) mp[c] = row_abs_max(wp + c * n, n, fp[c]);
+  });
+  // The scales and their inverses as before, by LibTorch's own float operations.
+  const auto scales = (abs_max / 127.0).clamp_min(1e-12).to(torch::kFloat64);
+  const auto inverse = (1.0 / scales.to(torch::kFloat32)).contiguous();
+  const float* ip = inverse.data_ptr<float>();
+  auto q = torch::empty(w.sizes(), torch::kInt8);
+  int8_t* qp = q.data_ptr<int8_t>();
+  at::parallel_for(0, Co, grain, [&](int64_t c0, int64_t c1) {
+    for (int64_t c = c0; c < c1; ++c) quantize_row(wp + c * n, n, fp[c], ip[c], qp + c * n);
+  });
+  return at::_make_per_channel_quantized_tensor(q, scales, torch::zeros({Co}, torch::kLong), 0);
 }
 
 torch::Tensor cat_int8(const std::vector<torch::Tensor>& parts_in, double scale, int64_t zero_point) {

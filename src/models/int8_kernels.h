@@ -18,8 +18,11 @@ torch::Tensor quantize_to_nhwc(const torch::Tensor& x, double scale, int64_t zer
 
 // A convolution's kernel w [Co,...] float -> qint8 per output channel, symmetric (scale
 // max|w_c| / 127, zero point 0): what at::quantize_per_channel computes with those scales, exactly,
-// in vectorised passes (~5x faster: a quarter of opening an int8 model took ATen's).
-torch::Tensor quantize_weight_per_channel(const torch::Tensor& weight);
+// in one vectorised pass for the scales and one for the bytes (ATen's took a quarter of opening an
+// int8 model). channel_factor [Co] (float32), when given: the kernel w x channel_factor per output
+// channel is quantized (BatchNorm's folding: the same bytes as quantizing the product made in
+// float32), without making that product.
+torch::Tensor quantize_weight_per_channel(const torch::Tensor& weight, const torch::Tensor& channel_factor = {});
 
 // quint8 [B,Ci,H,W] tensors concatenated along the channels into quint8 channels-last with (scale,
 // zero_point), each requantized on the way (quantized::cat's result in one vectorised pass: it took

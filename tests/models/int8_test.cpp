@@ -59,6 +59,19 @@ TEST(Int8, WeightsQuantizePerChannelAsAten) {
     EXPECT_TRUE(torch::equal(mine.int_repr(), aten.int_repr())) << k.sizes();
     EXPECT_EQ(mine.q_per_channel_axis(), 0);
   }
+  // With a per-channel factor (BatchNorm's folding): the bytes and scales of quantizing the product
+  // made in float32, though the product is never made.
+  const auto factor = torch::rand({17}) * 3 - 1;
+  factor[5] = 0;
+  const auto folded = w * factor.view({-1, 1, 1, 1});
+  const auto mine = geo::quantize_weight_per_channel(w, factor), product = geo::quantize_weight_per_channel(folded);
+  EXPECT_TRUE(torch::equal(mine.q_per_channel_scales(), product.q_per_channel_scales()));
+  EXPECT_TRUE(torch::equal(mine.int_repr(), product.int_repr()));
+  const auto scales = (folded.abs().amax({1, 2, 3}) / 127.0).clamp_min(1e-12).to(torch::kFloat64);
+  EXPECT_TRUE(torch::equal(
+      mine.int_repr(),
+      at::quantize_per_channel(folded, scales, torch::zeros({17}, torch::kLong), 0, torch::kQInt8).int_repr()));
+  EXPECT_THROW(geo::quantize_weight_per_channel(w, torch::ones({16})), c10::Error);
 }
 
 // Concatenation with requantization: the float concatenation of the dequantized parts, quantized
