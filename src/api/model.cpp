@@ -10,13 +10,13 @@
 #include "geometry/trajectory.h"
 #include "models/conv.h"
 #include "models/int8.h"
+#include "pipeline/checkpoint.h"
+#include "pipeline/networks.h"
+#include "api/model_impl.h"
 
 #ifdef __GLIBC__
 #include <malloc.h>
 #endif
-#include "pipeline/checkpoint.h"
-#include "pipeline/networks.h"
-#include "api/model_impl.h"
 
 #include <ATen/CPUGeneratorImpl.h>
 #include <torch/torch.h>
@@ -255,7 +255,8 @@ void Model::quantize_int8(const std::vector<torch::Tensor>& frames, bool keep_fl
   guarded("geo::Model::quantize_int8", [&] {
     auto& nets = impl_->nets;
     const bool release = !keep_float_weights;
-    // The networks into int8 (quantize_one: with the file's ranges, or those observed); from the first kernel let go on, there is no float model to go back to.
+    // The networks into int8 (quantize_one: with the file's ranges, or those observed); from the
+    // first kernel let go on, there is no float model to go back to.
     const auto quantize_all = [&](const auto& quantize_one) {
       if (release) impl_->float_released = true;
       try {
@@ -451,8 +452,8 @@ void Model::save(const std::string& path, bool half, bool force) const {
   guarded("writing geo model '" + path + "'", [&] {
     if (impl_->float_released)
       throw Error(
-          "this int8 model let go of its float weights (release_float_weights): save it before that, "
-          "or load its file again");
+          "this int8 model let go of its float weights (quantize_int8 without keeping them): save it "
+          "before that, or load its file again");
     check_model_file_target("path", path, impl_->spec.source, force);
     write_model_file(path, impl_->nets, half);
   });
