@@ -8,7 +8,8 @@
 // Post-training calibration: observe(net) makes net's forward record the range of every quantized
 // point while computing in float as before; run it on representative inputs, then quantize(net)
 // fixes each point's scale and zero point from the ranges seen and prepacks the weights; from then
-// on net's forward runs in int8 (inference only; the float weights stay for training and export).
+// on net's forward runs in int8 (inference only; the float weights stay for training and export,
+// unless quantize lets them go: Int8Graph::quantize).
 #pragma once
 
 #include <torch/torch.h>
