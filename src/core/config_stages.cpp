@@ -30,6 +30,7 @@ void LossWeights::validate(Checker& c) const {
   c.require(flow_smooth >= 0, "flow_smooth", flow_smooth, "must be >= 0");
   c.require(flow_consistency >= 0, "flow_consistency", flow_consistency, "must be >= 0");
   c.require(ground >= 0, "ground", ground, "must be >= 0");
+  c.require(anchor >= 0, "anchor", anchor, "must be >= 0");
 }
 
 void StageConfig::validate(Checker& c) const {
@@ -54,6 +55,8 @@ void StageConfig::validate(Checker& c) const {
   if (uses_flow())
     c.require(weights.flow > 0 || weights.flow_smooth > 0 || weights.flow_consistency > 0, "train", train.names(),
               "trains flow, so at least one flow loss weight must be > 0");
+  c.require(weights.anchor == 0 || train.depth, "train", train.names(),
+            "must include depth when weights.anchor is > 0 (the anchor holds the trained depth)");
   c.section("weights", weights);
 }
 

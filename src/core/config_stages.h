@@ -34,6 +34,10 @@ struct LossWeights {
   // Nothing standing on the road lies beyond it (losses/ground_prior.h): 0 in the paper's recipe;
   // configs/video.yaml turns it on for traffic (cars moving with the camera).
   double ground = 0.0;
+  // Depth held to the depth of the weights the stage starts from (losses/depth_anchor.h): 0 in the
+  // paper's recipe; geo_infer --refine uses 1. A stage that starts from no trained weights (the
+  // first stage without init or --init) has nothing to hold to: the term is then off, said once.
+  double anchor = 0.0;
 
   template <class V>
   void fields(V& v) {
@@ -43,6 +47,7 @@ struct LossWeights {
     v("flow_smooth", flow_smooth);
     v("flow_consistency", flow_consistency);
     v("ground", ground);
+    v("anchor", anchor);
   }
   void validate(Checker& c) const;
 };

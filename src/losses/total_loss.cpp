@@ -208,8 +208,8 @@ FlowTerms flow_terms(const RigidTerms& rigid, const PerSourceScale<torch::Tensor
   return out;
 }
 
-LossTerms total_loss(const RigidTerms& rigid, const FlowTerms* flow, const LossWeights& w,
-                     const torch::Tensor& ground) {
+LossTerms total_loss(const RigidTerms& rigid, const FlowTerms* flow, const LossWeights& w, const torch::Tensor& ground,
+                     const torch::Tensor& anchor) {
   LossTerms t;
   t.rigid = rigid.rigid;
   t.disp_smooth = rigid.disp_smooth;
@@ -218,6 +218,10 @@ LossTerms total_loss(const RigidTerms& rigid, const FlowTerms* flow, const LossW
   if (ground.defined()) {
     t.ground = ground;
     t.total = t.total + w.ground * t.ground;
+  }
+  if (anchor.defined()) {
+    t.anchor = anchor;
+    t.total = t.total + w.anchor * t.anchor;
   }
   if (flow) {
     t.flow = flow->flow;
@@ -237,6 +241,7 @@ std::vector<std::pair<std::string, double>> LossTerms::values() const {
                                 {"flow_smooth", flow_smooth},
                                 {"flow_consistency", flow_consistency},
                                 {"ground", ground},
+                                {"anchor", anchor},
                                 {"automasked", automasked},
                                 {"total", total}})
     if (v.defined()) {

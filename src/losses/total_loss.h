@@ -68,7 +68,7 @@ FlowTerms flow_terms(const RigidTerms& rigid, const PerSourceScale<torch::Tensor
 
 struct LossTerms {
   // Unweighted terms; undefined when the stage does not compute them (never zero-filled).
-  torch::Tensor rigid, flow, disp_smooth, flow_smooth, flow_consistency, ground;
+  torch::Tensor rigid, flow, disp_smooth, flow_smooth, flow_consistency, ground, anchor;
   torch::Tensor total;       // eq. 16: the weighted sum of the defined terms
   torch::Tensor automasked;  // not a loss: RigidTerms::automasked, reported beside the terms
 
@@ -78,8 +78,9 @@ struct LossTerms {
 };
 
 // Eq. 16. `flow` may be null (stages that do not train flow): flow terms are then left undefined.
-// `ground`: the road-plane prior (ground_prior.h), added with weights.ground when defined.
+// `ground`: the road-plane prior (ground_prior.h), added with weights.ground when defined; `anchor`:
+// the depth anchor (depth_anchor.h), added with weights.anchor when defined.
 LossTerms total_loss(const RigidTerms& rigid, const FlowTerms* flow, const LossWeights& weights,
-                     const torch::Tensor& ground = {});
+                     const torch::Tensor& ground = {}, const torch::Tensor& anchor = {});
 
 }  // namespace geo

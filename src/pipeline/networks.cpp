@@ -133,6 +133,19 @@ void Networks::set_trainable(const StageConfig& s) {
   if (flow) set(*flow, s.trains(Net::kFlow));
 }
 
+DepthNet Networks::frozen_depth_copy() const {
+  DepthNet copy = Networks::create(spec, false).depth;
+  torch::NoGradGuard no_grad;
+  const auto params = depth->named_parameters();
+  const auto buffers = depth->named_buffers();
+  for (auto& p : copy->named_parameters()) p.value().copy_(params[p.key()]);
+  for (auto& b : copy->named_buffers()) b.value().copy_(buffers[b.key()]);
+  for (auto& p : copy->parameters()) p.set_requires_grad(false);
+  copy->to(params.begin()->value().device());
+  copy->eval();
+  return copy;
+}
+
 std::vector<torch::Tensor> Networks::trainable_parameters() const {
   std::vector<torch::Tensor> out;
   auto add = [&](const torch::nn::Module& m) {

@@ -66,6 +66,9 @@ struct Networks {
   // requires_grad on: the parameters of the networks the stage trains, BatchNorm scales only when
   // spec.model.bn_scale (GeoNet: no gamma). Call once per stage, before building the optimizer.
   void set_trainable(const StageConfig& stage);
+  // A copy of the DepthNet's weights and statistics, on its device, in eval mode and without
+  // gradients (the depth anchor's teacher: losses/depth_anchor.h).
+  DepthNet frozen_depth_copy() const;
   // The parameters that require gradients (what set_trainable selected), in a fixed order.
   std::vector<torch::Tensor> trainable_parameters() const;
   // Inference: every network in eval mode and, with `fold`, BatchNorm folded into the convolutions

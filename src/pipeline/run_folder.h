@@ -9,6 +9,7 @@
 //   checkpoints/<stage>-<iteration, 8 digits>.pt   training checkpoints (train/checkpoints.h rotates them)
 //   checkpoints/best-<stage>.pt                the stage's checkpoint with the lowest validation score
 //   checkpoints/latest                         the name of the newest checkpoint
+//   anchor-<stage>.pt                          the DepthNet a stage started from (stages[].weights.anchor)
 // A file whose write was interrupted is left as <file>.tmp or <file>.tmp.<pid>.
 // LibTorch-free.
 #pragma once
@@ -38,6 +39,7 @@ class RunFolder {
   std::string checkpoint(const std::string& stage, int64_t iteration) const;
   std::string best(const std::string& stage) const;
   std::string latest_pointer() const { return checkpoints() + "/latest"; }
+  std::string anchor(const std::string& stage) const { return root_ + "/anchor-" + stage + ".pt"; }
 
   // The newest checkpoint's path (from checkpoints/latest), "" when none was written.
   std::string latest() const;

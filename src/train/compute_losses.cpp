@@ -1,6 +1,7 @@
 #include "train/compute_losses.h"
 
 #include "core/runtime.h"
+#include "losses/depth_anchor.h"
 #include "losses/ground_prior.h"
 #include "losses/photometric.h"
 
@@ -18,7 +19,7 @@ auto network_pass(const Config& config, const torch::Device& device, F forward) 
 }  // namespace
 
 StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& srcs, const torch::Tensor& K,
-                          const StageConfig& stage, const Config& config) {
+                          const StageConfig& stage, const Config& config, DepthNet teacher) {
   const int64_t B = tgt.size(0), N = srcs.size(1);
   std::vector<torch::Tensor> src_list;
   for (int64_t i = 0; i < N; ++i) src_list.push_back(srcs.select(1, i));
@@ -55,8 +56,16 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
   out.tgt_disp = in.tgt_disp;
   out.rigid = rigid_terms(in, config.loss);
   const torch::Tensor ground = stage.weights.ground > 0 ? ground_prior(in.tgt_disp[0], in.K) : torch::Tensor();
+  torch::Tensor anchor;
+  if (teacher && stage.weights.anchor > 0) {
+    const torch::Tensor taught = [&] {
+      torch::NoGradGuard no_grad;
+      return network_pass(config, tgt.device(), [&] { return teacher->forward(tgt).disp[0]; });
+    }();
+    anchor = depth_anchor(in.tgt_disp[0], taught);
+  }
   if (!stage.uses_flow()) {
-    out.losses = total_loss(out.rigid, nullptr, stage.weights, ground);
+    out.losses = total_loss(out.rigid, nullptr, stage.weights, ground, anchor);
     return out;
   }
   TORCH_CHECK(nets.flow, "the stage trains flow but no FlowNet was created");
@@ -86,7 +95,7 @@ StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch:
   }
   frozen.reset();
   out.flow = flow_terms(out.rigid, out.fwd_full, bwd_full, config.loss, stage.weights.flow_consistency);
-  out.losses = total_loss(out.rigid, &*out.flow, stage.weights, ground);
+  out.losses = total_loss(out.rigid, &*out.flow, stage.weights, ground, anchor);
   return out;
 }
 

@@ -24,7 +24,9 @@ struct StepOutput {
 // tgt [B,3,H,W], srcs [B,N,3,H,W], K [B,3,3] on the networks' device. FlowNet inputs are detached
 // (they are observations for it); the full flow keeps the rigid flow's gradient, so in the paper's
 // joint stage 2 the flow losses also train depth and pose.
+// `teacher` (Networks::frozen_depth_copy of the weights the stage started from): with
+// stage.weights.anchor > 0, the depth anchor (losses/depth_anchor.h) on the target's finest scale.
 StepOutput compute_losses(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& srcs, const torch::Tensor& K,
-                          const StageConfig& stage, const Config& config);
+                          const StageConfig& stage, const Config& config, DepthNet teacher = nullptr);
 
 }  // namespace geo

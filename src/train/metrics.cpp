@@ -14,7 +14,7 @@ namespace fs = std::filesystem;
 namespace geo {
 namespace {
 
-const char* kTermColumns[] = {"rigid", "disp_smooth", "flow", "flow_smooth", "flow_consistency", "ground"};
+const char* kTermColumns[] = {"rigid", "disp_smooth", "flow", "flow_smooth", "flow_consistency", "ground", "anchor"};
 
 std::optional<double> term(const StepRecord& r, const std::string& name) {
   for (const auto& [n, v] : r.losses)

@@ -8,7 +8,9 @@
 // frame (no validation block), the whole frame resized as geo_infer sees it (no crop), at half
 // video.yaml's learning rate and with BatchNorm's statistics kept (a few frames' batch statistics
 // would replace what the model measured on many: on the real KITTI runs that alone cost 10% AbsRel
-// and made refinement unstable). Depth and pose train; a FlowNet the model has is kept as it was.
+// and made refinement unstable), its depth held to the model's own (weights.anchor 1: a few frames
+// of traffic otherwise teach depth that follows texture). Depth and pose train; a FlowNet the model
+// has is kept as it was.
 #pragma once
 
 #include <cstdint>

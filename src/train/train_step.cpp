@@ -142,7 +142,7 @@ StepResult TrainStep::run(const torch::Tensor& tgt, const torch::Tensor& srcs, c
   for (auto& group : adam_->param_groups()) static_cast<torch::optim::AdamOptions&>(group.options()).lr(lr);
   adam_->zero_grad();
   StepResult r;
-  r.out = compute_losses(nets_, tgt, srcs, K, stage_, config_);
+  r.out = compute_losses(nets_, tgt, srcs, K, stage_, config_, teacher_);
   // Two device-to-host copies per step: the loss terms (to skip backward on a non-finite loss:
   // grid_sample's CPU backward crashes on NaN coordinates), then the gradient norm.
   r.losses = r.out.losses.values();

@@ -68,6 +68,8 @@ class TrainStep {
   // bucket's all-reduce starts during backward, as soon as its gradients exist
   // (run.distributed.overlap); else all start after backward.
   void set_gradient_averager(GradientAverager* averager, bool overlap = false);
+  // The depth anchor's teacher (compute_losses); nullptr (the default): no anchor term.
+  void set_anchor(DepthNet teacher) { teacher_ = std::move(teacher); }
 
  private:
   Networks& nets_;
@@ -76,6 +78,7 @@ class TrainStep {
   std::vector<torch::Tensor> params_;
   std::unique_ptr<torch::optim::Adam> adam_;
   GradientAverager* averager_ = nullptr;
+  DepthNet teacher_{nullptr};
   bool overlap_ = false;
 };
 

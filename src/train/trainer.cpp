@@ -3,6 +3,7 @@
 #include "core/files.h"
 #include "core/logging.h"
 #include "core/runtime.h"
+#include "core/state_io.h"
 #ifdef GEO_WITH_OPENCV
 #include "data/image_io.h"
 #endif
@@ -215,11 +216,44 @@ class Run {
     spdlog::info("stage {}: networks initialised from {}", s.name, path);
   }
 
+  // stages[].weights.anchor: the DepthNet the stage starts from, frozen (losses/depth_anchor.h).
+  // A fresh stage copies it and keeps the copy in the run folder (anchor-<stage>.pt) for a resumed
+  // run to read; a first stage without init or --init starts from random weights: nothing to hold.
+  DepthNet anchor_teacher(const StageConfig& s) {
+    if (s.weights.anchor <= 0) return nullptr;
+    const std::string path = folder_.anchor(s.name);
+    const bool fresh = resume_from_.empty();
+    if (fresh && state_.stage == 0 && opts_.init.empty() && s.init.empty()) {
+      if (writer_)
+        spdlog::warn(
+            "stage {}: weights.anchor {} is unused: the stage starts from random weights, so there is no depth to "
+            "hold to (give --init or stages[0].init to fine-tune a trained model)",
+            s.name, s.weights.anchor);
+      return nullptr;
+    }
+    if (fresh) {
+      DepthNet teacher = nets_.frozen_depth_copy();
+      if (writer_) save_state(*teacher, path);
+      spdlog::info("stage {}: depth held to the weights it starts from (weights.anchor {}, kept in {})", s.name,
+                   s.weights.anchor, path);
+      return teacher;
+    }
+    if (!fs::exists(path)) {  // the stage began without trained weights (said then)
+      if (writer_)
+        spdlog::warn("stage {}: weights.anchor {} is unused: {} does not exist", s.name, s.weights.anchor, path);
+      return nullptr;
+    }
+    DepthNet teacher = nets_.frozen_depth_copy();
+    load_state(*teacher, path);
+    return teacher;
+  }
+
   int run_stage(const SignalScope& signals) {
     const auto& s = stage();
     broadcast_networks(group_, nets_);  // every process starts the stage from rank 0's weights
     TrainStep step(nets_, cfg_, s);
     step.set_gradient_averager(averager_.get(), cfg_.run.distributed.overlap);
+    step.set_anchor(anchor_teacher(s));
     if (!resume_from_.empty()) CheckpointFile(resume_from_).load_optimizer(step.optimizer());
     const LrSchedule lr = LrSchedule::of(s);
     LoaderOptions lo = loader_options(cfg_.data, s.batch_size);

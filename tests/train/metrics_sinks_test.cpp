@@ -47,16 +47,16 @@ TEST(CsvSink, RowsAndResumeTrimming) {
   v.score = 0.75;
   csv.on_validation(v);
   EXPECT_EQ(test::read_file(dir + "/metrics.csv"),
-            "stage_index,stage,iteration,total,rigid,disp_smooth,flow,flow_smooth,flow_consistency,ground,lr\n"
-            "0,s1,1,1,0.5,,,,,,0.0001\n0,s1,2,2,1,,,,,,0.0001\n0,s1,3,3,1.5,,,,,,0.0001\n"
-            "1,s2,1,11,5.5,,,,,,0.0001\n1,s2,2,12,6,,,,,,0.0001\n");
+            "stage_index,stage,iteration,total,rigid,disp_smooth,flow,flow_smooth,flow_consistency,ground,anchor,lr\n"
+            "0,s1,1,1,0.5,,,,,,,0.0001\n0,s1,2,2,1,,,,,,,0.0001\n0,s1,3,3,1.5,,,,,,,0.0001\n"
+            "1,s2,1,11,5.5,,,,,,,0.0001\n1,s2,2,12,6,,,,,,,0.0001\n");
   EXPECT_EQ(test::read_file(dir + "/val.csv"),
             "stage_index,stage,iteration,photometric,flow,score\n1,s2,2,0.5,0.25,0.75\n");
   csv.trim_after(1, 1);  // resumed from s2 iteration 1: later rows go
   EXPECT_EQ(test::read_file(dir + "/metrics.csv"),
-            "stage_index,stage,iteration,total,rigid,disp_smooth,flow,flow_smooth,flow_consistency,ground,lr\n"
-            "0,s1,1,1,0.5,,,,,,0.0001\n0,s1,2,2,1,,,,,,0.0001\n0,s1,3,3,1.5,,,,,,0.0001\n"
-            "1,s2,1,11,5.5,,,,,,0.0001\n");
+            "stage_index,stage,iteration,total,rigid,disp_smooth,flow,flow_smooth,flow_consistency,ground,anchor,lr\n"
+            "0,s1,1,1,0.5,,,,,,,0.0001\n0,s1,2,2,1,,,,,,,0.0001\n0,s1,3,3,1.5,,,,,,,0.0001\n"
+            "1,s2,1,11,5.5,,,,,,,0.0001\n");
   EXPECT_EQ(test::read_file(dir + "/val.csv"), "stage_index,stage,iteration,photometric,flow,score\n");
 }
 

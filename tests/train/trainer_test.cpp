@@ -511,6 +511,53 @@ TEST(Trainer, CheckpointsRecordTheirInitChain) {
   EXPECT_EQ(CheckpointFile(resolve_checkpoint(c.run_dir)).init_configs(), chain_c);
 }
 
+// metrics.csv's column `name`, one entry per row ("" where the step had no such term).
+std::vector<std::string> metrics_column(const std::string& csv, const std::string& name) {
+  std::istringstream rows(csv);
+  std::vector<std::vector<std::string>> table;
+  for (std::string row; std::getline(rows, row);) {
+    table.emplace_back();
+    std::stringstream ss(row + ",");
+    for (std::string x; std::getline(ss, x, ',');) table.back().push_back(x);
+  }
+  const auto& header = table.at(0);
+  const size_t col = std::find(header.begin(), header.end(), name) - header.begin();
+  EXPECT_LT(col, header.size()) << name;
+  std::vector<std::string> out;
+  for (size_t i = 1; i < table.size(); ++i) out.push_back(col < table[i].size() ? table[i][col] : "?");
+  return out;
+}
+
+// weights.anchor: a fine-tune holds depth to the weights each stage starts from (the --init's, then
+// the first stage's result), keeps them beside its checkpoints, and resumes with the same losses; a
+// first stage from random weights has nothing to hold to and computes no anchor.
+TEST(Trainer, AnAnchoredFineTuneHoldsDepthToItsStartAndResumesExactly) {
+  const auto base = test::fresh_dir("anchor");
+  auto scratch = one_step_config();
+  scratch.stages[0].weights.anchor = 1;
+  TrainOptions a;
+  a.run_dir = base + "/scratch";
+  ASSERT_EQ(train(scratch, a), 0);
+  EXPECT_EQ(metrics_column(metrics(a.run_dir), "anchor"), std::vector<std::string>{""});
+  EXPECT_FALSE(std::filesystem::exists(a.run_dir + "/anchor-s1.pt"));
+
+  auto cfg = tiny_config();
+  cfg.stages[0].iterations = cfg.stages[1].iterations = 2;
+  for (auto& s : cfg.stages) {
+    s.weights.anchor = 1;
+    s.freeze_batch_norm = true;  // the network as the teacher computes it: no anchor at the first step
+  }
+  const auto r = test::killed_and_resumed(cfg, base, 3, "", a.run_dir);  // killed in s2
+  EXPECT_EQ(r.whole, r.resumed);
+  const auto anchor = metrics_column(r.whole, "anchor");
+  ASSERT_EQ(anchor.size(), 4u);
+  EXPECT_NEAR(std::stod(anchor[0]), 0.0, 1e-5);  // s1 starts from the --init's weights
+  EXPECT_GT(std::stod(anchor[1]), 1e-4);
+  EXPECT_NEAR(std::stod(anchor[2]), 0.0, 1e-5);  // s2 from s1's result
+  for (const auto& dir : {r.whole_dir, r.killed_dir})
+    for (const auto& stage : {"s1", "s2"}) EXPECT_TRUE(std::filesystem::exists(dir + "/anchor-" + stage + ".pt"));
+}
+
 // Sends this process SIGTERM (as a cluster scheduler would) after `n` steps: just before validation.
 struct TermAtStep : MetricsSink {
   explicit TermAtStep(int64_t n) : left(n) {}
