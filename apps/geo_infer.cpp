@@ -53,6 +53,7 @@ struct InferOptions {
   int64_t max_frames = 0, calibration_frames = 0;  // 0: 8 with --precision int8
   int64_t refine = 0;                              // 0: off
   std::string refine_run;
+  double refine_anchor = geo::kRefineAnchor;
   double camera_height = 0, ply_max_depth = 0;
   int threads = 0;
   bool videos = false, timing = false, force = false, report = false;
@@ -104,6 +105,11 @@ void add_options(CLI::App& app, InferOptions& o) {
                  "to the clip, with configs/video.yaml's settings and the camera of --intrinsics or the model's), then "
                  "predict with the refined networks; for short or hard clips (docs/video.md)")
       ->check(CLI::Range(int64_t{1}, int64_t{1000000}));
+  app.add_option("--refine-anchor", o.refine_anchor,
+                 "with --refine: how strongly depth is held to the model's own (stages[].weights.anchor): 1 keeps "
+                 "what the model learned where the clip teaches little (traffic moving with the camera); 0 lets the "
+                 "clip reshape depth freely (docs/video.md)")
+      ->check(CLI::Range(0.0, 1000.0));
   app.add_option("--refine-run", o.refine_run,
                  "with --refine: the refinement's run folder, kept (train.log, checkpoints, refined.pt: a model file "
                  "for later runs); default: a temporary folder, removed at the end");
@@ -474,6 +480,7 @@ std::string refined_model(const InferOptions& o, geo::StepTimes& times, ScratchR
   r.checkpoint = o.checkpoint;
   r.input = o.input;
   r.iterations = o.refine;
+  r.anchor = o.refine_anchor;
   r.intrinsics = o.intrinsics;
   if (r.intrinsics.empty()) {  // geo_infer's KITTI-like camera, in pixels of the input
     const auto K = geo::kitti_like_intrinsics(height, width).to(torch::kFloat64);
@@ -502,6 +509,9 @@ int infer(const InferOptions& o) {
   geo::StepTimes times;
   if (!o.refine_run.empty() && o.refine == 0)
     throw std::runtime_error("--refine-run '" + o.refine_run + "' keeps the run of --refine N: give --refine too");
+  if (o.refine_anchor != geo::kRefineAnchor && o.refine == 0)
+    throw std::runtime_error("--refine-anchor " + fmt::format("{:g}", o.refine_anchor) +
+                             " weighs a term of --refine N: give --refine too");
   ScratchRun scratch;
   const std::string checkpoint = o.refine > 0 ? refined_model(o, times, scratch) : o.checkpoint;
   if (checkpoint.empty()) return 130;  // interrupted: the refinement's checkpoint is in its run folder

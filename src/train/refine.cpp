@@ -18,9 +18,6 @@ namespace {
 // Half video.yaml's 2e-4: on the unseen ends of the real KITTI runs 50 iterations at 1e-4 gave the
 // best pair of ATEs of 1e-4 and 2e-4 (docs/video.md).
 constexpr double kRefineLearningRate = 1e-4;
-// Depth held to the source model's (losses/depth_anchor.h): on the real KITTI traffic frames 50
-// iterations without it raised AbsRel from 0.347 to 0.369; at 1 it stays at 0.345 (docs/video.md).
-constexpr double kRefineAnchor = 1.0;
 
 // `over`'s keys written into `base`, maps merged key by key.
 void merge_into(YAML::Node base, const YAML::Node& over) {
@@ -47,7 +44,7 @@ Config refine_config(const RefineOptions& o, const NetworkSpec& spec) {
   stage["iterations"] = o.iterations;
   stage["learning_rate"] = kRefineLearningRate;
   stage["freeze_batch_norm"] = true;
-  stage["weights"]["anchor"] = kRefineAnchor;
+  stage["weights"]["anchor"] = o.anchor;
   stage.remove("init");
   YAML::Node stages(YAML::NodeType::Sequence);
   stages.push_back(stage);

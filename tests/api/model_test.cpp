@@ -498,6 +498,10 @@ TEST(GeoInfer, RefinesOnTheInputFirst) {
                 .find("stage refine (1/1): training [depth, pose] for 2 iterations from 0, batch 4, lr 0.0001"),
             std::string::npos)
       << test::read_file(dir + "/log");
+  EXPECT_NE(
+      test::read_file(dir + "/log").find("stage refine: depth held to the weights it starts from (weights.anchor 1"),
+      std::string::npos);
+  EXPECT_TRUE(std::filesystem::exists(dir + "/run/anchor-refine.pt"));
   const std::string model = dir + "/run/refined.pt";
   ASSERT_TRUE(std::filesystem::exists(model));
   ASSERT_EQ(run("--checkpoint " + model + " --input " + clip + " --output " + dir + "/again"), 0)
@@ -522,7 +526,7 @@ TEST(GeoInfer, RefinesOnTheInputFirst) {
   EXPECT_FALSE(std::filesystem::exists(dir + "/refined/run"));  // the run folder lies where it was told
 
   // Refused, before any training: no steps, a single image, a clip shorter than a snippet, a
-  // used output folder or run folder, --refine-run alone.
+  // used output folder or run folder, --refine-run or --refine-anchor alone, a negative anchor.
   auto refused = [&](const std::string& args, const std::string& message) {
     EXPECT_NE(run(args), 0) << args;
     const auto log = test::read_file(dir + "/log");
@@ -543,6 +547,8 @@ TEST(GeoInfer, RefinesOnTheInputFirst) {
           "--refine-run '" + dir + "/run' exists and is not an empty folder");
   refused(source + " --output " + dir + "/o1 --refine-run " + dir + "/run3",
           "keeps the run of --refine N: give --refine too");
+  refused(source + " --output " + dir + "/o1 --refine-anchor 0.5", "--refine-anchor 0.5 weighs a term of --refine N");
+  refused(source + " --output " + dir + "/o1 --refine 2 --refine-anchor -1", "--refine-anchor: Value -1 not in range");
 }
 
 }  // namespace
