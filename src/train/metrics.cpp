@@ -139,7 +139,8 @@ void ProgressSink::warn_if_mostly_masked(const StepRecord& r, double masked) {
         "stage {}: {:.0f}% of the pixels were auto-masked over iterations {}-{} (a still frame explains them "
         "better than the predicted motion: traffic moving with the camera, a camera that hardly moves, or "
         "networks that are not learning): such footage is unlikely to teach depth. More forward driving helps, "
-        "or start from a model trained on forward driving (geo_train --init RUN)",
+        "or start from a model trained on forward driving (geo_train --init RUN, with stages[].weights.anchor 1 "
+        "and freeze_batch_norm true to keep its depth)",
         r.stage, 100 * mean, r.iteration - masked_steps_ + 1, r.iteration);
     masked_warned_ = true;
   }

@@ -68,13 +68,42 @@ std::map<int64_t, double> val_scores(const std::string& dir, const std::string& 
   return out;
 }
 
+// metrics.csv's column `name`, one entry per row ("" where the step had no such term).
+std::vector<std::string> metrics_column(const std::string& csv, const std::string& name) {
+  std::istringstream rows(csv);
+  std::vector<std::vector<std::string>> table;
+  for (std::string row; std::getline(rows, row);) {
+    table.emplace_back();
+    std::stringstream ss(row + ",");
+    for (std::string x; std::getline(ss, x, ',');) table.back().push_back(x);
+  }
+  const auto& header = table.at(0);
+  const size_t col = std::find(header.begin(), header.end(), name) - header.begin();
+  EXPECT_LT(col, header.size()) << name;
+  std::vector<std::string> out;
+  for (size_t i = 1; i < table.size(); ++i) out.push_back(col < table[i].size() ? table[i][col] : "?");
+  return out;
+}
+
 TEST(Trainer, KilledAndResumedRunLogsTheSameLosses) {
   // s1: 3 steps (checkpoints 2, 3), s2: 2 steps (checkpoint 2), killed during the 6th step.
-  const auto r = test::killed_and_resumed(tiny_config(), test::fresh_dir("resume"), 6);
+  // weights.anchor on both: s1 starts from random weights (nothing to hold, no term), s2 holds
+  // depth to s1's result, kept as anchor-s2.pt, which the resumed run reads.
+  auto cfg = tiny_config();
+  for (auto& s : cfg.stages) s.weights.anchor = 1;
+  const auto r = test::killed_and_resumed(cfg, test::fresh_dir("resume"), 6);
   EXPECT_EQ(r.latest_when_killed, "s2-00000002.pt\n");
   const auto& whole = r.whole;
   EXPECT_EQ(std::count(whole.begin(), whole.end(), '\n'), 7);  // header + 6 iterations
   EXPECT_EQ(whole, r.resumed);
+  const auto anchor = metrics_column(whole, "anchor");
+  ASSERT_EQ(anchor.size(), 6u);
+  for (int i = 0; i < 3; ++i) EXPECT_EQ(anchor[i], "") << i;
+  for (int i = 3; i < 6; ++i) EXPECT_GT(std::stod(anchor[i]), 0.0) << i;
+  for (const auto& dir : {r.whole_dir, r.killed_dir}) {
+    EXPECT_FALSE(std::filesystem::exists(dir + "/anchor-s1.pt"));
+    EXPECT_TRUE(std::filesystem::exists(dir + "/anchor-s2.pt"));
+  }
 
   // The TensorBoard file of the uninterrupted run: a loss value per iteration, steps 1..6 over both
   // stages, equal to metrics.csv's (as float32).
@@ -509,53 +538,6 @@ TEST(Trainer, CheckpointsRecordTheirInitChain) {
   EXPECT_EQ(parse_config(chain_c[1]).run.seed, cfg.run.seed);
   ASSERT_EQ(resume(c.run_dir, {}), 0);  // a resumed run keeps it
   EXPECT_EQ(CheckpointFile(resolve_checkpoint(c.run_dir)).init_configs(), chain_c);
-}
-
-// metrics.csv's column `name`, one entry per row ("" where the step had no such term).
-std::vector<std::string> metrics_column(const std::string& csv, const std::string& name) {
-  std::istringstream rows(csv);
-  std::vector<std::vector<std::string>> table;
-  for (std::string row; std::getline(rows, row);) {
-    table.emplace_back();
-    std::stringstream ss(row + ",");
-    for (std::string x; std::getline(ss, x, ',');) table.back().push_back(x);
-  }
-  const auto& header = table.at(0);
-  const size_t col = std::find(header.begin(), header.end(), name) - header.begin();
-  EXPECT_LT(col, header.size()) << name;
-  std::vector<std::string> out;
-  for (size_t i = 1; i < table.size(); ++i) out.push_back(col < table[i].size() ? table[i][col] : "?");
-  return out;
-}
-
-// weights.anchor: a fine-tune holds depth to the weights each stage starts from (the --init's, then
-// the first stage's result), keeps them beside its checkpoints, and resumes with the same losses; a
-// first stage from random weights has nothing to hold to and computes no anchor.
-TEST(Trainer, AnAnchoredFineTuneHoldsDepthToItsStartAndResumesExactly) {
-  const auto base = test::fresh_dir("anchor");
-  auto scratch = one_step_config();
-  scratch.stages[0].weights.anchor = 1;
-  TrainOptions a;
-  a.run_dir = base + "/scratch";
-  ASSERT_EQ(train(scratch, a), 0);
-  EXPECT_EQ(metrics_column(metrics(a.run_dir), "anchor"), std::vector<std::string>{""});
-  EXPECT_FALSE(std::filesystem::exists(a.run_dir + "/anchor-s1.pt"));
-
-  auto cfg = tiny_config();
-  cfg.stages[0].iterations = cfg.stages[1].iterations = 2;
-  for (auto& s : cfg.stages) {
-    s.weights.anchor = 1;
-    s.freeze_batch_norm = true;  // the network as the teacher computes it: no anchor at the first step
-  }
-  const auto r = test::killed_and_resumed(cfg, base, 3, "", a.run_dir);  // killed in s2
-  EXPECT_EQ(r.whole, r.resumed);
-  const auto anchor = metrics_column(r.whole, "anchor");
-  ASSERT_EQ(anchor.size(), 4u);
-  EXPECT_NEAR(std::stod(anchor[0]), 0.0, 1e-5);  // s1 starts from the --init's weights
-  EXPECT_GT(std::stod(anchor[1]), 1e-4);
-  EXPECT_NEAR(std::stod(anchor[2]), 0.0, 1e-5);  // s2 from s1's result
-  for (const auto& dir : {r.whole_dir, r.killed_dir})
-    for (const auto& stage : {"s1", "s2"}) EXPECT_TRUE(std::filesystem::exists(dir + "/anchor-" + stage + ".pt"));
 }
 
 // Sends this process SIGTERM (as a cluster scheduler would) after `n` steps: just before validation.

@@ -82,13 +82,12 @@ struct KilledAndResumed {
   std::string whole, resumed;      // metrics.csv of each
 };
 inline KilledAndResumed killed_and_resumed(const Config& config, const std::string& base, int64_t kill_at,
-                                           const std::string& device = "", const std::string& init = "") {
+                                           const std::string& device = "") {
   KilledAndResumed r;
   TrainOptions a, b;
   a.run_dir = r.whole_dir = base + "/whole";
   b.run_dir = r.killed_dir = base + "/killed";
   a.device = b.device = device;
-  a.init = b.init = init;
   EXPECT_EQ(train(config, a), 0);
   train_until_killed(config, b, kill_at);
   r.latest_when_killed = read_file(b.run_dir + "/checkpoints/latest");
