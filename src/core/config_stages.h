@@ -52,6 +52,12 @@ struct LossWeights {
   void validate(Checker& c) const;
 };
 
+// What helps a clip that is unlikely to teach depth (geo_train's warnings say it; docs/video.md).
+inline constexpr const char* kHardClipAdvice =
+    "A longer clip with more driving helps, or start from a model trained on forward driving and hold its "
+    "depth: geo_train --init RUN --set stages.0.weights.anchor=1 --set stages.0.freeze_batch_norm=true "
+    "(docs/video.md)";
+
 // One training stage (paper Sec. 4.2). Stages are data, not flags.
 struct StageConfig {
   std::string name = "stage1";

@@ -1,5 +1,6 @@
 #include "train/metrics.h"
 
+#include "core/config_stages.h"
 #include "core/files.h"
 
 #include <spdlog/spdlog.h>
@@ -138,10 +139,8 @@ void ProgressSink::warn_if_mostly_masked(const StepRecord& r, double masked) {
     spdlog::warn(
         "stage {}: {:.0f}% of the pixels were auto-masked over iterations {}-{} (a still frame explains them "
         "better than the predicted motion: traffic moving with the camera, a camera that hardly moves, or "
-        "networks that are not learning): such footage is unlikely to teach depth. More forward driving helps, "
-        "or start from a model trained on forward driving (geo_train --init RUN, with stages[].weights.anchor 1 "
-        "and freeze_batch_norm true to keep its depth)",
-        r.stage, 100 * mean, r.iteration - masked_steps_ + 1, r.iteration);
+        "networks that are not learning): such footage is unlikely to teach depth. {}",
+        r.stage, 100 * mean, r.iteration - masked_steps_ + 1, r.iteration, kHardClipAdvice);
     masked_warned_ = true;
   }
   masked_sum_ = 0;

@@ -197,11 +197,10 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
             " with the camera standing while other things moved): " + std::to_string(kept) +
             " kept; the camera moved in " + fixed(100 * selector.moving_share(), 0) + "% of the frames looked at";
   if (selector.moving_share() < kFewMovingFrames)
-    *warning =
-        "clip '" + path + "': the camera moved in only " + fixed(100 * selector.moving_share(), 0) + "% of its " +
-        std::to_string(selector.looked_at()) + " frames looked at (it stood in the others): such a " +
-        "clip is unlikely to teach depth. A longer clip with more driving helps, or start from a model trained " +
-        "on forward driving (geo_train --init RUN)";
+    *warning = "clip '" + path + "': the camera moved in only " + fixed(100 * selector.moving_share(), 0) +
+               "% of its " + std::to_string(selector.looked_at()) +
+               " frames looked at (it stood in the others): such a " + "clip is unlikely to teach depth. " +
+               kHardClipAdvice;
   if (c.window.width != W0 || c.window.height != H0)
     *report += "; cropped to " + std::to_string(c.window.width) + "x" + std::to_string(c.window.height) + " at (" +
                std::to_string(c.window.x0) + ", " + std::to_string(c.window.y0) + ")";
