@@ -86,20 +86,26 @@ NetworkSpec NetworkSpec::parse(const std::string& yaml, const std::string& sourc
   return of(parse_config(yaml, source));
 }
 
+namespace {
+
+// A new network's BatchNorm as the spec says (eps, momentum, and no trained scale without bn_scale).
+void style_batchnorm(torch::nn::Module& m, const ModelConfig& model) {
+  set_batchnorm_style(m, model.bn_eps, model.bn_momentum);
+  if (!model.bn_scale)
+    for (auto& gamma : batchnorm_scales(m)) gamma.set_requires_grad(false);
+}
+
+}  // namespace
+
 Networks Networks::create(const NetworkSpec& spec, bool with_flow) {
   Networks n;
   n.spec = spec;
   n.depth = DepthNet(depth_net_options(spec.model));
   n.pose = PoseNet(pose_net_options(spec));
   if (with_flow) n.flow = FlowNet(flow_net_options(spec.model));
-  const std::vector<torch::nn::Module*> nets = {n.depth.ptr().get(), n.pose.ptr().get(),
-                                                n.flow ? static_cast<torch::nn::Module*>(n.flow.ptr().get()) : nullptr};
-  for (torch::nn::Module* m : nets) {
-    if (!m) continue;
-    set_batchnorm_style(*m, spec.model.bn_eps, spec.model.bn_momentum);
-    if (!spec.model.bn_scale)
-      for (auto& gamma : batchnorm_scales(*m)) gamma.set_requires_grad(false);
-  }
+  style_batchnorm(*n.depth, spec.model);
+  style_batchnorm(*n.pose, spec.model);
+  if (n.flow) style_batchnorm(*n.flow, spec.model);
   return n;
 }
 
@@ -134,7 +140,8 @@ void Networks::set_trainable(const StageConfig& s) {
 }
 
 DepthNet Networks::frozen_depth_copy() const {
-  DepthNet copy = Networks::create(spec, false).depth;
+  DepthNet copy(depth_net_options(spec.model));
+  style_batchnorm(*copy, spec.model);
   torch::NoGradGuard no_grad;
   const auto params = depth->named_parameters();
   const auto buffers = depth->named_buffers();

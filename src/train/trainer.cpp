@@ -233,9 +233,11 @@ class Run {
     }
     if (fresh) {
       DepthNet teacher = nets_.frozen_depth_copy();
-      if (writer_) save_state(*teacher, path);
-      spdlog::info("stage {}: depth held to the weights it starts from (weights.anchor {}, kept in {})", s.name,
-                   s.weights.anchor, path);
+      if (writer_) {
+        save_state(*teacher, path);
+        spdlog::info("stage {}: depth held to the weights it starts from (weights.anchor {}, kept in {})", s.name,
+                     s.weights.anchor, path);
+      }
       return teacher;
     }
     if (!fs::exists(path)) {  // the stage began without trained weights (said then)

@@ -199,8 +199,7 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
   if (selector.moving_share() < kFewMovingFrames)
     *warning = "clip '" + path + "': the camera moved in only " + fixed(100 * selector.moving_share(), 0) +
                "% of its " + std::to_string(selector.looked_at()) +
-               " frames looked at (it stood in the others): such a " + "clip is unlikely to teach depth. " +
-               kHardClipAdvice;
+               " frames looked at (it stood in the others): such a clip is unlikely to teach depth. " + kHardClipAdvice;
   if (c.window.width != W0 || c.window.height != H0)
     *report += "; cropped to " + std::to_string(c.window.width) + "x" + std::to_string(c.window.height) + " at (" +
                std::to_string(c.window.x0) + ", " + std::to_string(c.window.y0) + ")";
