@@ -4,6 +4,7 @@
 //   geo_eval --split odometry  --data-root <odometry>   --sequence 09 --checkpoint <ckpt>
 //   geo_eval --split eigen --predictions depths.npy|folder     (precomputed predictions)
 //   geo_eval ... --precision int8 --calibration FRAMES         (the model in int8, calibrated on FRAMES)
+//   geo_eval ... --checkpoint model_int8.pt --precision int8   (a geo_export --int8 file, its own calibration)
 //   geo_eval --compare a.json b.json                           (side-by-side table)
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
@@ -80,7 +81,8 @@ void add_options(CLI::App& app, EvalCommand& c) {
   geo::app::add_precision_option(
       app, c.precision, {"fp32", "bf16", "auto", "int8"},
       "what the model computes in: fp32 (default), bf16, auto (bf16 on CPUs with AVX512-BF16/AMX) "
-      "or int8 (CPU; calibrated on --calibration): its accuracy against fp32's");
+      "or int8 (CPU; calibrated on --calibration, or with the calibration a geo_export --int8 file keeps): its "
+      "accuracy against fp32's");
   geo::app::add_calibration_options(app, c.calibration, c.calibration_frames, "--precision int8");
   app.add_option("--flow-resize", c.flow_resize,
                  "kitti2015: resize predicted flow to the ground truth by nearest (GeoNet) or bilinear")

@@ -72,7 +72,7 @@ void add_options(CLI::App& app, InferOptions& o) {
       "calibrated on the input's first frames)");
   app.add_option("--calibration-frames", o.calibration_frames,
                  "with --precision int8: calibrate on this many of the input's first frames, 1..1000 (default: 8, "
-                 "and none for a model file that keeps its calibration)")
+                 "and none for a model file that keeps its calibration; an int8 model file cannot be calibrated again)")
       ->check(CLI::Range(1, 1000));
   app.add_option("--intrinsics", o.intrinsics,
                  "fx fy cx cy of the input images in pixels (default: KITTI-like 0.58 W, 1.92 H, W/2, H/2)")
@@ -522,13 +522,14 @@ int infer(const InferOptions& o) {
     throw std::runtime_error("--calibration-frames calibrates int8: it needs --precision int8 (got " + o.precision +
                              ")");
   const int64_t calibration_frames = o.calibration_frames > 0 ? o.calibration_frames : 8;
-  load.precision = int8 ? "fp32" : o.precision;  // int8: calibrated on the input's frames once they are read
+  // int8: with the calibration the file keeps, else calibrated on the input's frames once they are read.
+  load.precision = int8 ? "fp32" : o.precision;
+  load.int8_when_calibrated = int8 && o.calibration_frames == 0;
+  load.keep_float_weights = !int8;  // geo_infer never saves the model: the float kernels go as the int8 ones come
   load.threads = o.threads;
-  geo::Model model = times.time("load the model", [&] { return geo::Model::load(checkpoint, load); });
+  geo::Model model = times.time("open the model", [&] { return geo::Model::load(checkpoint, load); });
   const int64_t h = model.spec().height, w = model.spec().width;
-  if (int8 && o.calibration_frames == 0 && model.has_int8_calibration()) {
-    // geo_infer never saves the model: its float kernels go as the int8 ones come (3/4 of its memory)
-    times.time("int8 (the file's calibration)", [&] { model.quantize_int8({}, false); });
+  if (model.spec().precision == "int8") {
     spdlog::info("int8: with the calibration {} keeps (--calibration-frames N calibrates on the input instead)",
                  o.checkpoint);
   } else if (int8) {

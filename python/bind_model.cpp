@@ -155,8 +155,9 @@ void bind_model(py::module_& m) {
           "Switches this fp32 CPU model to int8: the DepthNet, PoseNet and FlowNet calibrated on frames (like\n"
           "those the model will see, in order; consecutive pairs calibrate the FlowNet and PoseNet); without\n"
           "frames, with the calibration its file keeps (has_int8_calibration). keep_float_weights=False: for\n"
-          "inference only, the float kernels go as the int8 ones are made (~3/4 less memory); save() then\n"
-          "refuses and the model runs in int8 only. Not while another thread uses the model.")
+          "inference only, the float kernels go as the int8 ones are made (~3/4 less memory); the model runs\n"
+          "in int8 only and save() writes an int8 model file (its int8 kernels: opens in int8 only, at once).\n"
+          "Not while another thread uses the model.")
       .def_property_readonly("float_weights_released", &Model::float_weights_released)
       .def_property_readonly("has_int8_calibration", &Model::has_int8_calibration,
                              "Whether the file keeps an int8 calibration (geo_export --int8, or save() after\n"

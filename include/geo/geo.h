@@ -47,11 +47,17 @@ struct LoadOptions {
   // calibrated on `calibration`; ~3x faster than fp32: see Model::quantize_int8).
   std::string precision = "fp32";
   // int8's calibration frames: see Model::quantize_int8. Not needed for a model file written in
-  // int8 (geo_export --int8), which keeps its calibration (frames given here replace it).
+  // int8, which keeps its calibration: an int8 model file (geo_export --int8) keeps its int8
+  // kernels instead of the float ones and opens in int8 only; a file saved from an int8 model that
+  // kept its float weights also opens in fp32 or bf16, and frames given here replace its calibration.
   std::vector<torch::Tensor> calibration;
   // With "int8": false lets the float kernels go as the int8 ones are made (inference only; see
   // Model::quantize_int8).
   bool keep_float_weights = true;
+  // With another precision: a file that keeps an int8 calibration opens in int8 instead, with that
+  // calibration (spec().precision says which), as with "int8"; for callers that calibrate int8
+  // themselves when the file keeps none (geo_infer --precision int8).
+  bool int8_when_calibrated = false;
 };
 
 // What a model expects and has (read from the file).
@@ -152,7 +158,8 @@ class Model {
   // keep_float_weights false: for inference only, each layer that runs in int8 lets go of its float
   // kernel once its int8 one is made (the PoseNet's float layers keep theirs): the model then holds
   // its kernels once, ~3/4 less memory (the paper's model ~470 MB less, and the peak stays the float
-  // model's). It runs in int8 only from then on: save() refuses (save before), and if quantizing
+  // model's). It runs in int8 only from then on: save() writes an int8 model file (int8 kernels
+  // instead of float ones: a quarter of the size, opening in int8 only, faster), and if quantizing
   // fails the model cannot run at all (load it again).
   void quantize_int8(const std::vector<torch::Tensor>& frames, bool keep_float_weights = true);
   bool float_weights_released() const;  // quantize_int8(..., false), or LoadOptions::keep_float_weights
@@ -236,7 +243,8 @@ class Model {
 
   // Writes the weights only (no optimiser, no training config) with the spec: geo_export.
   // `half`: weights stored as float16 (half the size; loaded back as float32). An int8 model's file
-  // keeps its calibration too: loaded with precision "int8" it needs no frames. Refuses (geo::Error)
+  // keeps its calibration too: loaded with precision "int8" it needs no frames; one that let go of
+  // its float weights keeps its int8 kernels instead of them (see quantize_int8). Refuses (geo::Error)
   // the file this model was loaded from and, unless `force`, an existing file that is not a model
   // file (a training checkpoint holds the optimiser's state and the run's config, which this drops).
   void save(const std::string& path, bool half = false, bool force = false) const;

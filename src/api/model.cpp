@@ -25,6 +25,7 @@
 #include <filesystem>
 #include <mutex>
 #include <sstream>
+#include <utility>
 
 namespace geo {
 
@@ -218,21 +219,35 @@ Model Model::load(const std::string& path, const LoadOptions& options) {
     bool has_flow = false;
     {  // the file's tensors are let go before folding and prepacking add their own copies
       CheckpointFile checkpoint(file);
+      impl->int8_only = checkpoint.is_int8_only();
+      if (impl->int8_only && options.precision != "int8" && !options.int8_when_calibrated)
+        throw Error(file +
+                    ": an int8 model file (geo_export --int8: int8 kernels, no float ones) opens in int8 only, "
+                    "with the calibration it keeps (asked: " +
+                    options.precision + "); for fp32 or bf16, export the checkpoint it came from without --int8");
+      if (impl->int8_only && !options.calibration.empty())
+        throw Error(file +
+                    ": an int8 model file keeps the calibration its int8 kernels were made with: give no "
+                    "calibration frames (or calibrate the checkpoint it came from)");
       has_flow = checkpoint.has_flow();
       {
         const UninitialisedWeights every_weight_is_read_next;
         impl->nets = create_quietly(checkpoint.spec(), has_flow);
       }
-      checkpoint.load_networks(impl->nets, false);
+      checkpoint.load_networks(impl->nets, false, /*int8_kernels=*/true);  // (quantized below)
       if (checkpoint.config()) impl->training_configs = checkpoint.lineage();
       impl->depth_ranges = checkpoint.int8_ranges("depth");
       impl->pose_ranges = checkpoint.int8_ranges("pose");
       impl->flow_ranges = checkpoint.int8_ranges("flow");
+      impl->depth_kernels = checkpoint.int8_kernels("depth");
+      impl->pose_kernels = checkpoint.int8_kernels("pose");
+      impl->flow_kernels = checkpoint.int8_kernels("flow");
     }
     make_ready(*impl, options, has_flow, file);
     Model model(impl);
     // int8: calibrated on the frames given, else with the file's own calibration.
-    if (options.precision == "int8") model.quantize_int8(options.calibration, options.keep_float_weights);
+    if (options.precision == "int8" || (options.int8_when_calibrated && model.has_int8_calibration()))
+      model.quantize_int8(options.calibration, options.keep_float_weights);
     return model;
   });
 }
@@ -254,7 +269,7 @@ void Model::check_int8_possible() const {
 void Model::quantize_int8(const std::vector<torch::Tensor>& frames, bool keep_float_weights) {
   guarded("geo::Model::quantize_int8", [&] {
     auto& nets = impl_->nets;
-    const bool release = !keep_float_weights;
+    const bool release = !keep_float_weights || impl_->int8_only;  // (an int8 model file has none to keep)
     // The networks into int8 (quantize_one: with the file's ranges, or those observed); from the
     // first kernel let go on, there is no float model to go back to.
     const auto quantize_all = [&](const auto& quantize_one) {
@@ -283,9 +298,19 @@ void Model::quantize_int8(const std::vector<torch::Tensor>& frames, bool keep_fl
                     "calibrate it again (geo_export --int8, or LoadOptions::calibration)");
       check_int8_possible();
       const int64_t H = impl_->spec.height, W = impl_->spec.width;
-      quantize_all([&](auto& net, const auto& ranges) { geo::quantize_int8(net, *ranges, H, W, release); });
+      // An int8 model file's kernels as they are (taken: they are then held once, packed).
+      const auto kernels_of = [&](const torch::nn::Module& net) -> std::map<std::string, torch::Tensor>& {
+        if (&net == nets.pose.get()) return impl_->pose_kernels;
+        return &net == nets.depth->net.get() ? impl_->depth_kernels : impl_->flow_kernels;
+      };
+      quantize_all([&](auto& net, const auto& ranges) {
+        geo::quantize_int8(net, *ranges, H, W, release, std::exchange(kernels_of(net), {}));
+      });
       return;
     }
+    if (impl_->int8_only)
+      throw Error(impl_->spec.source +
+                  ": an int8 model file is calibrated already (its int8 kernels were made with it)");
     check_int8_possible();
     const size_t needed = nets.flow ? 2 : 1;
     if (frames.size() < needed)
@@ -450,10 +475,10 @@ torch::Tensor Model::intrinsics(const torch::Tensor& from, const torch::Tensor& 
 
 void Model::save(const std::string& path, bool half, bool force) const {
   guarded("writing geo model '" + path + "'", [&] {
-    if (impl_->float_released)
+    // An int8 model without its float kernels is written as an int8 model file (its int8 kernels).
+    if (impl_->float_released && impl_->spec.precision != "int8")
       throw Error(
-          "this int8 model let go of its float weights (quantize_int8 without keeping them): save it "
-          "before that, or load its file again");
+          "quantizing this model to int8 failed part of the way, its float weights partly let go: load it again");
     check_model_file_target("path", path, impl_->spec.source, force);
     write_model_file(path, impl_->nets, half);
   });

@@ -8,6 +8,7 @@
 
 #include <torch/torch.h>
 
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -21,6 +22,10 @@ struct Model::Impl {
   std::vector<std::string> training_configs;  // CheckpointFile::lineage() of a training checkpoint
   // The int8 calibration the file keeps, per network (a file written in int8), else nullopt.
   std::optional<torch::Tensor> depth_ranges, pose_ranges, flow_ranges;
+  // An int8 model file's int8 kernels per network (CheckpointFile::int8_kernels), until quantizing
+  // takes them; int8_only: the file keeps no float kernels.
+  std::map<std::string, torch::Tensor> depth_kernels, pose_kernels, flow_kernels;
+  bool int8_only = false;
   bool float_released = false;  // Model::release_float_weights
 };
 

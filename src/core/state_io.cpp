@@ -36,7 +36,8 @@ void write_state(const torch::nn::Module& module, torch::serialize::OutputArchiv
   }
 }
 
-void read_state(torch::nn::Module& module, torch::serialize::InputArchive& archive, const std::string& what) {
+void read_state(torch::nn::Module& module, torch::serialize::InputArchive& archive, const std::string& what,
+                bool allow_empty) {
   auto state = state_of(module);
   const auto keys = archive.keys();
   const std::set<std::string> in_file(keys.begin(), keys.end());
@@ -50,7 +51,7 @@ void read_state(torch::nn::Module& module, torch::serialize::InputArchive& archi
     if (!in_file.count(name)) continue;
     torch::Tensor t;
     archive.read(name, t);
-    if (t.sizes() != target.sizes()) {
+    if (t.sizes() != target.sizes() && !(allow_empty && t.numel() == 0)) {
       std::ostringstream os;
       os << name << " (file " << t.sizes() << ", model " << target.sizes() << ")";
       mismatched.push_back(os.str());
@@ -82,7 +83,8 @@ void read_state(torch::nn::Module& module, torch::serialize::InputArchive& archi
     // another device, a view) is copied.
     const bool whole = t.is_contiguous() && t.storage_offset() == 0 &&
                        t.storage().nbytes() == static_cast<size_t>(t.numel()) * t.element_size();
-    if (whole && t.dtype() == target.dtype() && t.device() == target.device()) target.set_data(t);
+    if (t.numel() == 0 && target.numel() != 0) target.set_data(torch::empty({0}, target.options()));
+    else if (whole && t.dtype() == target.dtype() && t.device() == target.device()) target.set_data(t);
     else target.copy_(t);
   }
 }

@@ -29,6 +29,9 @@ torch::serialize::InputArchive open_archive(const std::string& path);
 // read_state converts them back to the module's type.
 void write_state(const torch::nn::Module& module, torch::serialize::OutputArchive& archive,
                  std::optional<torch::ScalarType> floating = std::nullopt);
-void read_state(torch::nn::Module& module, torch::serialize::InputArchive& archive, const std::string& what);
+// `allow_empty`: a tensor the file keeps empty (0 elements: a kernel an int8 model file leaves out)
+// is taken as it is, whatever the module's shape.
+void read_state(torch::nn::Module& module, torch::serialize::InputArchive& archive, const std::string& what,
+                bool allow_empty = false);
 
 }  // namespace geo

@@ -245,10 +245,6 @@ std::unique_ptr<PredictionSource> trivial_source() { return std::make_unique<Tri
 ChosenSource choose_source(const SourceChoice& c) {
   ChosenSource out;
   const bool int8 = c.precision == "int8";
-  if (int8 && c.calibration.empty())
-    throw std::runtime_error(
-        "--precision int8 needs --calibration FRAMES: a folder of frames or a video like those "
-        "evaluated (its first --calibration-frames frames)");
   if (c.calibration_frames < 1 || c.calibration_frames > 1000)
     throw std::runtime_error("--calibration-frames must be in 1..1000 (got " + std::to_string(c.calibration_frames) +
                              ")");
@@ -256,7 +252,9 @@ ChosenSource choose_source(const SourceChoice& c) {
     throw std::runtime_error("--calibration calibrates int8: it needs --precision int8 (or it would be ignored)");
   LoadOptions load;
   load.device = c.device;
-  load.precision = int8 ? "fp32" : c.precision;  // int8: calibrated once the model's input size is known
+  // int8: with the calibration a model file keeps, else calibrated once the model's input size is known.
+  load.precision = int8 ? "fp32" : c.precision;
+  load.int8_when_calibrated = int8 && c.calibration.empty();
   if (!c.untrained_config.empty()) {
     out.predictor = std::make_unique<Predictor>(load_config(resolve_config_path(c.untrained_config)), load);
   } else if (c.trivial) {
@@ -278,7 +276,14 @@ ChosenSource choose_source(const SourceChoice& c) {
   if (!out.predictor && c.precision != "fp32")
     throw std::runtime_error("--precision " + c.precision +
                              " is a model's (--checkpoint, --untrained): there is none to run");
-  if (out.predictor && int8) {
+  if (out.predictor && int8 && c.calibration.empty()) {
+    if (out.predictor->precision() != "int8")
+      throw std::runtime_error("--precision int8: " + out.predictor->path() +
+                               " keeps no int8 calibration: give --calibration FRAMES, a folder of frames or a video "
+                               "like those evaluated (its first --calibration-frames frames), or a model file written "
+                               "by geo_export --int8");
+    spdlog::info("int8: with the calibration {} keeps", out.predictor->path());
+  } else if (out.predictor && int8) {
     const auto frames = first_frames(c.calibration, c.calibration_frames, out.predictor->height(),
                                      out.predictor->width(), "--calibration");
     out.predictor->quantize_int8(frames);

@@ -73,6 +73,8 @@ struct Int8Graph::State {
   }
   std::vector<Point> points;
   bool quantized = false;
+  bool released = false;                       // quantize(release_float = true)
+  std::map<std::string, torch::Tensor> given;  // set_kernels: taken by quantize
   std::unordered_map<const torch::nn::Module*, c10::IValue> packed;
   std::unordered_map<const torch::nn::Module*, c10::IValue> packed_phases;  // the upconvs' 2x2 phase kernels
   std::optional<c10::OperatorHandle> conv, conv_relu, add_relu;
@@ -146,12 +148,38 @@ struct Quantized {
   torch::Tensor dequantize(const torch::Tensor& y) { return y.dequantize().contiguous(); }
 };
 
-// w [Co,Ci,k,k] float (times factor [Co] per output channel, when given) -> int8 per output
-// channel (symmetric), prepacked with its float bias.
-c10::IValue pack(const torch::Tensor& weight, const torch::Tensor& bias, int64_t stride, int64_t padding,
-                 const torch::Tensor& factor = {}) {
-  const auto qw = quantize_weight_per_channel(weight, factor);
-  torch::jit::Stack stack{qw,
+// Shapes alone: counts the quantized points the graph takes (one range each in a calibration),
+// every operation giving an uninitialised tensor of its result's shape; nothing is computed but the
+// few float steps between them (pooling, resizing, the heads, the PoseNet's last convolution).
+struct Count {
+  static constexpr bool kShortcutFirst = false;  // (the count does not depend on it)
+  size_t i = 0;
+  torch::Tensor conv_shaped(const torch::nn::detail::ConvNdOptions<2>& o, const torch::Tensor& x) {
+    ++i;
+    const int64_t s = (*o.stride())[0];  // (k x k, padding k/2, k odd)
+    return torch::empty({x.size(0), o.out_channels(), (x.size(2) - 1) / s + 1, (x.size(3) - 1) / s + 1});
+  }
+  torch::Tensor quantize(const torch::Tensor& x) { return ++i, x; }
+  torch::Tensor dequantize(const torch::Tensor& x) { return torch::zeros_like(x); }  // (into a float layer)
+  torch::Tensor conv(ConvBnImpl& m, const torch::Tensor& x) { return conv_shaped(m.conv->options, x); }
+  torch::Tensor upconv(ConvBnImpl& m, const torch::Tensor& x, UpsampleMode) {
+    ++i;
+    return torch::empty({x.size(0), m.conv->options.out_channels(), 2 * x.size(2), 2 * x.size(3)});
+  }
+  torch::Tensor add_relu(const torch::Tensor& a, const torch::Tensor&) { return ++i, a; }
+  torch::Tensor fr(FeatureRefinementImpl&, const torch::Tensor& x) { return ++i, x; }
+  torch::Tensor cat(const std::vector<torch::Tensor>& parts) {
+    ++i;
+    int64_t channels = 0;
+    for (const auto& p : parts) channels += p.size(1);
+    return torch::empty({parts[0].size(0), channels, parts[0].size(2), parts[0].size(3)});
+  }
+  torch::Tensor pred(Conv2dImpl& m, const torch::Tensor& x) { return conv_shaped(m.options, x); }
+};
+
+// w qint8 [Co,Ci,k,k] per output channel (zero points 0) and its float bias -> prepacked.
+c10::IValue prepack(const torch::Tensor& qweight, const torch::Tensor& bias, int64_t stride, int64_t padding) {
+  torch::jit::Stack stack{qweight,
                           bias.defined() ? c10::IValue(bias.to(torch::kFloat32)) : c10::IValue(),
                           std::vector<int64_t>{stride, stride},
                           std::vector<int64_t>{padding, padding},
@@ -159,6 +187,68 @@ c10::IValue pack(const torch::Tensor& weight, const torch::Tensor& bias, int64_t
                           int64_t{1}};
   op("quantized::conv2d_prepack", "").callBoxed(&stack);
   return stack.at(0);
+}
+
+// w [Co,Ci,k,k] float (times factor [Co] per output channel, when given) -> int8 per output
+// channel (symmetric), prepacked with its float bias.
+c10::IValue pack(const torch::Tensor& weight, const torch::Tensor& bias, int64_t stride, int64_t padding,
+                 const torch::Tensor& factor = {}) {
+  return prepack(quantize_weight_per_channel(weight, factor), bias, stride, padding);
+}
+
+// A kernel to prepack: the quantized weight, its bias, stride and padding.
+struct Int8Kernel {
+  torch::Tensor weight, bias;
+  int64_t stride = 1, padding = 0;
+};
+
+// The kernel `name` of Int8Graph::kernels, taken out of `given` and checked against the layer's
+// shape [Co,Ci,kh,kw] (and its bias, when it has one).
+Int8Kernel take_given(std::map<std::string, torch::Tensor>& given, const std::string& name, std::vector<int64_t> shape,
+                      bool has_bias, int64_t stride, int64_t padding) {
+  const auto take = [&](const std::string& key) {
+    const auto it = given.find(key);
+    TORCH_CHECK(it != given.end(), "int8: no kernel '", key, "' for the network's layer '", name, "'");
+    auto t = it->second;
+    given.erase(it);
+    return t.contiguous();
+  };
+  const auto weight = take(name + ".weight"), scales = take(name + ".scales");
+  const auto bias = has_bias ? take(name + ".bias") : torch::Tensor();
+  const int64_t co = shape[0];
+  TORCH_CHECK(weight.scalar_type() == torch::kInt8 && weight.sizes() == at::IntArrayRef(shape), "int8: kernel '", name,
+              ".weight' is ", weight.scalar_type(), " ", weight.sizes(), ", the layer's is Char ",
+              at::IntArrayRef(shape));
+  TORCH_CHECK(scales.scalar_type() == torch::kFloat64 && scales.dim() == 1 && scales.size(0) == co &&
+                  (scales > 0).all().item<bool>() && torch::isfinite(scales).all().item<bool>(),
+              "int8: kernel '", name, ".scales' must be ", co, " finite positive float64 values, got ",
+              scales.scalar_type(), " ", scales.sizes());
+  TORCH_CHECK(!bias.defined() || (bias.scalar_type() == torch::kFloat32 && bias.dim() == 1 && bias.size(0) == co &&
+                                  torch::isfinite(bias).all().item<bool>()),
+              "int8: kernel '", name, ".bias' must be ", co, " finite float32 values");
+  return {at::_make_per_channel_quantized_tensor(weight, scales, torch::zeros({co}, torch::kLong), 0), bias, stride,
+          padding};
+}
+
+// A prepacked kernel back as Int8Graph::kernels's tensors under `name` (quantized::conv2d_unpack
+// gives the int8 weight and the bias that were packed).
+void unpack_into(std::map<std::string, torch::Tensor>& out, const std::string& name, const c10::IValue& packed) {
+  torch::jit::Stack stack{packed};
+  op("quantized::conv2d_unpack", "").callBoxed(&stack);
+  const auto w = stack.at(0).toTensor();
+  TORCH_CHECK(w.qscheme() == at::kPerChannelAffine && w.q_per_channel_axis() == 0 &&
+                  (w.q_per_channel_zero_points() == 0).all().item<bool>(),
+              "int8: kernel '", name, "' is not symmetric per output channel");
+  out[name + ".weight"] = w.int_repr().contiguous();
+  out[name + ".scales"] = w.q_per_channel_scales().to(torch::kFloat64).contiguous();
+  if (!stack.at(1).isNone()) out[name + ".bias"] = stack.at(1).toTensor().to(torch::kFloat32).contiguous();
+}
+
+// Each submodule of `net` -> its name in the network's state ("encoder.layer1.0.conv1").
+std::unordered_map<const torch::nn::Module*, std::string> module_names(const torch::nn::Module& net) {
+  std::unordered_map<const torch::nn::Module*, std::string> names;
+  for (const auto& m : net.named_modules("", /*include_self=*/false)) names[m.value().get()] = m.key();
+  return names;
 }
 
 }  // namespace
@@ -211,8 +301,22 @@ std::vector<torch::Tensor> Int8EncoderDecoder::forward(const torch::Tensor& x) {
   return run(x, [this](auto& ops, const torch::Tensor& in) { return encoder_decoder_graph(net_, ops, in); });
 }
 
+int64_t Int8EncoderDecoder::graph_points(const torch::Tensor& x) {
+  torch::NoGradGuard no_grad;
+  Count ops;
+  encoder_decoder_graph(net_, ops, x);
+  return static_cast<int64_t>(ops.i);
+}
+
 // (pose_graph runs the last convolution in float)
 Int8PoseNet::Int8PoseNet(PoseNetImpl& net) : Int8Graph(net, {}, {}, {net.convs.back().get()}), net_(net) {}
+
+int64_t Int8PoseNet::graph_points(const torch::Tensor& x) {
+  torch::NoGradGuard no_grad;
+  Count ops;
+  pose_graph(net_, ops, x);
+  return static_cast<int64_t>(ops.i);
+}
 
 torch::Tensor Int8PoseNet::forward(const torch::Tensor& x) {
   return run(x, [this](auto& ops,
@@ -229,24 +333,67 @@ void Int8Graph::quantize(bool release_float) {
   st.conv_relu = op("quantized::conv2d_relu", "new");
   st.add_relu = op("quantized::add_relu", "");
   torch::NoGradGuard no_grad;
-  // Layer by layer, so that with release_float each float kernel goes as its int8 one comes (the
-  // int8 kernels take the memory the float ones leave: the peak stays the float model's).
-  for (auto* cb : st.int8_layers()) {
-    TORCH_CHECK(cb->folded(), "int8: BatchNorm must be folded before quantizing");
-    const auto& o = cb->conv->options;
-    // The folded kernel quantized from the weight and BatchNorm's factor, not made in float.
-    st.packed[cb] =
-        pack(cb->conv->weight, cb->folded_bias(), (*o.stride())[0], (*o.kernel_size())[0] / 2, cb->bn_scale());
-    if (std::find(st.upconvs.begin(), st.upconvs.end(), cb) != st.upconvs.end())
-      st.packed_phases[cb] = pack(phase_kernels(cb->folded_weight().to(torch::kFloat32)),
-                                  cb->folded_bias().to(torch::kFloat32).repeat({4}), 1, 1);
-    if (release_float) cb->release_float_kernel();
+  const auto names = module_names(st.net);
+  const bool given = !st.given.empty();
+  if (given) {
+    // The file's kernels, checked in the graph's order, then prepacked on every core (oneDNN's
+    // reorder of one kernel hardly uses a second one).
+    std::vector<std::pair<const torch::nn::Module*, Int8Kernel>> jobs, phase_jobs;
+    for (auto* cb : st.int8_layers()) {
+      TORCH_CHECK(cb->folded(), "int8: BatchNorm must be folded before quantizing");
+      const auto& o = cb->conv->options;
+      const int64_t k = (*o.kernel_size())[0];
+      const auto& name = names.at(cb);
+      jobs.emplace_back(
+          cb, take_given(st.given, name, {o.out_channels(), o.in_channels(), k, k}, true, (*o.stride())[0], k / 2));
+      if (std::find(st.upconvs.begin(), st.upconvs.end(), cb) != st.upconvs.end())
+        phase_jobs.emplace_back(
+            cb, take_given(st.given, name + ".phases", {4 * o.out_channels(), o.in_channels(), 2, 2}, true, 1, 1));
+    }
+    for (auto* h : st.heads) {
+      const auto& o = h->options;
+      const int64_t k = (*o.kernel_size())[0];
+      jobs.emplace_back(h, take_given(st.given, names.at(h), {o.out_channels(), o.in_channels(), k, k},
+                                      h->bias.defined(), (*o.stride())[0], k / 2));
+    }
+    std::string left;
+    for (const auto& kv : st.given) left += (left.empty() ? "" : ", ") + kv.first;
+    TORCH_CHECK(left.empty(), "int8: kernels for no layer of the network: ", left);
+    const size_t n = jobs.size(), all = n + phase_jobs.size();
+    std::vector<c10::IValue> packed(all);
+    at::parallel_for(0, static_cast<int64_t>(all), 1, [&](int64_t begin, int64_t end) {
+      for (int64_t i = begin; i < end; ++i) {
+        const auto& j = static_cast<size_t>(i) < n ? jobs[i].second : phase_jobs[i - n].second;
+        packed[i] = prepack(j.weight, j.bias, j.stride, j.padding);
+      }
+    });
+    for (size_t i = 0; i < all; ++i)
+      (i < n ? st.packed[jobs[i].first] : st.packed_phases[phase_jobs[i - n].first]) = packed[i];
+    if (release_float) {
+      for (auto* cb : st.int8_layers()) cb->release_float_kernel();
+      for (auto* h : st.heads) h->weight.set_data(torch::empty({0}, h->weight.options()));
+    }
+  } else {
+    // Layer by layer, so that with release_float each float kernel goes as its int8 one comes (the
+    // int8 kernels take the memory the float ones leave: the peak stays the float model's).
+    for (auto* cb : st.int8_layers()) {
+      TORCH_CHECK(cb->folded(), "int8: BatchNorm must be folded before quantizing");
+      const auto& o = cb->conv->options;
+      const int64_t stride = (*o.stride())[0], k = (*o.kernel_size())[0];
+      // The folded kernel quantized from the weight and BatchNorm's factor, not made in float.
+      st.packed[cb] = pack(cb->conv->weight, cb->folded_bias(), stride, k / 2, cb->bn_scale());
+      if (std::find(st.upconvs.begin(), st.upconvs.end(), cb) != st.upconvs.end())
+        st.packed_phases[cb] = pack(phase_kernels(cb->folded_weight().to(torch::kFloat32)),
+                                    cb->folded_bias().to(torch::kFloat32).repeat({4}), 1, 1);
+      if (release_float) cb->release_float_kernel();
+    }
+    for (auto* h : st.heads) {
+      const auto& o = h->options;
+      st.packed[h] = pack(h->weight, h->bias, (*o.stride())[0], (*o.kernel_size())[0] / 2);
+      if (release_float) h->weight.set_data(torch::empty({0}, h->weight.options()));
+    }
   }
-  for (auto* h : st.heads) {
-    const auto& o = h->options;
-    st.packed[h] = pack(h->weight, h->bias, (*o.stride())[0], (*o.kernel_size())[0] / 2);
-    if (release_float) h->weight.set_data(torch::empty({0}, h->weight.options()));
-  }
+  st.released = release_float;
   st.quantized = true;
 }
 
@@ -255,6 +402,22 @@ torch::Tensor Int8Graph::ranges() const {
   auto a = r.accessor<float, 2>();
   for (int64_t i = 0; i < points(); ++i) a[i][0] = state_->points[i].lo, a[i][1] = state_->points[i].hi;
   return r;
+}
+
+bool Int8Graph::float_released() const { return state_->released; }
+
+std::map<std::string, torch::Tensor> Int8Graph::kernels() const {
+  TORCH_CHECK(state_->quantized, "int8: the network is not quantized: it has no int8 kernels");
+  const auto names = module_names(state_->net);
+  std::map<std::string, torch::Tensor> out;
+  for (const auto& [m, packed] : state_->packed) unpack_into(out, names.at(m), packed);
+  for (const auto& [m, packed] : state_->packed_phases) unpack_into(out, names.at(m) + ".phases", packed);
+  return out;
+}
+
+void Int8Graph::set_kernels(std::map<std::string, torch::Tensor> kernels) {
+  TORCH_CHECK(!state_->quantized, "int8: kernels are set on a network not yet quantized");
+  state_->given = std::move(kernels);
 }
 
 void Int8Graph::set_ranges(const torch::Tensor& ranges) {
@@ -275,21 +438,21 @@ void Int8Graph::set_ranges(const torch::Tensor& ranges) {
 namespace {
 
 template <class Int8Net, class Net>
-void quantize_with_ranges(Net& net, const torch::Tensor& ranges, const torch::Tensor& probe, bool release_float) {
+void quantize_with_ranges(Net& net, const torch::Tensor& ranges, const torch::Tensor& like, bool release_float,
+                          const std::map<std::string, torch::Tensor>& kernels) {
+  TORCH_CHECK(!net.is_training(), "int8: the network is in training mode (int8 is for inference)");
   auto int8 = std::make_shared<Int8Net>(net);
+  // The ranges must be this network's, one per point: counted from the shapes of an input like the
+  // network will see, before anything changes (a refused calibration leaves the float network).
+  const int64_t points = int8->graph_points(like);
+  TORCH_CHECK(ranges.dim() == 2 && ranges.size(0) == points, "int8: ", ranges.dim() == 2 ? ranges.size(0) : 0,
+              " calibrated ranges for a network of ", points,
+              " quantized points (a calibration of another network or geo version: calibrate again)");
   int8->set_ranges(ranges);
+  int8->set_kernels(kernels);
   int8->quantize(release_float);
-  // One call checks that the ranges are this network's (one per point). At the network's own input
-  // size: LibTorch 1.13's oneDNN int8 convolutions, on 2 threads, failed ("could not create a
-  // primitive descriptor for a reorder primitive") on a 2x7 input after a first call on 2x2.
+  // (oneDNN's int8 primitives are made at the first call, at the size it is given.)
   net.int8 = int8;
-  try {
-    torch::NoGradGuard no_grad;
-    int8->forward(probe);
-  } catch (...) {
-    net.int8.reset();
-    throw;
-  }
 }
 
 template <class Net>
@@ -306,14 +469,15 @@ void quantize_int8(EncoderDecoderImpl& net, bool release_float) { quantize_obser
 void quantize_int8(PoseNetImpl& net, bool release_float) { quantize_observed(net, release_float); }
 
 void quantize_int8(EncoderDecoderImpl& net, const torch::Tensor& ranges, int64_t height, int64_t width,
-                   bool release_float) {
+                   bool release_float, const std::map<std::string, torch::Tensor>& kernels) {
   quantize_with_ranges<Int8EncoderDecoder>(
-      net, ranges, torch::zeros({1, net.encoder->options.in_channels, height, width}), release_float);
+      net, ranges, torch::zeros({1, net.encoder->options.in_channels, height, width}), release_float, kernels);
 }
 
-void quantize_int8(PoseNetImpl& net, const torch::Tensor& ranges, int64_t height, int64_t width, bool release_float) {
+void quantize_int8(PoseNetImpl& net, const torch::Tensor& ranges, int64_t height, int64_t width, bool release_float,
+                   const std::map<std::string, torch::Tensor>& kernels) {
   quantize_with_ranges<Int8PoseNet>(net, ranges, torch::zeros({1, 3 * net.options.seq_length, height, width}),
-                                    release_float);
+                                    release_float, kernels);
 }
 
 }  // namespace geo

@@ -17,6 +17,7 @@
 #include "models/int8_engine.h"
 #include "models/int8_kernels.h"
 
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -45,6 +46,20 @@ class Int8Graph {
   // calibration; set_ranges (before quantize, instead of observing) takes them back.
   torch::Tensor ranges() const;
   void set_ranges(const torch::Tensor& ranges);
+  // The int8 kernels of a quantized network, by the layer's module name as in the network's state:
+  // "<name>.weight" int8 [Co,Ci,k,k] (per output channel, symmetric), "<name>.scales" float64 [Co],
+  // "<name>.bias" float32 [Co] (BatchNorm folded in); an upconv's 2x2 phase kernels under
+  // "<name>.phases.": what an int8 model file keeps instead of the float kernels.
+  std::map<std::string, torch::Tensor> kernels() const;
+  // Before quantize (with set_ranges): quantize prepacks these kernels instead of quantizing the
+  // float ones (which may then be absent, let go before the file was written). quantize checks them:
+  // every layer's, of its shape, nothing else.
+  void set_kernels(std::map<std::string, torch::Tensor> kernels);
+  // quantize(release_float = true) was called: the layers that run in int8 hold no float kernel.
+  bool float_released() const;
+  // The quantized points the network's graph takes on an input like x (x's values are not read),
+  // counted from the shapes alone: how many ranges a calibration of it holds.
+  virtual int64_t graph_points(const torch::Tensor& x) = 0;
 
   struct State;  // (models/int8.cpp)
 
@@ -68,6 +83,7 @@ class Int8EncoderDecoder : public Int8Graph {
  public:
   explicit Int8EncoderDecoder(EncoderDecoderImpl& net);
   std::vector<torch::Tensor> forward(const torch::Tensor& x);
+  int64_t graph_points(const torch::Tensor& x) override;
 
  private:
   EncoderDecoderImpl& net_;
@@ -80,6 +96,7 @@ class Int8PoseNet : public Int8Graph {
  public:
   explicit Int8PoseNet(PoseNetImpl& net);
   torch::Tensor forward(const torch::Tensor& x);
+  int64_t graph_points(const torch::Tensor& x) override;
 
  private:
   PoseNetImpl& net_;
@@ -92,12 +109,13 @@ void observe_int8(PoseNetImpl& net);
 // release_float: see Int8Graph::quantize.
 void quantize_int8(EncoderDecoderImpl& net, bool release_float = false);
 void quantize_int8(PoseNetImpl& net, bool release_float = false);
-// net in int8 with calibrated ranges kept from an earlier calibration (Int8Graph::ranges); throws
-// when they are not one per point of this network (checked by one call on a height x width input:
-// the size the network will see).
+// net in int8 with calibrated ranges kept from an earlier calibration (Int8Graph::ranges); throws,
+// changing nothing, when they are not one per point of this network (Int8Graph::graph_points on a
+// height x width input: the size the network will see). kernels: Int8Graph::kernels of the same network, prepacked as they
+// are (none: quantized from the float weights).
 void quantize_int8(EncoderDecoderImpl& net, const torch::Tensor& ranges, int64_t height, int64_t width,
-                   bool release_float = false);
+                   bool release_float = false, const std::map<std::string, torch::Tensor>& kernels = {});
 void quantize_int8(PoseNetImpl& net, const torch::Tensor& ranges, int64_t height, int64_t width,
-                   bool release_float = false);
+                   bool release_float = false, const std::map<std::string, torch::Tensor>& kernels = {});
 
 }  // namespace geo

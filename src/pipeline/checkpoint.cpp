@@ -18,6 +18,19 @@ namespace geo {
 namespace {
 
 constexpr const char* kModelFormat = "geo-model 1";
+// A model file whose networks run in int8 only: their float kernels are left out (empty tensors),
+// their int8 kernels kept instead ("int8_kernels_<network>": Int8Graph::kernels). Older geo
+// versions refuse it by this name instead of mistaking it for float weights.
+constexpr const char* kInt8ModelFormat = "geo-model 2 (int8 kernels)";
+constexpr const char* kNetworks[] = {"depth", "pose", "flow"};
+
+// The int8 graph of a network of `nets` by its file name ("depth", "pose", "flow"); null when it
+// has none or is absent.
+const Int8Graph* int8_graph(const Networks& nets, const std::string& network) {
+  if (network == "depth") return nets.depth->net->int8.get();
+  if (network == "pose") return nets.pose->int8.get();
+  return nets.flow ? nets.flow->net->int8.get() : nullptr;
+}
 
 void write_networks(torch::serialize::OutputArchive& archive, const Networks& nets,
                     std::optional<torch::ScalarType> floating) {
@@ -60,16 +73,25 @@ void write_train_state(torch::serialize::OutputArchive& a, const TrainState& s) 
 }
 
 void write_model_file(const std::string& path, const Networks& nets, bool half) {
+  // An int8 model's calibration: its ranges, so that loading it in int8 needs no frames; and when
+  // its float kernels are gone (inference only), its int8 kernels.
+  bool int8_only = false;
+  for (const char* network : kNetworks)
+    if (const auto* g = int8_graph(nets, network); g && g->quantized() && g->float_released()) int8_only = true;
   torch::serialize::OutputArchive a;
-  a.write("geo_model_format", c10::IValue(std::string(kModelFormat)));
+  a.write("geo_model_format", c10::IValue(std::string(int8_only ? kInt8ModelFormat : kModelFormat)));
   a.write("spec", c10::IValue(nets.spec.to_yaml()));
   write_networks(a, nets, half ? std::optional<torch::ScalarType>(torch::kHalf) : std::nullopt);
-  // An int8 model's calibration: its ranges, so that loading it in int8 needs no frames.
-  if (nets.depth->net->int8 && nets.depth->net->int8->quantized())
-    a.write("int8_depth", nets.depth->net->int8->ranges());
-  if (nets.flow && nets.flow->net->int8 && nets.flow->net->int8->quantized())
-    a.write("int8_flow", nets.flow->net->int8->ranges());
-  if (nets.pose->int8 && nets.pose->int8->quantized()) a.write("int8_pose", nets.pose->int8->ranges());
+  for (const char* network : kNetworks) {
+    const auto* g = int8_graph(nets, network);
+    if (!g || !g->quantized()) continue;
+    a.write(std::string("int8_") + network, g->ranges());
+    if (!int8_only) continue;
+    TORCH_CHECK(g->float_released(), "int8: a model whose networks let go of their float kernels in part");
+    torch::serialize::OutputArchive kernels;
+    for (const auto& [name, t] : g->kernels()) kernels.write(name, t);
+    a.write(std::string("int8_kernels_") + network, kernels);
+  }
   save_archive(a, path);
 }
 
@@ -97,9 +119,10 @@ CheckpointFile::CheckpointFile(std::string path) : path_(std::move(path)), archi
   has_flow_ = archive_.try_read("flow", flow);
   c10::IValue format;
   if (archive_.try_read("geo_model_format", format)) {
-    if (!format.isString() || format.toStringRef() != kModelFormat)
+    if (!format.isString() || (format.toStringRef() != kModelFormat && format.toStringRef() != kInt8ModelFormat))
       throw std::runtime_error(path_ + ": model file format '" + (format.isString() ? format.toStringRef() : "?") +
-                               "', this geo reads '" + kModelFormat + "'");
+                               "', this geo reads '" + kModelFormat + "' and '" + kInt8ModelFormat + "'");
+    int8_only_ = format.toStringRef() == kInt8ModelFormat;
     c10::IValue spec;
     if (!archive_.try_read("spec", spec) || !spec.isString())
       throw std::runtime_error(path_ + ": model file without its spec");
@@ -178,11 +201,16 @@ TrainState CheckpointFile::train_state() {
   return s;
 }
 
-void CheckpointFile::load_networks(Networks& nets, bool allow_missing_flow) {
+void CheckpointFile::load_networks(Networks& nets, bool allow_missing_flow, bool int8_kernels) {
+  if (int8_only_ && !int8_kernels)
+    throw std::runtime_error(path_ +
+                             ": an int8 model file (geo_export --int8): its networks keep int8 kernels only and "
+                             "run in int8 inference (precision int8); train, evaluate in float or export again "
+                             "from the checkpoint it was written from");
   auto get = [&](const char* key, torch::nn::Module& m) {
     torch::serialize::InputArchive sub;
     if (!archive_.try_read(key, sub)) return false;
-    read_state(m, sub, path_ + " [" + key + "]");
+    read_state(m, sub, path_ + " [" + key + "]", int8_only_);
     return true;
   };
   if (!get("depth", *nets.depth)) throw std::runtime_error(path_ + ": no DepthNet in this checkpoint");
@@ -195,6 +223,14 @@ std::optional<torch::Tensor> CheckpointFile::int8_ranges(const std::string& netw
   torch::Tensor ranges;
   if (!archive_.try_read("int8_" + network, ranges)) return std::nullopt;
   return ranges;
+}
+
+std::map<std::string, torch::Tensor> CheckpointFile::int8_kernels(const std::string& network) {
+  std::map<std::string, torch::Tensor> kernels;
+  torch::serialize::InputArchive sub;
+  if (!int8_only_ || !archive_.try_read("int8_kernels_" + network, sub)) return kernels;
+  for (const auto& key : sub.keys()) sub.read(key, kernels[key]);
+  return kernels;
 }
 
 Networks CheckpointFile::networks() {

@@ -7,6 +7,13 @@
 //     config               the run's config as YAML
 //     init_configs         the configs the run's initial weights were trained with (optional)
 //
+//   int8 model file (geo_export --int8): a model file whose networks run in int8 only
+//     geo_model_format     "geo-model 2 (int8 kernels)"
+//     depth, pose, [flow]  networks, the kernels of the layers that run in int8 left out (empty)
+//     int8_<network>       the calibration: each quantized point's range (models/int8.h)
+//     int8_kernels_<network>  those layers' int8 kernels (Int8Graph::kernels)
+//   A model file quantized with its float kernels kept ("geo-model 1") has int8_<network> alone.
+//
 // Checkpoints written before the typed train state (a float64 "meta" [stage, iteration, best] and a
 // separate "world_size") are still read.
 //
@@ -20,6 +27,7 @@
 #include <torch/torch.h>
 
 #include <limits>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -83,11 +91,16 @@ class CheckpointFile {
   // Throws "<path>: not a geo training checkpoint ..." for model files and foreign files.
   TrainState train_state();
   // Weights into `nets` (strict per network; a network absent from the file is an error unless
-  // `allow_missing_flow` and it is the FlowNet).
-  void load_networks(Networks& nets, bool allow_missing_flow);
+  // `allow_missing_flow` and it is the FlowNet). An int8 model file is refused unless `int8_kernels`
+  // (the caller quantizes with int8_kernels next: the kernels it leaves out stay empty until then).
+  void load_networks(Networks& nets, bool allow_missing_flow, bool int8_kernels = false);
   // The int8 calibration a geo_export model file keeps for a network ("depth", "flow", "pose"): the range of
   // each quantized point [points,2] (models/int8.h), or nullopt.
   std::optional<torch::Tensor> int8_ranges(const std::string& network);
+  // An int8 model file (geo_export --int8): its networks run in int8 only.
+  bool is_int8_only() const { return int8_only_; }
+  // Its int8 kernels of a network (Int8Graph::kernels); empty for other files.
+  std::map<std::string, torch::Tensor> int8_kernels(const std::string& network);
   // Networks created from the file's spec (a FlowNet when it holds one) with its weights.
   Networks networks();
   // The optimizer's state, if the file holds one; returns whether it did.
@@ -97,6 +110,7 @@ class CheckpointFile {
   std::string path_;
   torch::serialize::InputArchive archive_;
   bool model_file_ = false;
+  bool int8_only_ = false;
   bool has_flow_ = false;
   std::optional<Config> config_;
   std::vector<std::string> init_configs_;

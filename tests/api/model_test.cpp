@@ -224,7 +224,7 @@ TEST(Api, Int8FilesKeepTheirCalibration) {
   EXPECT_TRUE(torch::equal(later.depth(a), int8.depth(a)));
   EXPECT_TRUE(torch::equal(later.pose({a, b, c}), int8.pose({a, b, c})));
   // Inference only: the float kernels go as the int8 ones come, the outputs are the same bit for
-  // bit, saving is refused; from the file's calibration or from frames.
+  // bit; from the file's calibration or from frames.
   Model lean = Model::load(dir + "/int8.pt");
   lean.quantize_int8({}, false);
   EXPECT_TRUE(lean.float_weights_released());
@@ -232,8 +232,31 @@ TEST(Api, Int8FilesKeepTheirCalibration) {
   EXPECT_TRUE(torch::equal(lean.depth(a), int8.depth(a)));
   EXPECT_TRUE(torch::equal(lean.pose({a, b, c}), int8.pose({a, b, c})));  // (its last conv in float, kept)
   EXPECT_TRUE(torch::equal(lean.flow(a, b), later.flow(a, b)));
-  GEO_EXPECT_THROW_WITH(lean.save(dir + "/again.pt"), "let go of its float weights");
-  EXPECT_FALSE(std::filesystem::exists(dir + "/again.pt"));
+  // Saved, such a model is an int8 model file: its int8 kernels instead of the float ones (under
+  // half the size here: the float PoseNet layer and FR stay), opening in int8 only, at once, the same
+  // bit for bit; loading it otherwise or calibrating it again is refused naming it.
+  lean.save(dir + "/lean.pt");
+  EXPECT_LT(std::filesystem::file_size(dir + "/lean.pt") * 2, std::filesystem::file_size(dir + "/int8.pt"));
+  const Model opened = Model::load(dir + "/lean.pt", o);
+  EXPECT_EQ(opened.spec().precision, "int8");
+  EXPECT_TRUE(opened.float_weights_released());
+  EXPECT_TRUE(torch::equal(opened.depth(a), int8.depth(a)));
+  EXPECT_TRUE(torch::equal(opened.flow(a, b), int8.flow(a, b)));
+  EXPECT_TRUE(torch::equal(opened.pose({a, b, c}), int8.pose({a, b, c})));
+  LoadOptions when_calibrated;  // (geo_infer --precision int8)
+  when_calibrated.int8_when_calibrated = true;
+  EXPECT_EQ(Model::load(dir + "/lean.pt", when_calibrated).spec().precision, "int8");
+  EXPECT_EQ(Model::load(dir + "/int8.pt", when_calibrated).spec().precision, "int8");
+  EXPECT_EQ(Model::load(checkpoint(), when_calibrated).spec().precision, "fp32");
+  GEO_EXPECT_THROW_WITH(Model::load(dir + "/lean.pt"), "lean.pt: an int8 model file");
+  LoadOptions bf16;
+  bf16.precision = "bf16";
+  GEO_EXPECT_THROW_WITH(Model::load(dir + "/lean.pt", bf16), "opens in int8 only");
+  LoadOptions recalibrate = o;
+  recalibrate.calibration = {a, b};
+  GEO_EXPECT_THROW_WITH(Model::load(dir + "/lean.pt", recalibrate), "give no calibration frames");
+  opened.save(dir + "/lean2.pt");  // written again from its int8 kernels: the same model
+  EXPECT_TRUE(torch::equal(Model::load(dir + "/lean2.pt", o).depth(a), int8.depth(a)));
   LoadOptions lean_options = o;
   lean_options.keep_float_weights = false;
   const Model lean_load = Model::load(dir + "/int8.pt", lean_options);

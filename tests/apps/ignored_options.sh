@@ -21,8 +21,6 @@ refused "--calibration calibrates int8: it needs --precision int8" \
   "$apps/geo_eval" --split eigen --trivial --calibration "$work" --data-root "$work"
 refused "--precision int8 is a model's" \
   "$apps/geo_eval" --split eigen --trivial --precision int8 --calibration "$work" --data-root "$work"
-refused "--precision int8 needs --calibration FRAMES" \
-  "$apps/geo_eval" --split eigen --checkpoint "$work/x.pt" --precision int8 --data-root "$work"
 refused "--train-batch: Value -3 not in range 1 to 1024" "$apps/geo_bench" --train-batch -3
 refused "--batch: Value 100000 not in range 1 to 1024" "$apps/geo_bench" --batch 100000
 refused "--ceiling-size: Value 1000000 not in range 64 to 16384" "$apps/geo_bench" --ceiling-size 1000000

@@ -238,8 +238,19 @@ TEST(Int8, PoseNetFollowsTheFloatOne) {
   net->int8.reset();
   geo::quantize_int8(*net, ranges, 64, 128);
   EXPECT_TRUE(torch::equal(net->predict(snippet(5).first, snippet(5).second).poses, before));
+  const auto kept = net->int8;
   EXPECT_THROW(geo::quantize_int8(*net, ranges.narrow(0, 0, 6), 64, 128), c10::Error);
-  EXPECT_FALSE(net->int8);  // a refused calibration leaves the float network
+  EXPECT_EQ(net->int8, kept);  // a refused calibration changes nothing
+  net->int8.reset();
+  try {
+    geo::quantize_int8(*net, torch::cat({ranges, ranges.narrow(0, 0, 1)}), 64, 128, /*release_float=*/true);
+    ADD_FAILURE() << "8 ranges taken for a network of 7 points";
+  } catch (const c10::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("8 calibrated ranges for a network of 7 quantized points"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_FALSE(net->int8);  // ... and leaves the float network as it was
+  EXPECT_FALSE(net->convs[0]->float_kernel_released());
   // Inference only: conv1-conv6's float kernels go, conv7 (run in float) and the heads keep theirs;
   // the same poses and camera bit for bit, and a released layer refuses to run in float.
   geo::quantize_int8(*net, ranges, 64, 128);
@@ -261,6 +272,43 @@ TEST(Int8, PoseNetFollowsTheFloatOne) {
   } catch (const c10::Error& e) {
     EXPECT_NE(std::string(e.what()).find("let go for int8-only inference"), std::string::npos) << e.what();
   }
+  // Its int8 kernels (what an int8 model file keeps): conv1..conv6, each an int8 weight of its
+  // layer's shape with a scale per output channel and the folded bias; given back to a network
+  // without float kernels, the same poses bit for bit. Kernels missing, of another shape or type,
+  // or of no layer are refused naming them, the network left as it was.
+  const auto kernels = net->int8->kernels();
+  EXPECT_EQ(kernels.size(), 6u * 3u);
+  EXPECT_EQ(kernels.at("conv1.weight").scalar_type(), torch::kInt8);
+  EXPECT_EQ(kernels.at("conv1.weight").sizes(), torch::IntArrayRef({16, 9, 7, 7}));
+  EXPECT_EQ(kernels.at("conv6.scales").scalar_type(), torch::kFloat64);
+  net->int8.reset();  // (its float kernels are gone: only the given ones can make it int8 again)
+  geo::quantize_int8(*net, ranges, 64, 128, true, kernels);
+  EXPECT_TRUE(torch::equal(net->predict(snippet(5).first, snippet(5).second).poses, before));
+  const auto refused = [&](std::map<std::string, torch::Tensor> given, const std::string& why) {
+    net->int8.reset();
+    try {
+      geo::quantize_int8(*net, ranges, 64, 128, true, given);
+      ADD_FAILURE() << "taken: " << why;
+    } catch (const c10::Error& e) {
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+    }
+    EXPECT_FALSE(net->int8);
+  };
+  auto missing = kernels;
+  missing.erase("conv3.scales");
+  refused(missing, "no kernel 'conv3.scales' for the network's layer 'conv3'");
+  auto extra = kernels;
+  extra["conv7.weight"] = kernels.at("conv6.weight");
+  refused(extra, "kernels for no layer of the network: conv7.weight");
+  auto reshaped = kernels;
+  reshaped["conv2.weight"] = kernels.at("conv2.weight").flatten();
+  refused(reshaped, "kernel 'conv2.weight' is Char [");
+  auto in_float = kernels;
+  in_float["conv2.weight"] = kernels.at("conv2.weight").to(torch::kFloat32);
+  refused(in_float, "kernel 'conv2.weight' is Float");
+  auto zero_scale = kernels;
+  zero_scale["conv4.scales"] = torch::zeros_like(kernels.at("conv4.scales"));
+  refused(zero_scale, "'conv4.scales' must be");
 }
 
 TEST(Int8, QuantizingNeedsCalibrationAFoldedNetworkAndInference) {

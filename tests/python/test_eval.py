@@ -139,7 +139,16 @@ def test_evaluate_equals_geo_eval_byte_for_byte(split, source, model_file, world
         geo.eval.evaluate(split, data_root=str(world_dir), trivial=True, split_file=str(split_file), output=str(split_file))
     assert split_file.read_text() == "keep\n"
     if source == "int8":
-        with pytest.raises(geo.Error, match="needs --calibration FRAMES"):
+        with pytest.raises(geo.Error, match="keeps no int8 calibration: give --calibration FRAMES"):
             geo.eval.evaluate(split, data_root=str(world_dir), checkpoint=str(model_file), precision="int8")
+        # The same calibration exported as an int8 model file: evaluated with its own, the same figures.
+        int8_file = tmp_path / "int8.pt"
+        run_app("geo_export", "--checkpoint", model_file, "--out", int8_file, "--int8", "--calibration", frames,
+                "--calibration-frames", "4")
+        from_file = geo.eval.evaluate(split, data_root=str(world_dir), device="cpu", checkpoint=str(int8_file),
+                                      precision="int8")
+        assert from_file["metrics"] == result["metrics"]
+        with pytest.raises(geo.Error, match="an int8 model file"):
+            geo.eval.evaluate(split, data_root=str(world_dir), checkpoint=str(int8_file))
         with pytest.raises(geo.Error, match="is a model's"):
             geo.eval.evaluate(split, data_root=str(world_dir), trivial=True, precision="int8", calibration=frames)

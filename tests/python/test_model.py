@@ -253,13 +253,16 @@ def test_int8_is_calibrated_on_frames_and_follows_fp32(model_file, frames, tmp_p
     assert kept.has_int8_calibration
     kept.quantize_int8()
     assert kept.spec.precision == "int8" and torch.equal(kept.depth(frames), d8)
-    # For inference only: the float kernels go, the int8 depth is the same, saving is refused.
+    # For inference only: the float kernels go, the int8 depth is the same; saved, it is an int8
+    # model file (its int8 kernels), which opens in int8 only.
     assert not kept.float_weights_released
     lean = geo.Model.load(str(tmp_path / "int8.pt"), precision="int8", keep_float_weights=False)
     assert lean.float_weights_released and torch.equal(lean.depth(frames), d8)
-    with pytest.raises(geo.Error, match="let go of its float weights"):
-        lean.save(str(tmp_path / "again.pt"))
-    assert not (tmp_path / "again.pt").exists()
+    lean.save(str(tmp_path / "lean.pt"))
+    assert (tmp_path / "lean.pt").stat().st_size * 2 < (tmp_path / "int8.pt").stat().st_size
+    assert torch.equal(geo.Model.load(str(tmp_path / "lean.pt"), precision="int8").depth(frames), d8)
+    with pytest.raises(geo.Error, match="an int8 model file"):
+        geo.Model.load(str(tmp_path / "lean.pt"))
     from_frames = geo.Model.load(str(model_file))
     from_frames.quantize_int8(list(frames), keep_float_weights=False)
     assert from_frames.float_weights_released and torch.equal(from_frames.depth(frames), d8)
