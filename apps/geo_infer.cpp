@@ -54,6 +54,7 @@ struct InferOptions {
   int64_t refine = 0;                              // 0: off
   std::string refine_run;
   double refine_anchor = geo::kRefineAnchor;
+  bool refine_anchor_given = false;  // (even at its default: it means nothing without --refine)
   double camera_height = 0, ply_max_depth = 0;
   int threads = 0;
   bool videos = false, timing = false, force = false, report = false;
@@ -109,7 +110,8 @@ void add_options(CLI::App& app, InferOptions& o) {
                  "with --refine: how strongly depth is held to the model's own (stages[].weights.anchor): 1 keeps "
                  "what the model learned where the clip teaches little (traffic moving with the camera); 0 lets the "
                  "clip reshape depth freely (docs/video.md)")
-      ->check(CLI::Range(0.0, 1000.0));
+      ->check(CLI::Range(0.0, 1000.0))
+      ->each([&o](const std::string&) { o.refine_anchor_given = true; });
   app.add_option("--refine-run", o.refine_run,
                  "with --refine: the refinement's run folder, kept (train.log, checkpoints, refined.pt: a model file "
                  "for later runs); default: a temporary folder, removed at the end");
@@ -509,7 +511,7 @@ int infer(const InferOptions& o) {
   geo::StepTimes times;
   if (!o.refine_run.empty() && o.refine == 0)
     throw std::runtime_error("--refine-run '" + o.refine_run + "' keeps the run of --refine N: give --refine too");
-  if (o.refine_anchor != geo::kRefineAnchor && o.refine == 0)
+  if (o.refine_anchor_given && o.refine == 0)
     throw std::runtime_error("--refine-anchor " + fmt::format("{:g}", o.refine_anchor) +
                              " weighs a term of --refine N: give --refine too");
   ScratchRun scratch;

@@ -134,13 +134,13 @@ void bind_model(py::module_& m) {
       .def_static(
           "create",
           [](const std::string& config_yaml, const std::string& device, const std::string& precision, int threads,
-             const py::object& calibration) {
-            const LoadOptions options = load_options(device, precision, threads, calibration, true);
+             const py::object& calibration, bool keep_float_weights) {
+            const LoadOptions options = load_options(device, precision, threads, calibration, keep_float_weights);
             py::gil_scoped_release release;
             return Model::create(config_yaml, options);
           },
           "config_yaml"_a = "{}", py::kw_only(), "device"_a = "cpu", "precision"_a = "fp32", "threads"_a = 0,
-          "calibration"_a = py::none(),
+          "calibration"_a = py::none(), "keep_float_weights"_a = true,
           "Untrained networks (torch.manual_seed first for fixed weights) of a geo config given as YAML text\n"
           "(model.*, data.height/width/seq_length, loss.*; absent keys: geo's defaults, \"{}\": the paper's model\n"
           "at 128x416): for measuring speed or trying a program before a model is trained.")

@@ -571,6 +571,7 @@ TEST(GeoInfer, RefinesOnTheInputFirst) {
   refused(source + " --output " + dir + "/o1 --refine-run " + dir + "/run3",
           "keeps the run of --refine N: give --refine too");
   refused(source + " --output " + dir + "/o1 --refine-anchor 0.5", "--refine-anchor 0.5 weighs a term of --refine N");
+  refused(source + " --output " + dir + "/o1 --refine-anchor 1", "--refine-anchor 1 weighs a term of --refine N");
   refused(source + " --output " + dir + "/o1 --refine 2 --refine-anchor -1", "--refine-anchor: Value -1 not in range");
 }
 

@@ -42,6 +42,13 @@ def test_created_models_follow_the_seed_and_only_checkpoints_carry_training_conf
     assert len(configs) == 1 and "encoder_depth: 18" in configs[0]
     with pytest.raises(geo.Error, match="encoder_dept"):
         geo.Model.create("model: {encoder_dept: 18}")
+    # Created in int8 for inference only, as load: the float kernels go, the depth is the kept model's.
+    torch.manual_seed(3)
+    kept = geo.Model.create(yaml, precision="int8", calibration=list(frames))
+    torch.manual_seed(3)
+    lean = geo.Model.create(yaml, precision="int8", calibration=list(frames), keep_float_weights=False)
+    assert lean.float_weights_released and not kept.float_weights_released
+    assert torch.equal(lean.depth(frames[0]), kept.depth(frames[0]))
 
 
 def test_numpy_images_are_viewed_channels_last_without_a_copy(frames):
