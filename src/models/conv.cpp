@@ -6,6 +6,11 @@
 
 namespace geo {
 
+void release_float_weight(torch::Tensor& weight) {
+  torch::NoGradGuard no_grad;
+  weight.set_data(torch::empty({0}, weight.options()));
+}
+
 int64_t onednn_channel_padding(const torch::Tensor& x) {
 #if TORCH_VERSION_MAJOR >= 2
   const int64_t c = x.dim() == 4 ? x.size(1) : 0;

@@ -33,6 +33,10 @@ int64_t onednn_channel_padding(const torch::Tensor& x);
 // t with n zero channels appended (dimension 1); t itself when n is 0.
 torch::Tensor pad_channels(const torch::Tensor& t, int64_t n);
 
+// Lets go of a float kernel that int8 inference replaced: its data becomes an empty tensor (0
+// elements, same type and device), as an int8 model file keeps it.
+void release_float_weight(torch::Tensor& weight);
+
 // While one exists on this thread, new geo::Conv2d modules get uninitialised weights (torch::empty,
 // no random numbers drawn for them) and init_weights does nothing: for networks whose every weight
 // is read from a file next (geo::Model::load, CheckpointFile::networks). Random initialisation was

@@ -126,7 +126,7 @@ torch::Tensor ConvBnImpl::folded_weight() const {
 void ConvBnImpl::release_float_kernel() {
   TORCH_CHECK(folded() && !is_training(), "ConvBn: only a folded module (inference) lets go of its float kernel");
   torch::NoGradGuard no_grad;
-  conv->weight.set_data(torch::empty({0}, conv->weight.options()));
+  release_float_weight(conv->weight);
   folded_weight_ = pending_w32_ = torch::Tensor();
   packed_weight_ = packed_phase_weight_ = packed_bias_ = packed_phase_bias_ = torch::Tensor();
   released_ = true;

@@ -371,7 +371,7 @@ void Int8Graph::quantize(bool release_float) {
       (i < n ? st.packed[jobs[i].first] : st.packed_phases[phase_jobs[i - n].first]) = packed[i];
     if (release_float) {
       for (auto* cb : st.int8_layers()) cb->release_float_kernel();
-      for (auto* h : st.heads) h->weight.set_data(torch::empty({0}, h->weight.options()));
+      for (auto* h : st.heads) release_float_weight(h->weight);
     }
   } else {
     // Layer by layer, so that with release_float each float kernel goes as its int8 one comes (the
@@ -390,7 +390,7 @@ void Int8Graph::quantize(bool release_float) {
     for (auto* h : st.heads) {
       const auto& o = h->options;
       st.packed[h] = pack(h->weight, h->bias, (*o.stride())[0], (*o.kernel_size())[0] / 2);
-      if (release_float) h->weight.set_data(torch::empty({0}, h->weight.options()));
+      if (release_float) release_float_weight(h->weight);
     }
   }
   st.released = release_float;
