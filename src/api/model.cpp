@@ -224,7 +224,9 @@ Model Model::load(const std::string& path, const LoadOptions& options) {
         throw Error(file +
                     ": an int8 model file (geo_export --int8: int8 kernels, no float ones) opens in int8 only, "
                     "with the calibration it keeps (asked: " +
-                    options.precision + "); for fp32 or bf16, export the checkpoint it came from without --int8");
+                    options.precision +
+                    "): open it with precision int8 (geo_infer, geo_eval: --precision int8 without calibration "
+                    "frames); for fp32 or bf16, export the checkpoint it came from without --int8");
       if (impl->int8_only && !options.calibration.empty())
         throw Error(file +
                     ": an int8 model file keeps the calibration its int8 kernels were made with: give no "
