@@ -196,16 +196,19 @@ c10::IValue pack(const torch::Tensor& weight, const torch::Tensor& bias, int64_t
   return prepack(quantize_weight_per_channel(weight, factor), bias, stride, padding);
 }
 
-// A kernel to prepack: the quantized weight, its bias, stride and padding.
+// A quantized kernel and its float bias (undefined: none).
 struct Int8Kernel {
   torch::Tensor weight, bias;
-  int64_t stride = 1, padding = 0;
 };
+
+c10::IValue prepack(const Int8Kernel& k, int64_t stride, int64_t padding) {
+  return prepack(k.weight, k.bias, stride, padding);
+}
 
 // The kernel `name` of Int8Graph::kernels, taken out of `given` and checked against the layer's
 // shape [Co,Ci,kh,kw] (and its bias, when it has one).
 Int8Kernel take_given(std::map<std::string, torch::Tensor>& given, const std::string& name, std::vector<int64_t> shape,
-                      bool has_bias, int64_t stride, int64_t padding) {
+                      bool has_bias) {
   const auto take = [&](const std::string& key) {
     const auto it = given.find(key);
     TORCH_CHECK(it != given.end(), "int8: no kernel '", key, "' for the network's layer '", name, "'");
@@ -226,8 +229,7 @@ Int8Kernel take_given(std::map<std::string, torch::Tensor>& given, const std::st
   TORCH_CHECK(!bias.defined() || (bias.scalar_type() == torch::kFloat32 && bias.dim() == 1 && bias.size(0) == co &&
                                   torch::isfinite(bias).all().item<bool>()),
               "int8: kernel '", name, ".bias' must be ", co, " finite float32 values");
-  return {at::_make_per_channel_quantized_tensor(weight, scales, torch::zeros({co}, torch::kLong), 0), bias, stride,
-          padding};
+  return {at::_make_per_channel_quantized_tensor(weight, scales, torch::zeros({co}, torch::kLong), 0), bias};
 }
 
 // A prepacked kernel back as Int8Graph::kernels's tensors under `name` (quantized::conv2d_unpack
@@ -335,62 +337,47 @@ void Int8Graph::quantize(bool release_float) {
   torch::NoGradGuard no_grad;
   const auto names = module_names(st.net);
   const bool given = !st.given.empty();
+  // Layer by layer, so that with release_float each float kernel goes as its int8 one comes (the
+  // int8 kernels take the memory the float ones leave: the peak stays the float model's). Given
+  // kernels (an int8 model file's) are all checked before any float kernel goes.
+  const bool release_each = release_float && !given;
+  for (auto* cb : st.int8_layers()) {
+    TORCH_CHECK(cb->folded(), "int8: BatchNorm must be folded before quantizing");
+    const auto& o = cb->conv->options;
+    const int64_t stride = (*o.stride())[0], k = (*o.kernel_size())[0];
+    const bool upconv = std::find(st.upconvs.begin(), st.upconvs.end(), cb) != st.upconvs.end();
+    const auto& name = names.at(cb);
+    if (given) {
+      st.packed[cb] =
+          prepack(take_given(st.given, name, {o.out_channels(), o.in_channels(), k, k}, true), stride, k / 2);
+      if (upconv)
+        st.packed_phases[cb] =
+            prepack(take_given(st.given, name + ".phases", {4 * o.out_channels(), o.in_channels(), 2, 2}, true), 1, 1);
+    } else {
+      // The folded kernel quantized from the weight and BatchNorm's factor, not made in float.
+      st.packed[cb] = pack(cb->conv->weight, cb->folded_bias(), stride, k / 2, cb->bn_scale());
+      if (upconv)
+        st.packed_phases[cb] = pack(phase_kernels(cb->folded_weight().to(torch::kFloat32)),
+                                    cb->folded_bias().to(torch::kFloat32).repeat({4}), 1, 1);
+    }
+    if (release_each) cb->release_float_kernel();
+  }
+  for (auto* h : st.heads) {
+    const auto& o = h->options;
+    const int64_t stride = (*o.stride())[0], k = (*o.kernel_size())[0];
+    st.packed[h] =
+        given ? prepack(take_given(st.given, names.at(h), {o.out_channels(), o.in_channels(), k, k}, h->bias.defined()),
+                        stride, k / 2)
+              : pack(h->weight, h->bias, stride, k / 2);
+    if (release_each) release_float_weight(h->weight);
+  }
   if (given) {
-    // The file's kernels, checked in the graph's order, then prepacked on every core (oneDNN's
-    // reorder of one kernel hardly uses a second one).
-    std::vector<std::pair<const torch::nn::Module*, Int8Kernel>> jobs, phase_jobs;
-    for (auto* cb : st.int8_layers()) {
-      TORCH_CHECK(cb->folded(), "int8: BatchNorm must be folded before quantizing");
-      const auto& o = cb->conv->options;
-      const int64_t k = (*o.kernel_size())[0];
-      const auto& name = names.at(cb);
-      jobs.emplace_back(
-          cb, take_given(st.given, name, {o.out_channels(), o.in_channels(), k, k}, true, (*o.stride())[0], k / 2));
-      if (std::find(st.upconvs.begin(), st.upconvs.end(), cb) != st.upconvs.end())
-        phase_jobs.emplace_back(
-            cb, take_given(st.given, name + ".phases", {4 * o.out_channels(), o.in_channels(), 2, 2}, true, 1, 1));
-    }
-    for (auto* h : st.heads) {
-      const auto& o = h->options;
-      const int64_t k = (*o.kernel_size())[0];
-      jobs.emplace_back(h, take_given(st.given, names.at(h), {o.out_channels(), o.in_channels(), k, k},
-                                      h->bias.defined(), (*o.stride())[0], k / 2));
-    }
     std::string left;
     for (const auto& kv : st.given) left += (left.empty() ? "" : ", ") + kv.first;
     TORCH_CHECK(left.empty(), "int8: kernels for no layer of the network: ", left);
-    const size_t n = jobs.size(), all = n + phase_jobs.size();
-    std::vector<c10::IValue> packed(all);
-    at::parallel_for(0, static_cast<int64_t>(all), 1, [&](int64_t begin, int64_t end) {
-      for (int64_t i = begin; i < end; ++i) {
-        const auto& j = static_cast<size_t>(i) < n ? jobs[i].second : phase_jobs[i - n].second;
-        packed[i] = prepack(j.weight, j.bias, j.stride, j.padding);
-      }
-    });
-    for (size_t i = 0; i < all; ++i)
-      (i < n ? st.packed[jobs[i].first] : st.packed_phases[phase_jobs[i - n].first]) = packed[i];
     if (release_float) {
       for (auto* cb : st.int8_layers()) cb->release_float_kernel();
       for (auto* h : st.heads) release_float_weight(h->weight);
-    }
-  } else {
-    // Layer by layer, so that with release_float each float kernel goes as its int8 one comes (the
-    // int8 kernels take the memory the float ones leave: the peak stays the float model's).
-    for (auto* cb : st.int8_layers()) {
-      TORCH_CHECK(cb->folded(), "int8: BatchNorm must be folded before quantizing");
-      const auto& o = cb->conv->options;
-      const int64_t stride = (*o.stride())[0], k = (*o.kernel_size())[0];
-      // The folded kernel quantized from the weight and BatchNorm's factor, not made in float.
-      st.packed[cb] = pack(cb->conv->weight, cb->folded_bias(), stride, k / 2, cb->bn_scale());
-      if (std::find(st.upconvs.begin(), st.upconvs.end(), cb) != st.upconvs.end())
-        st.packed_phases[cb] = pack(phase_kernels(cb->folded_weight().to(torch::kFloat32)),
-                                    cb->folded_bias().to(torch::kFloat32).repeat({4}), 1, 1);
-      if (release_float) cb->release_float_kernel();
-    }
-    for (auto* h : st.heads) {
-      const auto& o = h->options;
-      st.packed[h] = pack(h->weight, h->bias, (*o.stride())[0], (*o.kernel_size())[0] / 2);
-      if (release_float) release_float_weight(h->weight);
     }
   }
   st.released = release_float;
