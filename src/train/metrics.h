@@ -116,9 +116,11 @@ class ProgressSink : public MetricsSink {
   int64_t interval_;
   std::string stage_;
   std::optional<Progress> progress_;  // of the current stage
-  // The auto-masked share over the current window of steps (warn_if_mostly_masked).
+  // The auto-masked share over the current window of steps and the window before it
+  // (warn_if_mostly_masked; negative: none yet).
   double masked_sum_ = 0;
   int64_t masked_steps_ = 0;
+  double masked_before_ = -1;
   bool masked_warned_ = false;  // in this stage
   void warn_if_mostly_masked(const StepRecord& r, double masked);
 };
