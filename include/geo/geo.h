@@ -233,7 +233,10 @@ class Model {
   // A whole sequence, as geo_infer runs it: from the start of `frames`, each frame's depth (times
   // its entry of `scales`, e.g. sequence_scales(); empty: 1) and, with a next frame, the flow and
   // the motion to it (flow_parts(frame, next, intrinsics, previous): each network once per frame),
-  // handed to `sink` in order while at most three frames are held. Returns the camera trajectory
+  // handed to `sink` in order (on the calling thread) while a few frames are held. On the CPU
+  // several frames are computed at once, each on its own thread with a share of LibTorch's intra-op
+  // threads (2 threads: 2 frames of one thread each; 16: 4 of 4), which a single frame at batch 1
+  // cannot use well; at most that many + 3 frames are held. Returns the camera trajectory
   // (chain_poses of the motions, each step scaled by its first frame's factor): [N,4,4] float64
   // for N frames; undefined for one frame or a 5-frame model. `intrinsics`: as flow_parts takes them
   // (pixels of the frames). Throws geo::Error on no frame, frames of different sizes, or scales of

@@ -125,13 +125,24 @@ TEST(Api, AnyInputSizeAndBatches) {
 
 // run_sequence: each frame's depth and, to the next frame, flow_parts with the previous frame as the
 // snippet's first; the trajectory is chain_poses of the motions; scales multiply depth and steps.
+// With 2 intra-op threads two frames are computed at once with one thread each (core/lanes.h): the
+// same as the calls made with one thread, handed on in order.
 TEST(Api, RunSequenceIsTheCallsFrameByFrame) {
   const Model m = Model::load(checkpoint());
   const std::vector<torch::Tensor> frames{image(64, 208), image(64, 208, 0.1), image(64, 208, 0.25),
                                           image(64, 208, 0.3)};
   TensorFrames source(frames);
   std::vector<SequenceFrame> seen;
-  const auto poses = m.run_sequence(source, [&](const SequenceFrame& f) { seen.push_back(f); });
+  std::vector<int> sink_threads;
+  const int threads = torch::get_num_threads();
+  torch::set_num_threads(2);
+  const auto poses = m.run_sequence(source, [&](const SequenceFrame& f) {
+    seen.push_back(f);
+    sink_threads.push_back(torch::get_num_threads());
+  });
+  EXPECT_EQ(torch::get_num_threads(), 2);
+  EXPECT_EQ(sink_threads, std::vector<int>(4, 1));  // lanes were at work (the caller keeps one thread)
+  torch::set_num_threads(1);
   ASSERT_EQ(seen.size(), 4u);
   std::vector<torch::Tensor> motions;
   for (size_t i = 0; i < 4; ++i) {
@@ -171,6 +182,15 @@ TEST(Api, RunSequenceIsTheCallsFrameByFrame) {
   GEO_EXPECT_THROW_WITH(m.run_sequence(mixed, nothing), "frame 1 is [3, 32, 104], expected [3, 64, 208]");
   GEO_EXPECT_THROW_WITH(m.run_sequence(source, nothing, {1.0, 1.0, 1.0, 1.0, 1.0}), "5 scales for 4 frames");
   GEO_EXPECT_THROW_WITH(m.run_sequence(source, nothing, {1.0}), "1 scales for a sequence of more");
+  torch::set_num_threads(2);  // thrown while frames were computed ahead: refused the same way
+  GEO_EXPECT_THROW_WITH(m.run_sequence(source, nothing, {1.0}), "1 scales for a sequence of more");
+  GEO_EXPECT_THROW_WITH(m.run_sequence(source,
+                                       [](const SequenceFrame& f) {
+                                         if (f.index == 1) throw Error("the sink failed at frame 1");
+                                       }),
+                        "the sink failed at frame 1");
+  EXPECT_EQ(torch::get_num_threads(), 2);
+  torch::set_num_threads(threads);
 }
 
 TEST(Api, ExportedFilesGiveTheCheckpointsOutputs) {
