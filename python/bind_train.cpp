@@ -4,6 +4,7 @@
 
 #include "core/config.h"
 #include "core/logging.h"
+#include "models/conv.h"
 #include "geo/geo.h"
 #include "pipeline/checkpoint.h"
 #include "pipeline/run_folder.h"
@@ -163,6 +164,10 @@ void bind_train(py::module_& m) {
           },
           "input"_a, "FlowNet: its 12-channel input [B,12,H,W] -> residual flows in pixels at 4 scales, finest first.")
       .def_property_readonly("has_flow", [](const Networks& n) { return static_cast<bool>(n.flow); });
+  m.def(
+      "onednn_channel_padding", [](py::handle x) { return onednn_channel_padding(tensor_arg(x, "x")); }, "x"_a,
+      "How many zero channels geo's convolutions append to the input x of a convolution: the oneDNN of\n"
+      "LibTorch 2.x computes some channel counts wrongly on the CPU (models/conv.h); geo.nn applies the same rule.");
   m.def(
       "state_dicts",
       [](const std::string& path) {

@@ -15,12 +15,28 @@ import torch.nn.functional as F
 import geo
 
 
+class Conv2d(nn.Conv2d):
+    """nn.Conv2d computed as geo's convolutions are: with the zero input channels geo appends where the
+    oneDNN of LibTorch 2.x computes a channel count wrongly on the CPU (33 or 129 input channels gave
+    errors of 15 and NaN in Debian's PyTorch 2.6.0+dfsg-7+b1; geo._geo.onednn_channel_padding is the
+    rule). The same convolution exactly; nothing appended while tracing or exporting."""
+
+    def forward(self, x):
+        tracing = torch.jit.is_tracing() or torch.onnx.is_in_onnx_export()
+        n = 0 if tracing or self.groups != 1 else geo._geo.onednn_channel_padding(x)
+        if n == 0:
+            return super().forward(x)
+        w = F.pad(self.weight, (0, 0, 0, 0, 0, n))
+        x = F.pad(x, (0, 0, 0, 0, 0, n))
+        return F.conv2d(x, w, self.bias, self.stride, self.padding, self.dilation, self.groups)
+
+
 class ConvBn(nn.Module):
     """k x k conv (stride, padding k // 2, no bias) -> BatchNorm -> ReLU (optional)."""
 
     def __init__(self, cin, cout, k, stride=1, relu=True, eps=1e-3):
         super().__init__()
-        self.conv = nn.Conv2d(cin, cout, k, stride, k // 2, bias=False)
+        self.conv = Conv2d(cin, cout, k, stride, k // 2, bias=False)
         self.bn = nn.BatchNorm2d(cout, eps=eps)
         self.relu = relu
 
@@ -36,9 +52,9 @@ class FeatureRefinement(nn.Module):
     def __init__(self, channels, ratio=16, kernel=7, spatial_bn=False, eps=1e-3):
         super().__init__()
         hidden = max(1, channels // ratio)
-        self.mlp_in = nn.Conv2d(channels, hidden, 1, bias=False)
-        self.mlp_out = nn.Conv2d(hidden, channels, 1, bias=False)
-        self.spatial = nn.Conv2d(2, 1, kernel, padding=kernel // 2, bias=False)
+        self.mlp_in = Conv2d(channels, hidden, 1, bias=False)
+        self.mlp_out = Conv2d(hidden, channels, 1, bias=False)
+        self.spatial = Conv2d(2, 1, kernel, padding=kernel // 2, bias=False)
         self.spatial_bn = nn.BatchNorm2d(1, eps=eps) if spatial_bn else None
 
     def forward(self, x):
@@ -147,7 +163,7 @@ class EncoderDecoder(nn.Module):
                 setattr(self, f"refined{k + 5}", FeatureRefinement(width, model["fr_ratio"],
                                                                    spatial_bn=model["fr_spatial_bn"], eps=eps))
             if k >= 2:
-                setattr(self, "pred" + name, nn.Conv2d(width, cout, 3, padding=1))
+                setattr(self, "pred" + name, Conv2d(width, cout, 3, padding=1))
             width_in = width
 
     def forward(self, x):
@@ -206,8 +222,8 @@ class PoseNet(nn.Module):
         for i, (cout, k) in enumerate(zip((16, 32, 64, 128, 256, 256, 256), (7, 5, 3, 3, 3, 3, 3))):
             setattr(self, f"conv{i + 1}", ConvBn(cin, cout, k, 2, eps=eps))
             cin = cout
-        self.pred = nn.Conv2d(256, 6 * self.sources, 1)
-        self.intrinsics = nn.Conv2d(256, 4, 1) if learn_intrinsics else None
+        self.pred = Conv2d(256, 6 * self.sources, 1)
+        self.intrinsics = Conv2d(256, 4, 1) if learn_intrinsics else None
 
     def forward(self, target, sources):
         x = torch.cat([target, *sources], 1) * 2 - 1
