@@ -202,12 +202,24 @@ class RealVideo : public ::testing::Test {
     return s;
   }
 
-  // The trained run's scores: computed once, read by the tests that need them.
+  // The scores of the trained run and of the baselines: each computed once, read by the tests that
+  // need them.
   static const Scores& trained_scores() {
     static const Scores scores = [] {
       Predictor trained(root_ + "/run", "cpu");
       return score(&trained);
     }();
+    return scores;
+  }
+  static const Scores& untrained_scores() {
+    static const Scores scores = [] {
+      Predictor untrained(config_, "cpu");
+      return score(&untrained);
+    }();
+    return scores;
+  }
+  static const Scores& trivial_scores() {
+    static const Scores scores = score(nullptr);
     return scores;
   }
 
@@ -250,9 +262,7 @@ bool passes(const Scores& s, const Scores& untrained, const Scores& trivial) {
 }
 
 TEST_F(RealVideo, DepthAndMotionOfUnseenFramesBeatTheBaselines) {
-  Predictor untrained(config_, "cpu");
-  const Scores& t = trained_scores();
-  const Scores u = score(&untrained), v = score(nullptr);
+  const Scores &t = trained_scores(), &u = untrained_scores(), &v = trivial_scores();
   print("trained", t);
   print("untrained", u);
   print("constant depth, no motion", v);
@@ -295,8 +305,9 @@ TEST_F(RealVideo, Int8KeepsTheAccuracyOfFp32) {
 }
 
 TEST_F(RealVideo, WithoutThePhotometricTermTheCheckFails) {
-  Predictor blind(root_ + "/run_without_photometric", "cpu"), untrained(config_, "cpu");
-  const Scores b = score(&blind), u = score(&untrained), v = score(nullptr);
+  Predictor blind(root_ + "/run_without_photometric", "cpu");
+  const Scores b = score(&blind);
+  const Scores &u = untrained_scores(), &v = trivial_scores();
   print("without photometric term", b);
   std::printf("real-video check view error share: without photometric term %.4f\n", view_share(b, u, v));
   EXPECT_FALSE(passes(b, u, v)) << "the check passes without the photometric term: it does not measure learning";
