@@ -60,42 +60,54 @@ struct Scores {
   std::vector<double> view;  // one per run of kRuns: view_error
 };
 
-// Depth checked by the recorded camera motion: on each run's unseen frames t = 36..49, frame t+1
-// warped into frame t through the depth of t (upsampled to the frames' 424x128) and the ground-truth
-// motion t -> t+1; the mean photometric error (losses/photometric.h, SSIM weight `alpha`) against
-// frame t over all pixels (a sample leaving the frame takes the border pixel), at the depth scale that
-// fits the run best (64 scales from 0.05 to 2000 times the depth). `depth_of` gives the depth of a
-// frame [1,3,64,208] at that size.
-double view_error(const std::string& run, double alpha,
-                  const std::function<torch::Tensor(const torch::Tensor&)>& depth_of) {
+// What the view error of a run reads, the same for every model: its unseen frames t = 36..49 and
+// the frames after them (424x128), the networks' input of each t, the ground-truth motion t -> t+1.
+struct ViewFrames {
+  torch::Tensor K;  // [1,3,3] at 424x128
+  std::vector<torch::Tensor> targets, sources, inputs, motions;
+};
+
+ViewFrames view_frames(const std::string& run) {
   const std::string dir = kData + "/odometry_" + run;
-  const auto P0 = read_key_values(dir + "/calib.txt").projection("P0");
-  const auto K = P0.slice(1, 0, 3).to(torch::kFloat64).unsqueeze(0);  // P0 = [K | 0]
-  const auto poses = read_poses(dir + "/poses.txt");                  // camera to world
-  torch::NoGradGuard no_grad;
-  std::vector<torch::Tensor> targets, sources, depths, motions;
+  ViewFrames v;
+  v.K = read_key_values(dir + "/calib.txt").projection("P0").slice(1, 0, 3).to(torch::kFloat64).unsqueeze(0);
+  const auto poses = read_poses(dir + "/poses.txt");  // camera to world
   for (int t = kTrainFrames; t < kLastFrame; ++t) {
     const std::string target = dir + "/frames/" + zero_padded(t, 6) + ".png";
-    targets.push_back(read_image(target).unsqueeze(0));
-    sources.push_back(read_image(dir + "/frames/" + zero_padded(t + 1, 6) + ".png").unsqueeze(0));
-    const auto depth = depth_of(read_image_resized(target, kHeight, kWidth).unsqueeze(0)).to(torch::kFloat64);
-    depths.push_back(torch::nn::functional::interpolate(
-        depth, torch::nn::functional::InterpolateFuncOptions()
-                   .size(std::vector<int64_t>{targets.back().size(2), targets.back().size(3)})
-                   .mode(torch::kBilinear)
-                   .align_corners(false)));
-    motions.push_back(compose(inverse_transform(poses.slice(0, t + 1, t + 2)), poses.slice(0, t, t + 1)));
+    v.targets.push_back(read_image(target).unsqueeze(0));
+    v.sources.push_back(read_image(dir + "/frames/" + zero_padded(t + 1, 6) + ".png").unsqueeze(0));
+    v.inputs.push_back(read_image_resized(target, kHeight, kWidth).unsqueeze(0));
+    v.motions.push_back(compose(inverse_transform(poses.slice(0, t + 1, t + 2)), poses.slice(0, t, t + 1)));
   }
+  return v;
+}
+
+// Depth checked by the recorded camera motion: frame t+1 warped into frame t through the depth of t
+// (upsampled to 424x128) and the ground-truth motion t -> t+1; the mean photometric error
+// (losses/photometric.h, SSIM weight `alpha`) against frame t over all pixels (a sample leaving the
+// frame takes the border pixel), at the depth scale that fits the run best (64 scales from 0.05 to
+// 2000 times the depth). `depth_of` gives the depth of an input [1,3,64,208] at that size.
+double view_error(const ViewFrames& v, double alpha,
+                  const std::function<torch::Tensor(const torch::Tensor&)>& depth_of) {
+  torch::NoGradGuard no_grad;
+  std::vector<torch::Tensor> depths;
+  for (size_t i = 0; i < v.inputs.size(); ++i)
+    depths.push_back(
+        torch::nn::functional::interpolate(depth_of(v.inputs[i]).to(torch::kFloat64),
+                                           torch::nn::functional::InterpolateFuncOptions()
+                                               .size(std::vector<int64_t>{v.targets[i].size(2), v.targets[i].size(3)})
+                                               .mode(torch::kBilinear)
+                                               .align_corners(false)));
   double best = std::numeric_limits<double>::infinity();
   for (int k = 0; k < 64; ++k) {
     const double scale = 0.05 * std::pow(2000.0 / 0.05, k / 63.0);
     double sum = 0;
-    for (size_t i = 0; i < targets.size(); ++i) {
-      const auto flow = rigid_flow(depths[i] * scale, motions[i], K).to(torch::kFloat32);
-      const torch::Tensor warped = warp(sources[i], flow, OutOfView::kBorder).image;
-      sum += photometric_error(warped, targets[i], alpha).mean().item<double>();
+    for (size_t i = 0; i < depths.size(); ++i) {
+      const auto flow = rigid_flow(depths[i] * scale, v.motions[i], v.K).to(torch::kFloat32);
+      const torch::Tensor warped = warp(v.sources[i], flow, OutOfView::kBorder).image;
+      sum += photometric_error(warped, v.targets[i], alpha).mean().item<double>();
     }
-    best = std::min(best, sum / static_cast<double>(targets.size()));
+    best = std::min(best, sum / static_cast<double>(depths.size()));
   }
   return best;
 }
@@ -195,7 +207,7 @@ class RealVideo : public ::testing::Test {
       odometry.sequence = sequence(i);
       odometry.split_file = root_ + "/eval/heldout_" + sequence(i) + ".txt";
       s.ate.push_back(metric_of(run(odometry), "ate_mean"));
-      s.view.push_back(view_error(kRuns[i], config_.loss.ssim_alpha, [&](const torch::Tensor& image) {
+      s.view.push_back(view_error(views()[i], config_.loss.ssim_alpha, [&](const torch::Tensor& image) {
         return p ? p->depth(image) : torch::ones({1, 1, kHeight, kWidth});
       }));
     }
@@ -221,6 +233,15 @@ class RealVideo : public ::testing::Test {
   static const Scores& trivial_scores() {
     static const Scores scores = score(nullptr);
     return scores;
+  }
+  // Each run's frames for view_error, read once.
+  static const std::vector<ViewFrames>& views() {
+    static const std::vector<ViewFrames> frames = [] {
+      std::vector<ViewFrames> v;
+      for (const auto& run : kRuns) v.push_back(view_frames(run));
+      return v;
+    }();
+    return frames;
   }
 
   static void print(const char* what, const Scores& s) {
