@@ -28,7 +28,6 @@
 #include "core/output_folder.h"
 #include "core/files.h"
 #include "core/progress.h"
-#include "core/runtime.h"
 #include "data/kitti/calib.h"
 #include "data/cv_tensor.h"
 #include "data/image_io.h"
@@ -468,7 +467,6 @@ struct ScratchRun {
 // signal stopped the training). Whatever can refuse the run is checked before the training: the
 // output folder, a clip to train on, the camera.
 std::string refined_model(const InferOptions& o, geo::StepTimes& times, ScratchRun& scratch) {
-  geo::keep_freed_memory();  // refining trains
   const bool video = fs::is_regular_file(o.input) && geo::FrameStream(o.input, "--input").is_video();
   if (!video && !fs::is_directory(o.input))
     throw std::runtime_error("--refine " + std::to_string(o.refine) + " trains on a clip: '" + o.input +

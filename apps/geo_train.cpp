@@ -42,7 +42,6 @@ void add_options(CLI::App& app, TrainCommand& c) {
 }
 
 int train(const TrainCommand& c) {
-  geo::keep_freed_memory();  // (a training tool)
   if (c.config.empty() && c.resume.empty())
     throw std::runtime_error("give --config FILE (e.g. --config stage1.yaml) or --resume RUN_DIR; see --help");
   if (!c.resume.empty()) {

@@ -19,8 +19,11 @@ torch::Device select_device(const std::string& name);
 // that autograd frees at the end of backward; by default glibc hands every block over 32 MB back
 // with munmap and the next step page-faults all of it in again. Measured with geo_bench on the
 // 2-core CI machine: the DepthNet's training forward over 12 frames at 128x416 went from 3.3 s to
-// 2.1 s. The peak memory is unchanged; the process simply does not shrink after it. Called by the
-// tools that train (geo_train, geo_bench, geo_infer --refine), not by those that only predict: there
+// 2.1 s; on a virtual machine whose page faults are costly, a training step of the learning check
+// (ResNet-18 at 64x208, batch 4) took twice as long without it. The peak memory is unchanged; the
+// process simply does not shrink after it. Called by training itself (geo::train and geo::resume:
+// geo_train, geo_infer --refine, the library, `import geo`, the tests that train) and by
+// geo_bench, which times training steps; not by the tools that only predict: there
 // memory let go (an int8 model's float kernels) goes back to the system and the next layer's int8
 // kernels do not stack on it (geo_infer's peak with the paper's model in int8: 1.17 -> 0.84 GB).
 // GEO_KEEP_MEMORY=0 in the environment turns this off.

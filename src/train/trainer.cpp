@@ -450,6 +450,7 @@ struct PreparedFolder {
 // process runs.
 int run_in_folder(const Config& config, const TrainOptions& options, bool resuming,
                   const std::function<PreparedFolder()>& prepare, std::string* run_dir) {
+  keep_freed_memory();  // every step allocates what the step before freed (core/runtime.h)
   auto group = join_group(config, options);
   if (group->rank() != 0) {
     const std::string dir = group->share_from_rank0("run_dir", "");

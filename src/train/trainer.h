@@ -28,6 +28,7 @@ struct TrainOptions {
 };
 
 // Exit codes: 0 done, 130 interrupted by a signal (checkpoint written). Throws on errors.
+// Training keeps freed memory in the process from then on (keep_freed_memory, core/runtime.h).
 int train(const Config& config, const TrainOptions& options, std::string* run_dir = nullptr);
 // Continues the run in `run_dir` from its latest checkpoint, with the config stored there.
 int resume(const std::string& run_dir, const TrainOptions& options);
