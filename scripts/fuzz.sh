@@ -19,7 +19,8 @@ if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
   # No -Werror here: GCC 12 warns falsely (maybe-uninitialized in <regex>) under the sanitizers.
   # -g1: line tables only, what the sanitizers' stack traces need (file:line of every frame); full
   # debug information took a third longer to build (64 s against 45 s for the networks' unity file).
-  cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release -DGEO_SANITIZE=address,undefined \
+  . scripts/compiler.sh  # the compiler as scripts/setup.sh chooses it
+  cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release -DGEO_SANITIZE=address,undefined -DCMAKE_CXX_COMPILER="$(geo_cxx)" \
     -DCMAKE_CXX_FLAGS_RELEASE="-O1 -g1" -DGEO_WERROR=OFF -DGEO_UNITY_BUILD="$([ "${GEO_UNITY:-1}" = 1 ] && echo ON || echo OFF)"
 fi
 echo "geo fuzz: building the sanitized fuzz and int8 tests in $BUILD_DIR with $JOBS jobs"

@@ -10,6 +10,9 @@
 #                   once per batch (a fresh build in ~70% of the time; an edit recompiles its batch);
 #                   0: one translation unit per source.
 #                   Default: 1 for a new build folder, an existing one keeps its setting.
+#   GEO_CXX         the C++ compiler of a new build folder: clang (default; installed with Debian's
+#                   LibTorch, elsewhere used where it is on the PATH, else GCC) or gcc; an existing
+#                   build folder keeps its compiler (scripts/compiler.sh says why clang).
 #   GEO_SETUP_PACKAGES_ONLY=1  install the packages, build nothing (scripts/fuzz.sh)
 #   GEO_SETUP_BROWSER=0  do not install Chromium (only the browser test of geo_infer --report needs it)
 #   GEO_TARGETS     build only these targets (space-separated, e.g. "geo_train geo_eval"; default: all,
@@ -27,6 +30,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+. scripts/compiler.sh
 installed() { dpkg-query -W -f='${Status}' "$1" 2>/dev/null | grep -q "install ok installed"; }
 
 TORCH="${GEO_TORCH:-system}"
@@ -55,6 +59,15 @@ PACKAGES=(
 # Build tools already on the PATH (a GPU image's cmake from pip, say) will do; ccache is optional
 # away from Debian's LibTorch (an offline image may have none).
 for tool in cmake g++ make; do command -v "$tool" >/dev/null || PACKAGES+=("$tool"); done
+case "${GEO_CXX:-clang}" in
+  clang | gcc) ;;
+  *) echo "geo setup: GEO_CXX must be clang or gcc, not '$GEO_CXX'" >&2; exit 1 ;;
+esac
+# Clang from Debian with Debian's LibTorch; elsewhere (a GPU image) one on the PATH, else GCC.
+if [ "${GEO_CXX:-clang}" = clang ] && ! command -v clang++ >/dev/null; then
+  if [ "$TORCH" = system ]; then PACKAGES+=(clang)
+  elif [ -n "${GEO_CXX:-}" ]; then echo "geo setup: GEO_CXX=clang, but there is no clang++ on the PATH" >&2; exit 1; fi
+fi
 command -v ccache >/dev/null || { [ "$TORCH" != system ] || PACKAGES+=(ccache); }
 # Ninja builds several targets at once (make builds the targets it is given one after another); one
 # already on the PATH (a PyTorch image's) will do.
@@ -110,10 +123,18 @@ if [ -n "$TORCH_PREFIX" ]; then CONFIGURE+=("-DCMAKE_PREFIX_PATH=$TORCH_PREFIX")
 echo "geo setup: LibTorch $TORCH${TORCH_PREFIX:+ ($TORCH_PREFIX)}, OpenCV $OPENCV, build folder $BUILD_DIR"
 if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
   [ -n "${GEO_UNITY:-}" ] || CONFIGURE+=(-DGEO_UNITY_BUILD=ON)
+  CONFIGURE+=("-DCMAKE_CXX_COMPILER=$(geo_cxx)")
   CONFIGURE+=(-G Ninja)  # a new build folder; an existing one keeps its generator
   cmake -S . -B "$BUILD_DIR" "${CONFIGURE[@]}"
 elif [ -n "${GEO_TORCH:-}${GEO_OPENCV:-}" ]; then
   cmake -S . -B "$BUILD_DIR" "${CONFIGURE[@]}" >/dev/null  # asked for explicitly: apply to an existing build
+fi
+CXX_USED="$(sed -n 's/^CMAKE_CXX_COMPILER:[A-Z]*=//p' "$BUILD_DIR/CMakeCache.txt")"
+echo "geo setup: C++ compiler $CXX_USED"
+if "$CXX_USED" --version | grep -q clang; then CXX_KIND=clang; else CXX_KIND=gcc; fi
+if [ -n "${GEO_CXX:-}" ] && [ "$GEO_CXX" != "$CXX_KIND" ]; then
+  echo "geo setup: GEO_CXX=$GEO_CXX, but $BUILD_DIR was configured with $CXX_USED: a build folder keeps its compiler (use another GEO_BUILD_DIR)" >&2
+  exit 1
 fi
 if [ "$TORCH" = system ] && ! grep -q '^GEO_WITH_PYTHON:STRING=ON$' "$BUILD_DIR/CMakeCache.txt"; then
   cmake -S . -B "$BUILD_DIR" -DGEO_WITH_PYTHON=ON >/dev/null  # a build folder made before the module existed

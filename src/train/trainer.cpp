@@ -427,7 +427,9 @@ class Run {
   std::string resume_from_;                // the checkpoint the current stage resumes from ("" = a fresh stage)
   std::vector<std::string> init_configs_;  // CheckpointContents::init_configs of this run
   int64_t skipped_ = 0;
-  bool summaries_skipped_ = false;
+#ifndef GEO_WITH_OPENCV
+  bool summaries_skipped_ = false;  // said once: image summaries need OpenCV
+#endif
 };
 
 // This process's group (a SingleProcess alone), its ranks checked to train one configuration.

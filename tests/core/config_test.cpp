@@ -152,7 +152,7 @@ TEST(Config, EmptyValuesAndNonDecimalIntegersAreRefused) {
            {"stages: [{name: s, iterations: 010}]", "written in decimal without leading zeros, got '010'"},
            {"stages: [{name: s, iterations: 0x10}]", "got '0x10'"},
            {"data: {height: 1e3}", "got '1e3'"}}) {
-    const std::string msg = error_of([&] { geo::parse_config(text + "\n", "x.yaml"); });
+    const std::string msg = error_of([&, &text = text] { geo::parse_config(text + "\n", "x.yaml"); });
     EXPECT_NE(msg.find(why), std::string::npos) << msg;
   }
   EXPECT_EQ(geo::parse_config("stages: [{name: s, iterations: 10}]\n").stages[0].iterations, 10);
@@ -169,7 +169,7 @@ TEST(Config, SizesAreBoundedWhereRead) {
            {"data: {width: 8192}", "'data.width' = 8192 (line 1)", "in 16..4096"},
            {"data: {augment: {scale_max: 1e300}}", "'data.augment.scale_max'", "must be in [1, 2]"},
            {"stages: [{name: s, learning_rate: 1e300}]", "'stages[0].learning_rate'", "must be in (0, 1]"}}) {
-    const std::string msg = error_of([&] { geo::parse_config(text + "\n", "x.yaml"); });
+    const std::string msg = error_of([&, &text = text] { geo::parse_config(text + "\n", "x.yaml"); });
     EXPECT_NE(msg.find(key), std::string::npos) << msg;
     EXPECT_NE(msg.find(why), std::string::npos) << msg;
   }
@@ -265,7 +265,7 @@ TEST(Config, OverridesApplyAndAreValidated) {
                                                      {"loss.ssim_alpha=", "empty value"},
                                                      {"loss..ssim_alpha=1", "is not a key name"}};
   for (const auto& [set, want] : bad) {
-    msg = error_of([&] { geo::parse_config("", "<s>", {set}); });
+    msg = error_of([&, &set = set] { geo::parse_config("", "<s>", {set}); });
     EXPECT_NE(msg.find(want), std::string::npos) << set << ": " << msg;
   }
   EXPECT_EQ(geo::parse_config("", "<s>", {"data.root=''"}).data.root, "");
