@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Runs one of geo's scripts on Debian 13 (trixie: LibTorch/PyTorch 2.6, GCC 14) from a Debian 12
+# Runs one of geo's scripts on Debian 13 (trixie: LibTorch/PyTorch 2.6, Clang 19, GCC 14) from a Debian 12
 # machine: makes (or reuses) a Debian 13 root with mmdebstrap from the host's own Debian mirror,
 # copies the checkout into it and runs the script there.
 #   scripts/debian13.sh scripts/test.sh            the test suite on LibTorch 2.6
@@ -39,7 +39,7 @@ if [ -f "$ROOT/.geo-root-complete" ] && [ -s "$ROOT/.geo-root-complete" ] && [ "
   exit 1
 fi
 # Debian 13 packages the root starts with; scripts/setup.sh inside adds what it needs.
-COMMON=python3-yaml,python3-numpy,python3-dev,pybind11-dev,python3-pytest,python3-onnx,libopenblas0-pthread,g++,cmake,make,ninja-build,ccache,libyaml-cpp-dev,libcli11-dev,libspdlog-dev,libgtest-dev,libgmock-dev
+COMMON=python3-yaml,python3-numpy,python3-dev,pybind11-dev,python3-pytest,python3-onnx,libopenblas0-pthread,g++,clang,cmake,make,ninja-build,ccache,libyaml-cpp-dev,libcli11-dev,libspdlog-dev,libgtest-dev,libgmock-dev
 COMPONENTS=main
 if [ "$CUDA" = 1 ]; then
   # contrib: the CUDA build of LibTorch (with its Gloo and Python packages); non-free: the CUDA

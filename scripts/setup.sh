@@ -11,8 +11,8 @@
 #                   0: one translation unit per source.
 #                   Default: 1 for a new build folder, an existing one keeps its setting.
 #   GEO_CXX         the C++ compiler of a new build folder: clang (default; installed with Debian's
-#                   LibTorch, elsewhere used where it is on the PATH, else GCC) or gcc; an existing
-#                   build folder keeps its compiler (scripts/compiler.sh says why clang).
+#                   LibTorch, elsewhere the one on the PATH, else GCC) or gcc; an existing build
+#                   folder keeps its compiler (scripts/compiler.sh says why Clang).
 #   GEO_SETUP_PACKAGES_ONLY=1  install the packages, build nothing (scripts/fuzz.sh)
 #   GEO_SETUP_BROWSER=0  do not install Chromium (only the browser test of geo_infer --report needs it)
 #   GEO_TARGETS     build only these targets (space-separated, e.g. "geo_train geo_eval"; default: all,
@@ -63,8 +63,8 @@ case "${GEO_CXX:-clang}" in
   clang | gcc) ;;
   *) echo "geo setup: GEO_CXX must be clang or gcc, not '$GEO_CXX'" >&2; exit 1 ;;
 esac
-# Clang from Debian with Debian's LibTorch; elsewhere (a GPU image) one on the PATH, else GCC.
-if [ "${GEO_CXX:-clang}" = clang ] && ! command -v clang++ >/dev/null; then
+# Clang from Debian with Debian's LibTorch; elsewhere (a GPU image) only the one on the PATH.
+if [ "$(geo_cxx_choice)" = clang ] && ! command -v clang++ >/dev/null; then
   if [ "$TORCH" = system ]; then PACKAGES+=(clang)
   elif [ -n "${GEO_CXX:-}" ]; then echo "geo setup: GEO_CXX=clang, but there is no clang++ on the PATH" >&2; exit 1; fi
 fi
