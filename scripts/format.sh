@@ -30,14 +30,15 @@ if git rev-parse --is-inside-work-tree >/dev/null 2>&1; then
 else
   mapfile -t files < <(find src apps include tests python examples -name '*.cpp' -o -name '*.h' | sort)
 fi
-differ=()
-for f in "${files[@]}"; do
-  [ -f "$f" ] || continue
-  if ! "$FORMAT" --style=file "$f" | cmp -s - "$f"; then
-    differ+=("$f")
-    [ "$CHECK" = 1 ] || "$FORMAT" --style=file -i "$f"
-  fi
-done
+# One clang-format for all files (one process per file took 40 s where starting a process is dear):
+# --dry-run names each file that would change.
+present=()
+for f in "${files[@]}"; do [ -f "$f" ] && present+=("$f"); done
+report="$("$FORMAT" --style=file --dry-run "${present[@]}" 2>&1)" ||
+  { printf '%s\n' "$report" | tail -n 20 >&2; echo "format: $FORMAT failed (above)" >&2; exit 2; }
+mapfile -t differ < <(printf '%s\n' "$report" |
+  sed -n 's/^\(.*\):[0-9]*:[0-9]*: warning: code should be clang-formatted.*/\1/p' | sort -u)
+if [ "$CHECK" = 0 ] && ((${#differ[@]})); then "$FORMAT" --style=file -i "${differ[@]}"; fi
 if [ "$CHECK" = 1 ]; then
   if ((${#differ[@]})); then
     printf 'format: %s differs from .clang-format (scripts/format.sh rewrites it)\n' "${differ[@]}" >&2
