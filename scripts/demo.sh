@@ -6,8 +6,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT="${GEO_DEMO_DIR:-out/demo}"
-echo "geo demo: about 9.5 minutes on 2 cores from a fresh machine (packages ~1.5 min, building the"
-echo "training tools ~4 min, training ~3.5 min while the evaluation tools build beside it, evaluation"
+echo "geo demo: about 8 minutes on 2 cores from a fresh machine (packages ~1.5 min, building the"
+echo "training tools ~2.5 min, training ~3.5 min while the evaluation tools build beside it, evaluation"
 echo "~0.5 min). Output: $OUT"
 # The tools only (scripts/test.sh builds the tests), with OpenCV: the demo reads and writes images,
 # also from a build folder configured without it (e.g. by GEO_OPENCV=0 scripts/test.sh).
