@@ -64,7 +64,7 @@ case "${GEO_CXX:-clang}" in
   *) echo "geo setup: GEO_CXX must be clang or gcc, not '$GEO_CXX'" >&2; exit 1 ;;
 esac
 # Clang from Debian with Debian's LibTorch; elsewhere (a GPU image) only the one on the PATH.
-if [ "$(geo_cxx_choice)" = clang ] && ! command -v clang++ >/dev/null; then
+if [ "${GEO_CXX:-clang}" = clang ] && ! command -v clang++ >/dev/null; then
   if [ "$TORCH" = system ]; then PACKAGES+=(clang)
   elif [ -n "${GEO_CXX:-}" ]; then echo "geo setup: GEO_CXX=clang, but there is no clang++ on the PATH" >&2; exit 1; fi
 fi
