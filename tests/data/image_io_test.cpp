@@ -82,7 +82,7 @@ TEST(ImageIo, BadFilesAreNamed) {
   GEO_EXPECT_THROW_WITH(read_image(dir + "/huge.png"), "huge.png", "cannot decode");
 }
 
-TEST(KittiSamples, Flow2012GroundTruthWarpHalvesTheError) {
+TEST(KittiFlowSamples, Flow2012GroundTruthWarpHalvesTheError) {
   const auto root = test::kitti_samples();
   if (root.empty()) GTEST_SKIP() << "../shared/kitti_samples not present";
   const std::string d = root + "/flow2012/training";

@@ -20,7 +20,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-TEST(Networks, GeoNetBatchNormByDefaultAndTrainableSetOncePerStage) {
+TEST(StageNetworks, GeoNetBatchNormByDefaultAndTrainableSetOncePerStage) {
   Config c = parse_config("model: {encoder_depth: 18}\n");
   Networks n = Networks::create(NetworkSpec::of(c), true);
   int bns = 0;
