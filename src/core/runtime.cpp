@@ -9,6 +9,8 @@
 #include <thread>
 
 #include <ATen/Context.h>
+#include <c10/core/CPUAllocator.h>
+#include <c10/core/impl/alloc_cpu.h>
 #include <ATen/autocast_mode.h>
 #include <spdlog/spdlog.h>
 #include <torch/cuda.h>
@@ -17,6 +19,7 @@
 #if defined(__GLIBC__)
 #include <malloc.h>
 #endif
+#include <sys/mman.h>
 #if defined(__x86_64__) || defined(__i386__)
 #include <cpuid.h>
 #endif
@@ -31,6 +34,39 @@ void keep_freed_memory() {
   mallopt(M_TRIM_THRESHOLD, -1);  // and never trimmed (-1: "disables trimming", mallopt(3))
   mallopt(M_TOP_PAD, 64 << 20);   // grow the heap in 64 MiB steps
 #endif
+}
+
+namespace {
+constexpr size_t kHugePage = size_t{2} << 20;
+
+// Blocks of 2 MiB and more start on a 2 MiB boundary and their whole 2 MiB pages are advised huge
+// (the tail stays in small pages: no memory is added); freed with free() like LibTorch's own.
+class HugePageCpuAllocator final : public c10::Allocator {
+ public:
+  c10::DataPtr allocate(size_t bytes) const override {
+    void* p = nullptr;
+    if (bytes >= kHugePage && posix_memalign(&p, kHugePage, bytes) == 0)
+      madvise(p, bytes / kHugePage * kHugePage, MADV_HUGEPAGE);
+    else p = c10::alloc_cpu(bytes);  // (and LibTorch's out-of-memory error)
+    return {p, p, &c10::free_cpu, c10::Device(c10::DeviceType::CPU)};
+  }
+  c10::DeleterFnPtr raw_deleter() const override { return &c10::free_cpu; }
+#if TORCH_VERSION_MAJOR >= 2
+  void copy_data(void* dest, const void* src, std::size_t count) const override { default_copy_data(dest, src, count); }
+#endif
+};
+}  // namespace
+
+bool use_huge_pages() {
+  const char* env = std::getenv("GEO_HUGE_PAGES");
+  if (env && std::strcmp(env, "0") == 0) return false;
+  std::ifstream mode("/sys/kernel/mm/transparent_hugepage/enabled");
+  std::string modes;
+  std::getline(mode, modes);
+  if (modes.find("[never]") != std::string::npos) return false;
+  static HugePageCpuAllocator allocator;
+  c10::SetCPUAllocator(&allocator);
+  return true;
 }
 
 }  // namespace geo

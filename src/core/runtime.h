@@ -29,6 +29,17 @@ torch::Device select_device(const std::string& name);
 // GEO_KEEP_MEMORY=0 in the environment turns this off.
 void keep_freed_memory();
 
+// Tensors of 2 MiB and more on transparent huge pages: LibTorch's CPU allocator (which also gives
+// oneDNN its memory) replaced by one that starts such blocks on a 2 MiB boundary and asks the kernel
+// for huge pages for their whole 2 MiB pages (madvise MADV_HUGEPAGE; smaller blocks as before).
+// Fresh memory then costs a page fault per 2 MiB instead of per 4 KiB: what opening a model mostly
+// is (reading the file's tensors, packing their int8 kernels for oneDNN), and on virtual machines a
+// fault can cost ~10 us. The tools call it at start-up (geo::app::run_tool); the library leaves
+// LibTorch's allocator alone. Nothing changes where the kernel gives no huge pages
+// (transparent_hugepage "never"); GEO_HUGE_PAGES=0 in the environment turns it off. Returns whether
+// it is in use.
+bool use_huge_pages();
+
 // LibTorch's intra-op threads set to every core of the machine (std::thread::hardware_concurrency):
 // what geo's tools use unless told otherwise (LibTorch's own default can be fewer: one on some
 // 2-core machines); OMP_NUM_THREADS in the environment, where set, is kept. Returns the count.

@@ -229,7 +229,11 @@ Int8Kernel take_given(std::map<std::string, torch::Tensor>& given, const std::st
   TORCH_CHECK(!bias.defined() || (bias.scalar_type() == torch::kFloat32 && bias.dim() == 1 && bias.size(0) == co &&
                                   torch::isfinite(bias).all().item<bool>()),
               "int8: kernel '", name, ".bias' must be ", co, " finite float32 values");
-  return {at::_make_per_channel_quantized_tensor(weight, scales, torch::zeros({co}, torch::kLong), 0), bias};
+  // The file's bytes as they are, viewed as qint8 (_make_per_channel_quantized_tensor would copy them).
+  auto qweight = at::_empty_per_channel_affine_quantized({0}, scales, torch::zeros({co}, torch::kLong), 0,
+                                                         weight.options().dtype(torch::kQInt8));
+  qweight.set_(weight.storage(), weight.storage_offset(), weight.sizes(), weight.strides());
+  return {qweight, bias};
 }
 
 // A prepacked kernel back as Int8Graph::kernels's tensors under `name` (quantized::conv2d_unpack
