@@ -26,7 +26,8 @@ torch::Device select_device(const std::string& name);
 // geo_bench, which times training steps; not by the tools that only predict: there
 // memory let go (an int8 model's float kernels) goes back to the system and the next layer's int8
 // kernels do not stack on it (geo_infer's peak with the paper's model in int8: 1.17 -> 0.84 GB).
-// GEO_KEEP_MEMORY=0 in the environment turns this off.
+// GEO_KEEP_MEMORY=0 in the environment turns this off. LibTorch's own CPU allocator comes back if
+// use_huge_pages replaced it (training is slower on huge-page blocks).
 void keep_freed_memory();
 
 // Tensors of 2 MiB and more on transparent huge pages: LibTorch's CPU allocator (which also gives
@@ -35,7 +36,7 @@ void keep_freed_memory();
 // Fresh memory then costs a page fault per 2 MiB instead of per 4 KiB: what opening a model mostly
 // is (reading the file's tensors, packing their int8 kernels for oneDNN), and on virtual machines a
 // fault can cost ~10 us. The tools call it at start-up (geo::app::run_tool); the library leaves
-// LibTorch's allocator alone. Nothing changes where the kernel gives no huge pages
+// LibTorch's allocator alone, and training puts it back (keep_freed_memory). Nothing changes where the kernel gives no huge pages
 // (transparent_hugepage "never"); GEO_HUGE_PAGES=0 in the environment turns it off. Returns whether
 // it is in use.
 bool use_huge_pages();

@@ -63,5 +63,15 @@ TEST(HugePages, LargeBlocksOnHugePageBoundariesAndSmallOnesAsBefore) {
   }
 }
 
+TEST(HugePages, TrainingPutsLibTorchsAllocatorBack) {
+  if (!kernel_gives_huge_pages()) GTEST_SKIP() << "transparent huge pages are off on this machine";
+  ASSERT_TRUE(use_huge_pages());
+  EXPECT_NE(c10::GetCPUAllocator(), c10::GetDefaultCPUAllocator());
+  keep_freed_memory();
+  EXPECT_EQ(c10::GetCPUAllocator(), c10::GetDefaultCPUAllocator());
+  ASSERT_TRUE(use_huge_pages());  // and again, as the tools start
+  EXPECT_NE(c10::GetCPUAllocator(), c10::GetDefaultCPUAllocator());
+}
+
 }  // namespace
 }  // namespace geo
