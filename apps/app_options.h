@@ -19,13 +19,12 @@
 namespace geo::app {
 
 // Runs a tool's work once its options are parsed: every core for LibTorch (a tool's --threads or
-// run.threads may set fewer), large tensors on huge pages, logging at info, and any exception as one error line naming what is
+// run.threads may set fewer), logging at info, and any exception as one error line naming what is
 // wrong with exit code 1 (a tool's own codes, e.g. 130 for an interrupted training, come back from
 // `body`).
 template <class Body>
 int run_tool(Body&& body) {
   use_all_cores();
-  use_huge_pages();
   try {
     setup_logging("info");
     return body();

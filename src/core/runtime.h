@@ -1,6 +1,7 @@
 // Process-wide settings every geo program applies at start-up.
 #pragma once
 
+#include <c10/core/Allocator.h>
 #include <torch/types.h>
 
 #include "core/config.h"
@@ -26,20 +27,30 @@ torch::Device select_device(const std::string& name);
 // geo_bench, which times training steps; not by the tools that only predict: there
 // memory let go (an int8 model's float kernels) goes back to the system and the next layer's int8
 // kernels do not stack on it (geo_infer's peak with the paper's model in int8: 1.17 -> 0.84 GB).
-// GEO_KEEP_MEMORY=0 in the environment turns this off. LibTorch's own CPU allocator comes back if
-// use_huge_pages replaced it (training is slower on huge-page blocks).
+// GEO_KEEP_MEMORY=0 in the environment turns this off.
 void keep_freed_memory();
 
-// Tensors of 2 MiB and more on transparent huge pages: LibTorch's CPU allocator (which also gives
-// oneDNN its memory) replaced by one that starts such blocks on a 2 MiB boundary and asks the kernel
-// for huge pages for their whole 2 MiB pages (madvise MADV_HUGEPAGE; smaller blocks as before).
-// Fresh memory then costs a page fault per 2 MiB instead of per 4 KiB: what opening a model mostly
-// is (reading the file's tensors, packing their int8 kernels for oneDNN), and on virtual machines a
-// fault can cost ~10 us. The tools call it at start-up (geo::app::run_tool); the library leaves
-// LibTorch's allocator alone, and training puts it back (keep_freed_memory). Nothing changes where the kernel gives no huge pages
-// (transparent_hugepage "never"); GEO_HUGE_PAGES=0 in the environment turns it off. Returns whether
-// it is in use.
-bool use_huge_pages();
+// While alive, tensors of 2 MiB and more on transparent huge pages: LibTorch's CPU allocator (which
+// also gives oneDNN its memory) replaced by one that starts such blocks on a 2 MiB boundary and asks
+// the kernel for huge pages for their whole 2 MiB pages (madvise MADV_HUGEPAGE; smaller blocks as
+// before; all freed with free(), like LibTorch's own). Fresh memory then costs a page fault per
+// 2 MiB instead of per 4 KiB: what opening a model mostly is (reading the file's tensors, packing
+// int8 kernels for oneDNN), and on virtual machines a fault can cost ~10 us. The tools open models
+// inside one (geo_infer, geo_export); the library leaves LibTorch's allocator alone. Not for what
+// comes after: blocks that come and go (a frame's activations, a training step's) are reused from
+// the heap either way, and huge pages there measured slower. Nothing changes where the kernel gives
+// no huge pages (transparent_hugepage "never") or with GEO_HUGE_PAGES=0 in the environment.
+class HugePages {
+ public:
+  HugePages();
+  ~HugePages();
+  HugePages(const HugePages&) = delete;
+  HugePages& operator=(const HugePages&) = delete;
+  bool on() const { return replaced_ != nullptr; }
+
+ private:
+  c10::Allocator* replaced_ = nullptr;
+};
 
 // LibTorch's intra-op threads set to every core of the machine (std::thread::hardware_concurrency):
 // what geo's tools use unless told otherwise (LibTorch's own default can be fewer: one on some

@@ -1,5 +1,5 @@
-// use_huge_pages: LibTorch's CPU allocator giving blocks of 2 MiB and more on 2 MiB boundaries (the
-// kernel's transparent huge pages), the rest as before.
+// HugePages: while alive, LibTorch's CPU allocator gives blocks of 2 MiB and more on 2 MiB
+// boundaries (the kernel's transparent huge pages), the rest as before; LibTorch's comes back after.
 #include "core/runtime.h"
 
 #include <c10/core/CPUAllocator.h>
@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <optional>
 #include <string>
 
 namespace geo {
@@ -28,14 +29,21 @@ uintptr_t address(const torch::Tensor& t) { return reinterpret_cast<uintptr_t>(t
 TEST(HugePages, OffInTheEnvironmentLeavesLibTorchsAllocator) {
   ::setenv("GEO_HUGE_PAGES", "0", 1);
   c10::Allocator* before = c10::GetCPUAllocator();
-  EXPECT_FALSE(use_huge_pages());
-  EXPECT_EQ(c10::GetCPUAllocator(), before);
+  {
+    const HugePages huge;
+    EXPECT_FALSE(huge.on());
+    EXPECT_EQ(c10::GetCPUAllocator(), before);
+  }
   ::unsetenv("GEO_HUGE_PAGES");
 }
 
 TEST(HugePages, LargeBlocksOnHugePageBoundariesAndSmallOnesAsBefore) {
   if (!kernel_gives_huge_pages()) GTEST_SKIP() << "transparent huge pages are off on this machine";
-  ASSERT_TRUE(use_huge_pages());
+  c10::Allocator* libtorch = c10::GetCPUAllocator();
+  std::optional<HugePages> huge;
+  huge.emplace();
+  ASSERT_TRUE(huge->on());
+  EXPECT_NE(c10::GetCPUAllocator(), libtorch);
   // 3 MiB of floats: on a 2 MiB boundary, holding what is written.
   auto big = torch::arange(3 * kMiB / 4, torch::kFloat32);
   EXPECT_EQ(address(big) % (2 * kMiB), 0u);
@@ -61,16 +69,18 @@ TEST(HugePages, LargeBlocksOnHugePageBoundariesAndSmallOnesAsBefore) {
     if (bytes >= (size_t{2} << 20)) EXPECT_EQ(reinterpret_cast<uintptr_t>(p) % (2 * kMiB), 0u);
     alloc->raw_deallocate(p);
   }
-}
-
-TEST(HugePages, TrainingPutsLibTorchsAllocatorBack) {
-  if (!kernel_gives_huge_pages()) GTEST_SKIP() << "transparent huge pages are off on this machine";
-  ASSERT_TRUE(use_huge_pages());
-  EXPECT_NE(c10::GetCPUAllocator(), c10::GetDefaultCPUAllocator());
-  keep_freed_memory();
-  EXPECT_EQ(c10::GetCPUAllocator(), c10::GetDefaultCPUAllocator());
-  ASSERT_TRUE(use_huge_pages());  // and again, as the tools start
-  EXPECT_NE(c10::GetCPUAllocator(), c10::GetDefaultCPUAllocator());
+  {  // one inside another: the inner changes nothing, the outer's allocator stays
+    const HugePages inner;
+    EXPECT_FALSE(inner.on());
+  }
+  EXPECT_EQ(c10::GetCPUAllocator(), alloc);
+  // Gone: LibTorch's own again; what was allocated on huge pages is freed as any block.
+  huge.reset();
+  EXPECT_EQ(c10::GetCPUAllocator(), libtorch);
+  big = torch::Tensor();
+  other = torch::Tensor();
+  auto after = torch::ones({3 * kMiB}, torch::kUInt8);
+  EXPECT_EQ(after.sum().item<int64_t>(), 3 * kMiB);
 }
 
 }  // namespace
