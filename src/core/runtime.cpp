@@ -31,19 +31,24 @@ constexpr size_t kHugePage = size_t{2} << 20;
 
 // Blocks of 2 MiB and more start on a 2 MiB boundary and their whole 2 MiB pages are advised huge
 // (the tail stays in small pages: no memory is added); freed with free() like LibTorch's own.
+c10::DataPtr huge_or_small_block(size_t bytes) {
+  void* p = nullptr;
+  if (bytes >= kHugePage && posix_memalign(&p, kHugePage, bytes) == 0)
+    madvise(p, bytes / kHugePage * kHugePage, MADV_HUGEPAGE);
+  else p = c10::alloc_cpu(bytes);  // (and LibTorch's out-of-memory error)
+  return {p, p, &c10::free_cpu, c10::Device(c10::DeviceType::CPU)};
+}
+
 class HugePageCpuAllocator final : public c10::Allocator {
  public:
-  c10::DataPtr allocate(size_t bytes) const override {
-    void* p = nullptr;
-    if (bytes >= kHugePage && posix_memalign(&p, kHugePage, bytes) == 0)
-      madvise(p, bytes / kHugePage * kHugePage, MADV_HUGEPAGE);
-    else p = c10::alloc_cpu(bytes);  // (and LibTorch's out-of-memory error)
-    return {p, p, &c10::free_cpu, c10::Device(c10::DeviceType::CPU)};
-  }
-  c10::DeleterFnPtr raw_deleter() const override { return &c10::free_cpu; }
-#if TORCH_VERSION_MAJOR >= 2
+#if TORCH_VERSION_MAJOR > 2 || (TORCH_VERSION_MAJOR == 2 && TORCH_VERSION_MINOR >= 3)
+  // (LibTorch 2.3 made allocate non-const and added copy_data.)
+  c10::DataPtr allocate(size_t bytes) override { return huge_or_small_block(bytes); }
   void copy_data(void* dest, const void* src, std::size_t count) const override { default_copy_data(dest, src, count); }
+#else
+  c10::DataPtr allocate(size_t bytes) const override { return huge_or_small_block(bytes); }
 #endif
+  c10::DeleterFnPtr raw_deleter() const override { return &c10::free_cpu; }
 };
 }  // namespace
 
