@@ -66,7 +66,9 @@ TEST(HugePages, LargeBlocksOnHugePageBoundariesAndSmallOnesAsBefore) {
     void* p = alloc->raw_allocate(bytes);
     ASSERT_NE(p, nullptr);
     std::memset(p, 1, bytes);
-    if (bytes >= (size_t{2} << 20)) EXPECT_EQ(reinterpret_cast<uintptr_t>(p) % (2 * kMiB), 0u);
+    if (bytes >= (size_t{2} << 20)) {
+      EXPECT_EQ(reinterpret_cast<uintptr_t>(p) % (2 * kMiB), 0u);
+    }
     alloc->raw_deallocate(p);
   }
   {  // one inside another: the inner changes nothing, the outer's allocator stays
