@@ -70,6 +70,16 @@ TEST(Calib, NonFiniteOrImplausibleFocalLengthsAreRejectedNamingFileAndKey) {
   test::write_text(dir + "/calib_cam_to_cam.txt",
                    "R_rect_00: 1 0 0 0 1 0 0 0 inf\nP_rect_02: 100 0 50 0 0 100 20 0 0 0 1 0\n");
   GEO_EXPECT_THROW_WITH(read_raw_calib(dir, 2), "'R_rect_00'", "non-finite");
+  // An image size that is not one (found by the fuzzer: 1e20 did not fit an integer).
+  for (const std::string size : {"1e20 375", "1242 0", "1242.5 375", "nan 375", "-1242 375"}) {
+    test::write_text(dir + "/calib_cam_to_cam.txt",
+                     rect + "P_rect_02: 100 0 50 0 0 100 20 0 0 0 1 0\nS_rect_02: " + size + "\n");
+    GEO_EXPECT_THROW_WITH(read_raw_calib(dir, 2), "calib_cam_to_cam.txt", "'S_rect_02'", "not an image size");
+  }
+  test::write_text(dir + "/calib_cam_to_cam.txt",
+                   rect + "P_rect_02: 100 0 50 0 0 100 20 0 0 0 1 0\nS_rect_02: 1.242000e+03 3.750000e+02\n");
+  EXPECT_EQ(read_raw_calib(dir, 2).width, 1242);
+  EXPECT_EQ(read_raw_calib(dir, 2).height, 375);
   // A key given twice: which one is meant cannot be told.
   test::write_text(dir + "/calib_cam_to_cam.txt",
                    rect + "P_rect_02: 100 0 50 0 0 100 20 0 0 0 1 0\nP_rect_02: 7 0 50 0 0 7 20 0 0 0 1 0\n");

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
+#include <tuple>
 
 namespace geo {
 
@@ -43,6 +44,16 @@ torch::Tensor KeyValues::rotation(const std::string& key) const {
     throw std::runtime_error(source + ": calibration entry '" + key + "' is not a rotation (R R^T differs from I by " +
                              std::to_string(off) + ", det " + std::to_string(det) + ")");
   return R;
+}
+
+std::pair<int64_t, int64_t> KeyValues::image_size(const std::string& key) const {
+  const auto& s = get(key, 2);
+  for (double v : s)
+    if (!(v >= 1 && v <= 1e5 && v == std::floor(v)))  // (NaN fails too)
+      throw std::runtime_error(source + ": calibration entry '" + key + "' is not an image size in pixels (" +
+                               std::to_string(s[0]) + " x " + std::to_string(s[1]) +
+                               "; whole numbers from 1 to 100000 expected)");
+  return {static_cast<int64_t>(s[0]), static_cast<int64_t>(s[1])};
 }
 
 KeyValues parse_key_values(const std::string& text, const std::string& source) {
@@ -93,11 +104,7 @@ RawCalib read_raw_calib(const std::string& date_dir, int camera, bool need_velo)
   calib.P_rect = cam.projection("P_rect_" + c);
   calib.R_rect = torch::eye(4, torch::kFloat64);
   calib.R_rect.index_put_({torch::indexing::Slice(0, 3), torch::indexing::Slice(0, 3)}, cam.rotation("R_rect_00"));
-  if (cam.has("S_rect_" + c)) {
-    const auto& s = cam.get("S_rect_" + c, 2);
-    calib.width = static_cast<int64_t>(s[0]);
-    calib.height = static_cast<int64_t>(s[1]);
-  }
+  if (cam.has("S_rect_" + c)) std::tie(calib.width, calib.height) = cam.image_size("S_rect_" + c);
   calib.cam_from_velo = torch::eye(4, torch::kFloat64);
   if (need_velo) {
     const auto velo = read_key_values(date_dir + "/calib_velo_to_cam.txt");

@@ -25,6 +25,9 @@ struct KeyValues {
   torch::Tensor projection(const std::string& key) const;
   // A 3x3 rotation: orthonormal within 1e-2 and of determinant +1 (a zero or scaled matrix is not).
   torch::Tensor rotation(const std::string& key) const;
+  // An image size "width height" (S_rect_0c): whole numbers of pixels in 1..100000, else an error
+  // naming file and key.
+  std::pair<int64_t, int64_t> image_size(const std::string& key) const;
 };
 
 // Parses "KEY: numbers" (or "KEY numbers") lines. Lines whose key is in `text_keys` (default:

@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <tuple>
 
 namespace geo {
 
@@ -30,11 +31,7 @@ torch::Tensor from_calib_file(const std::string& path, int64_t width, int64_t he
   int64_t cal_w = 0, cal_h = 0;
   if (kv.has("P_rect_02")) {
     K = kv.projection("P_rect_02").slice(1, 0, 3).clone();
-    if (kv.has("S_rect_02")) {
-      const auto& s = kv.get("S_rect_02", 2);
-      cal_w = std::llround(s[0]);
-      cal_h = std::llround(s[1]);
-    }
+    if (kv.has("S_rect_02")) std::tie(cal_w, cal_h) = kv.image_size("S_rect_02");
   } else if (kv.has("P2")) {
     K = kv.projection("P2").slice(1, 0, 3).clone();
   } else {
