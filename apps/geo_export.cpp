@@ -8,6 +8,7 @@
 #include <filesystem>
 
 #include "app_options.h"
+#include "open_model.h"
 #include "geo/geo.h"
 #include "core/files.h"
 #include "pipeline/checkpoint.h"
@@ -54,11 +55,7 @@ int export_model(const ExportCommand& c) {
     throw std::runtime_error("--int8 needs --calibration FRAMES (a folder or a video)");
   if (!c.int8 && !c.calibration.empty())
     throw std::runtime_error("--calibration calibrates int8: it needs --int8 (or it would be ignored)");
-  // (Opened on huge pages, as geo_infer opens models: core/runtime.h.)
-  geo::Model model = [&] {
-    const geo::HugePages while_opening;
-    return geo::Model::load(c.checkpoint);
-  }();
+  geo::Model model = geo::app::open_model(c.checkpoint);
   const auto& s = model.spec();
   geo::check_model_file_target("--out", c.out, s.source, c.force);
   geo::check_outputs({{"--out", c.out}}, {s.source, c.calibration}, true);  // the checkpoint file, not its run folder
@@ -71,10 +68,7 @@ int export_model(const ExportCommand& c) {
   // Check what was written: the same depth from both on a fixed image.
   geo::LoadOptions as_written;
   as_written.precision = c.int8 ? "int8" : "fp32";
-  const geo::Model back = [&] {
-    const geo::HugePages while_opening;
-    return geo::Model::load(c.out, as_written);
-  }();
+  const geo::Model back = geo::app::open_model(c.out, as_written);
   auto image = torch::linspace(0, 1, 3 * s.height * s.width).view({3, s.height, s.width});
   const double diff = (model.depth(image) - back.depth(image)).abs().max().item<double>();
   const double scale = model.depth(image).abs().max().item<double>();

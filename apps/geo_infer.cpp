@@ -39,6 +39,7 @@
 #include "infer/report.h"
 #include "train/refine.h"
 #include "app_options.h"
+#include "open_model.h"
 #include "geo/geo.h"
 
 namespace fs = std::filesystem;
@@ -527,10 +528,7 @@ int infer(const InferOptions& o) {
   load.int8_when_calibrated = int8 && o.calibration_frames == 0;
   load.keep_float_weights = !int8;  // geo_infer never saves the model: the float kernels go as the int8 ones come
   load.threads = o.threads;
-  geo::Model model = times.time("open the model", [&] {
-    const geo::HugePages while_opening;
-    return geo::Model::load(checkpoint, load);
-  });
+  geo::Model model = times.time("open the model", [&] { return geo::app::open_model(checkpoint, load); });
   const int64_t h = model.spec().height, w = model.spec().width;
   if (model.spec().precision == "int8") {
     spdlog::info("int8: with the calibration {} keeps (--calibration-frames N calibrates on the input instead)",

@@ -1,4 +1,4 @@
-// Process-wide settings every geo program applies at start-up.
+// Process-wide settings of geo's programs (most applied at start-up).
 #pragma once
 
 #include <c10/core/Allocator.h>
@@ -36,7 +36,7 @@ void keep_freed_memory();
 // before; all freed with free(), like LibTorch's own). Fresh memory then costs a page fault per
 // 2 MiB instead of per 4 KiB: what opening a model mostly is (reading the file's tensors, packing
 // int8 kernels for oneDNN), and on virtual machines a fault can cost ~10 us. The tools open models
-// inside one (geo_infer, geo_export); the library leaves LibTorch's allocator alone. Not for what
+// inside one (geo::app::open_model: geo_infer, geo_export); the library leaves LibTorch's allocator alone. Not for what
 // comes after: blocks that come and go (a frame's activations, a training step's) are reused from
 // the heap either way, and huge pages there measured slower. Nothing changes where the kernel gives
 // no huge pages (transparent_hugepage "never") or with GEO_HUGE_PAGES=0 in the environment.
