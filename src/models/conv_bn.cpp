@@ -38,8 +38,8 @@ torch::Tensor packed_conv(const torch::Tensor& x, const torch::Tensor& weight, c
 
 }  // namespace
 
-bool ConvBnImpl::uses_packed(const torch::Tensor& x, const torch::Tensor& packed) const {
-  if (!packed.defined() || !x.device().is_cpu() || x.scalar_type() != folded_bias_.scalar_type()) return false;
+bool ConvBnImpl::uses_packed(const torch::Tensor& x, bool packed) const {
+  if (!packed || !x.device().is_cpu() || x.scalar_type() != folded_bias_.scalar_type()) return false;
   TORCH_CHECK(!is_training(), "ConvBn: BatchNorm was folded for inference; this module cannot train");
   return true;
 }
@@ -48,15 +48,15 @@ namespace {
 constexpr const char* kReleased = "ConvBn: its float kernel was let go for int8-only inference; it runs in int8 only";
 }  // namespace
 
-void ConvBnImpl::prepack_once() {
+void ConvBnImpl::prepack_once(const torch::Tensor& x) {
   TORCH_CHECK(!released_, kReleased);
   if (!pack_pending_) return;
-  std::call_once(pack_once_, [this] {
+  std::call_once(pack_once_, [this, &x] {
     torch::NoGradGuard no_grad;
     // (float32: the kernel computed from the parameters now; bf16: kept from folding)
     const auto w32 = pending_w32_.defined() ? pending_w32_ : folded_weight();
     const auto kernel = folded_weight_.defined() ? folded_weight_ : w32;
-    prepack(kernel, w32, pending_b32_);
+    prepack(kernel, w32, pending_b32_, pad_channels(x, onednn_channel_padding(x)).sizes());
     // Packed: folded_weight() computes the plain kernel again when asked; not packed: kept for the calls.
     folded_weight_ = prepacked() ? torch::Tensor() : kernel;
     pending_w32_ = pending_b32_ = torch::Tensor();
@@ -64,11 +64,12 @@ void ConvBnImpl::prepack_once() {
 }
 
 torch::Tensor ConvBnImpl::forward(const torch::Tensor& x) {
-  prepack_once();
+  prepack_once(x);
   const auto& o = conv->options;
   const auto k = *o.kernel_size();
   const int64_t pad = onednn_channel_padding(x);
-  if (uses_packed(x, packed_weight_)) {  // (packed with the padded channels)
+  if (uses_packed(x, static_cast<bool>(packed_conv_))) return packed_conv_(pad_channels(x, pad));
+  if (uses_packed(x, packed_weight_.defined())) {  // (packed with the padded channels)
     const auto y = packed_conv(pad_channels(x, pad), packed_weight_, packed_bias_, {k[0] / 2, k[1] / 2}, *o.stride());
     return relu ? torch::relu(y) : y;
   }
@@ -83,9 +84,9 @@ torch::Tensor ConvBnImpl::forward_upsampled(const torch::Tensor& x) {
       (*o.kernel_size())[0] == 3 && (*o.kernel_size())[1] == 3 && (*o.stride())[0] == 1 && (*o.stride())[1] == 1,
       "forward_upsampled needs a 3x3 stride-1 ConvBn");
   if (x.size(2) * x.size(3) < kMinSubpixelArea) return forward(upsample2(x, UpsampleMode::kNearest));
-  prepack_once();
-  if (uses_packed(x, packed_phase_weight_)) {
-    const int64_t B = x.size(0), Co = conv->weight.size(0), h = x.size(2), w = x.size(3);
+  prepack_once(x);
+  const int64_t B = x.size(0), Co = conv->weight.size(0), h = x.size(2), w = x.size(3);
+  if (uses_packed(x, packed_phase_weight_.defined())) {
     const auto y = interleave_phases(
         packed_conv(x, packed_phase_weight_, packed_phase_bias_, {1, 1}, {1, 1}).view({B, 2, 2, Co, h + 1, w + 1}));
     return relu ? torch::relu(y) : y;
@@ -129,6 +130,7 @@ void ConvBnImpl::release_float_kernel() {
   release_float_weight(conv->weight);
   folded_weight_ = pending_w32_ = torch::Tensor();
   packed_weight_ = packed_phase_weight_ = packed_bias_ = packed_phase_bias_ = torch::Tensor();
+  packed_conv_ = PrepackedConv();
   released_ = true;
 }
 
@@ -136,22 +138,32 @@ torch::Tensor ConvBnImpl::bn_scale() const { return bn->weight / torch::sqrt(bn-
 
 torch::Tensor ConvBnImpl::scaled_kernel() const { return conv->weight * bn_scale().view({-1, 1, 1, 1}); }
 
-void ConvBnImpl::prepack(const torch::Tensor& kernel, const torch::Tensor& w32, const torch::Tensor& b32) {
+void ConvBnImpl::prepack(const torch::Tensor& kernel, const torch::Tensor& w32, const torch::Tensor& b32,
+                         torch::IntArrayRef input) {
   const auto& o = conv->options;
   const auto k = *o.kernel_size();
   const std::vector<int64_t> pad = {k[0] / 2, k[1] / 2};
+  const bool phases = upsampled && k[0] == 3 && k[1] == 3 && (*o.stride())[0] == 1 && (*o.stride())[1] == 1;
+  const auto w = pad_channels(kernel, onednn_channel_padding(kernel));  // as forward pads x
+  // float32: the convolution as oneDNN's prepacked one (ReLU fused, channels-last in and out). The
+  // phase kernels stay blocked: oneDNN's channels-last 2x2 convolutions sum in an order that depends
+  // on the number of threads, so a 1- and a 2-thread run would differ in the last bits.
+  if (kernel.scalar_type() == torch::kFloat32)
+    packed_conv_ = PrepackedConv::make(w, b32, *o.stride(), pad, input, relu);
   try {
-    const auto w = pad_channels(kernel, onednn_channel_padding(kernel));  // as forward pads x
-    packed_weight_ = at::mkldnn_reorder_conv2d_weight(w.contiguous().to_mkldnn(), pad, *o.stride(), {1, 1}, 1);
-    packed_bias_ = b32;
-    if (upsampled && k[0] == 3 && k[1] == 3 && (*o.stride())[0] == 1 && (*o.stride())[1] == 1) {
+    if (!packed_conv_) {
+      packed_weight_ = at::mkldnn_reorder_conv2d_weight(w.contiguous().to_mkldnn(), pad, *o.stride(), {1, 1}, 1);
+      packed_bias_ = b32;
+    }
+    if (phases) {
       packed_phase_weight_ = at::mkldnn_reorder_conv2d_weight(
           phase_kernels(w32).to(kernel.scalar_type()).contiguous().to_mkldnn(), {1, 1}, {1, 1}, {1, 1}, 1);
       packed_phase_bias_ = b32.repeat({4});
     }
     // A CPU without oneDNN's kernels for this type (bf16 without AVX-512) fails here, not later.
-    packed_conv(torch::zeros({1, w.size(1), k[0], k[1]}, kernel.options()), packed_weight_, packed_bias_, pad,
-                *o.stride());
+    if (!packed_conv_)
+      packed_conv(torch::zeros({1, w.size(1), k[0], k[1]}, kernel.options()), packed_weight_, packed_bias_, pad,
+                  *o.stride());
   } catch (const c10::Error&) {
     packed_weight_ = packed_phase_weight_ = packed_bias_ = packed_phase_bias_ = torch::Tensor();
   }

@@ -3,6 +3,7 @@
 #pragma once
 
 #include "models/conv.h"
+#include "models/prepacked_conv.h"
 #include "models/sync_batch_norm.h"
 
 #include <torch/torch.h>
@@ -31,9 +32,12 @@ struct ConvBnImpl : torch::nn::Module {
   // tensors are not registered: fold after loading weights and moving to the device; a folded
   // module refuses to run in training mode. `dtype`: the folded tensors' type (computed in float32).
   // On CPU, where LibTorch has oneDNN (MKL-DNN), the folded kernels (and forward_upsampled's phase
-  // kernels) are also reordered once into oneDNN's blocked layout, so a call reorders only the
-  // activations, not the weights (PyTorch's torch.utils.mkldnn; at::conv2d reorders the weights
-  // on every call). Same results up to rounding. The reorder happens at the first float call (once,
+  // kernels) are also reordered once into oneDNN's layout (at::conv2d reorders the weights on every
+  // call): in float32 as oneDNN's prepacked convolution with the ReLU fused, which reads and writes
+  // channels-last activations as they lie (models/prepacked_conv.h; a network's layers then pass
+  // channels-last tensors on, and its outputs are made dense again); in bf16, and forward_upsampled's
+  // phase kernels, as blocked kernels (PyTorch's torch.utils.mkldnn) with the activations reordered
+  // per call. Same results up to rounding. The reorder happens at the first float call (once,
   // whichever thread makes it), not here: a model that runs in int8 never pays it (40% of opening
   // the paper's model). A prepacked module keeps only the packed kernel
   // (the plain folded one is computed again where a call needs it): a loaded model holds its
@@ -41,7 +45,9 @@ struct ConvBnImpl : torch::nn::Module {
   // folded kernel is held before the packing either (an int8 model never makes a float one).
   void fold_batchnorm(torch::Dtype dtype = torch::kFloat32);
   bool folded() const { return folded_bias_.defined(); }
-  bool prepacked() const { return packed_weight_.defined(); }  // (after the first float call)
+  bool prepacked() const {
+    return packed_weight_.defined() || static_cast<bool>(packed_conv_);
+  }  // (after the first float call)
   // The folded kernel and bias (undefined before fold_batchnorm): what the int8 path quantizes.
   torch::Tensor folded_weight() const;
   // BatchNorm's per-channel factor γ/√(σ²+ε): the folded kernel is the conv's weight times it.
@@ -65,14 +71,19 @@ struct ConvBnImpl : torch::nn::Module {
   torch::Tensor scaled_kernel() const;
   // The folded kernel (in the folded type; w32 the same in float32) and the float32 bias -> the
   // oneDNN-blocked ones (none where oneDNN cannot run them).
-  void prepack(const torch::Tensor& kernel, const torch::Tensor& w32, const torch::Tensor& b32);
-  // The oneDNN kernels, made at the first call after folding (pack_once_).
-  void prepack_once();
-  // `packed` is defined and applies to x (a CPU tensor of the folded type); a training module throws.
-  bool uses_packed(const torch::Tensor& x, const torch::Tensor& packed) const;
+  // `input`: the sizes of the first call's (channel-padded) input, which oneDNN picks the layout for.
+  void prepack(const torch::Tensor& kernel, const torch::Tensor& w32, const torch::Tensor& b32,
+               torch::IntArrayRef input);
+  // The oneDNN kernels, made at the first call after folding (pack_once_), x that call's input.
+  void prepack_once(const torch::Tensor& x);
+  // `packed` applies to x (a CPU tensor of the folded type); a training module throws.
+  bool uses_packed(const torch::Tensor& x, bool packed) const;
   torch::Tensor folded_weight_, folded_bias_;
   // oneDNN-blocked kernels (CPU, folded): the conv's, and forward_upsampled's four 2x2 phase kernels.
   torch::Tensor packed_weight_, packed_phase_weight_, packed_bias_, packed_phase_bias_;
+  // float32 instead of packed_weight_ (models/prepacked_conv.h): oneDNN's prepacked convolution, the
+  // ReLU fused, reading and writing channels-last activations as they lie.
+  PrepackedConv packed_conv_;
   // Folded and not yet packed: the float32 kernel (bf16 folding only; float32 computes it from the
   // parameters) and bias the packing starts from.
   torch::Tensor pending_w32_, pending_b32_;

@@ -117,7 +117,8 @@ std::vector<torch::Tensor> encoder_decoder_graph(EncoderDecoderImpl& net, Ops& o
     if (!net.refine.empty()) y = ops.fr(*net.refine[k], y);
     if (k >= 2) preds.push_back(net.head(ops.pred(*net.pred[k - 2], y)));
   }
-  return {preds[3], preds[2], preds[1], preds[0]};
+  // In the dense layout whatever the layers computed in (prepacked float convolutions: channels-last).
+  return {preds[3].contiguous(), preds[2].contiguous(), preds[1].contiguous(), preds[0].contiguous()};
 }
 
 // The PoseNet's convolutions (PoseNetImpl::convs) on the normalised snippet x: the features its

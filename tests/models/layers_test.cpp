@@ -11,9 +11,11 @@
 #include "core/state_io.h"
 #include "models/conv.h"
 #include "models/depth_net.h"
+#include "models/flow_net.h"
 #include "models/fr.h"
 #include "models/conv_bn.h"
 #include "models/layers.h"
+#include "models/prepacked_conv.h"
 #include "models/sync_batch_norm.h"
 #include "models/upsample_conv.h"
 
@@ -150,11 +152,58 @@ TEST(Layers, FoldedDepthNetMatchesTheUnfoldedOne) {
   o.encoder_depth = 18;
   DepthNet net(o);
   net->eval();
-  const auto x = torch::rand({1, 3, 64, 96});
+  const auto x = torch::rand({1, 3, 64, 208});
   torch::NoGradGuard no_grad;
-  const auto ref = net(x).disp[0].clone();
+  const auto ref = net(x).disp;
   fold_batchnorm(*net);
-  EXPECT_LT((net(x).disp[0] - ref).abs().max().item<double>(), 1e-4);
+  const auto folded = net(x).disp;  // (float32 with oneDNN: prepacked convolutions, channels-last inside)
+  const int threads = at::get_num_threads();
+  at::set_num_threads(threads == 1 ? 2 : 1);
+  const auto other_threads = net(x).disp;  // the same to the bit: geo_eval and Python agree
+  at::set_num_threads(threads);
+  ASSERT_EQ(folded.size(), ref.size());
+  for (size_t s = 0; s < ref.size(); ++s) {
+    EXPECT_LT((folded[s] - ref[s]).abs().max().item<double>(), 1e-4) << "scale " << s;
+    EXPECT_TRUE(folded[s].is_contiguous()) << "scale " << s;  // the dense layout whatever ran inside
+    EXPECT_TRUE(torch::equal(other_threads[s], folded[s])) << "scale " << s;
+  }
+  FlowNetOptions fo;  // two output channels: channels-last would show in the strides
+  fo.backbone = o;
+  FlowNet flow(fo);
+  flow->eval();
+  const auto in = torch::rand({1, 12, 64, 96});
+  const auto flow_ref = flow(in).flow;
+  fold_batchnorm(*flow);
+  const auto flow_folded = flow(in).flow;
+  for (size_t s = 0; s < flow_ref.size(); ++s) {
+    EXPECT_LT((flow_folded[s] - flow_ref[s]).abs().max().item<double>(), 1e-4) << "scale " << s;
+    EXPECT_TRUE(flow_folded[s].is_contiguous()) << "scale " << s;
+  }
+}
+
+// oneDNN's prepacked convolution is the convolution, its ReLU fused, and leaves channels-last
+// activations; inputs of either layout and of sizes it was not laid out for give the same.
+TEST(Layers, PrepackedConvIsTheConvolutionWithItsReluInChannelsLastOrder) {
+  torch::manual_seed(6);
+  const auto w = torch::randn({8, 5, 3, 3}), b = torch::randn({8});
+  const auto x = torch::randn({2, 5, 9, 11});
+  const auto other = torch::randn({1, 5, 16, 7}).contiguous(at::MemoryFormat::ChannelsLast);
+  for (const bool relu : {false, true}) {
+    const auto c = PrepackedConv::make(w, b, {2, 2}, {1, 1}, x.sizes(), relu);
+    ASSERT_EQ(static_cast<bool>(c), at::hasMKLDNN());
+    if (!c) continue;
+    for (const auto& in : {x, other}) {
+      auto ref = torch::conv2d(in, w, b, {2, 2}, {1, 1});
+      if (relu) ref = torch::relu(ref);
+      const auto y = c(in);
+      ASSERT_EQ(y.sizes(), ref.sizes());
+      EXPECT_TRUE(y.is_contiguous(at::MemoryFormat::ChannelsLast));
+      EXPECT_LT((y - ref).abs().max().item<double>(), 1e-5) << "relu " << relu << ", input " << in.sizes();
+    }
+    EXPECT_EQ(c(x).lt(0).any().item<bool>(), !relu);
+  }
+  EXPECT_FALSE(PrepackedConv::make(w.to(torch::kBFloat16), b, {1, 1}, {1, 1}, x.sizes(), true));  // float32 only
+  EXPECT_THROW(PrepackedConv()(x), c10::Error);
 }
 
 // geo::Conv2d draws the initial weights torch::nn::Conv2d draws, from the same random numbers;
