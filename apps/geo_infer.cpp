@@ -566,12 +566,15 @@ int infer(const InferOptions& o) {
         "this model's PoseNet takes {}-frame snippets: geo_infer writes flow and trajectory.txt for "
         "3-frame models only; depth is written for every frame",
         model.spec().seq_length);
+  geo::DeferredSync to_disk;  // the outputs reach the disk together, not file by file (core/files.h)
   std::string written = write_outputs(o, model, frames, K, scales, truth, times);
+  times.time("flush to disk", [&] { to_disk.commit(); });
   const std::string table =
       times.table(static_cast<int64_t>(frames.size()), "frame",
                   std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
   if (o.report) {
     write_report(o, model, frames, K, {height, width}, truth.defined(), table);
+    to_disk.commit();
     written += ", report.html";
   }
   spdlog::info("done: {}/{{{}}}", o.output, written);

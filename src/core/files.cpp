@@ -12,6 +12,8 @@
 #include <ctime>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
+#include <set>
 #include <stdexcept>
 
 namespace geo {
@@ -27,6 +29,35 @@ void sync_dir(const std::string& dir) {
   if (fd < 0) return;  // not fatal: some file systems do not open folders
   ::fsync(fd);
   ::close(fd);
+}
+
+// DeferredSync's state: how many are alive, and the folders written into since the last flush.
+std::mutex g_deferred_mutex;
+int g_deferred = 0;
+std::set<std::string> g_deferred_folders;
+
+// True (and `dir` remembered for the flush) while a DeferredSync is alive.
+bool defer_sync(const std::string& dir) {
+  std::lock_guard<std::mutex> lock(g_deferred_mutex);
+  if (g_deferred == 0) return false;
+  g_deferred_folders.insert(dir.empty() ? "." : dir);
+  return true;
+}
+
+// One syncfs per file system among `folders`; "" or the first folder that failed with its error.
+std::string flush_file_systems(const std::set<std::string>& folders) {
+  std::set<dev_t> done;
+  for (const auto& dir : folders) {
+    struct stat st {};
+    if (::stat(dir.c_str(), &st) != 0 || !done.insert(st.st_dev).second) continue;  // (gone: nothing to keep)
+    const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (fd < 0) continue;  // not fatal: some file systems do not open folders
+    const int rc = ::syncfs(fd);
+    const std::string error = rc != 0 ? os_error() : "";
+    ::close(fd);
+    if (rc != 0) return dir + ": " + error;
+  }
+  return "";
 }
 
 // Streams `produce` into an open descriptor; returns the first OS error ("" when none).
@@ -130,14 +161,40 @@ void write_file_durable(const std::string& requested, const std::function<void(c
     ::unlink(tmp.c_str());
     throw;
   }
-  if (error.empty() && ::fsync(fd) != 0) error = os_error();
+  const std::string folder = fs::path(path).parent_path().string();
+  const bool deferred = defer_sync(folder);
+  if (error.empty() && !deferred && ::fsync(fd) != 0) error = os_error();
   if (::close(fd) != 0 && error.empty()) error = os_error();
   if (error.empty() && ::rename(tmp.c_str(), path.c_str()) != 0) error = os_error() + " (renaming " + tmp + ")";
   if (!error.empty()) {
     ::unlink(tmp.c_str());
     throw std::runtime_error("cannot write " + path + ": " + error + "; the file that stood there is unchanged");
   }
-  sync_dir(fs::path(path).parent_path().string());
+  if (!deferred) sync_dir(folder);
+}
+
+DeferredSync::DeferredSync() {
+  std::lock_guard<std::mutex> lock(g_deferred_mutex);
+  ++g_deferred;
+}
+
+void DeferredSync::commit() {
+  std::set<std::string> folders;
+  {
+    std::lock_guard<std::mutex> lock(g_deferred_mutex);
+    folders.swap(g_deferred_folders);
+  }
+  const auto error = flush_file_systems(folders);
+  if (!error.empty()) throw std::runtime_error("cannot flush the files written to disk: " + error);
+}
+
+DeferredSync::~DeferredSync() {
+  std::set<std::string> folders;
+  {
+    std::lock_guard<std::mutex> lock(g_deferred_mutex);
+    if (--g_deferred == 0) folders.swap(g_deferred_folders);
+  }
+  flush_file_systems(folders);  // (a destructor throws nothing: commit() reports errors)
 }
 
 void write_file_atomic(const std::string& path, const std::string& content) {

@@ -31,6 +31,39 @@ TEST(Files, AtomicWriteReplacesAndAFullDiskLeavesTheOldFile) {
   GEO_EXPECT_THROW_WITH(write_file_atomic(dir + "/missing/x.txt", "x"), dir + "/missing/x.txt", "No such file");
 }
 
+// Under DeferredSync files are still replaced atomically and a failed write still leaves the old
+// file; commit() flushes (folders written into and removed since are passed over), and nested ones
+// and writes after the last one ends work as before.
+TEST(Files, DeferredSyncStillReplacesAtomicallyAndCommits) {
+  const auto dir = test::fresh_dir("files_deferred");
+  const std::string path = dir + "/0000-depth.png";
+  {
+    DeferredSync outer;
+    write_file_atomic(path, "first");
+    {
+      DeferredSync inner;
+      write_file_atomic(path, "second");
+      std::filesystem::create_directories(dir + "/gone");
+      write_file_atomic(dir + "/gone/x.txt", "x");
+      std::filesystem::remove_all(dir + "/gone");
+    }
+    EXPECT_EQ(test::read_file(path), "second");
+    const std::string tmp = path + ".tmp." + std::to_string(::getpid());
+    ASSERT_EQ(::symlink("/dev/full", tmp.c_str()), 0);
+    GEO_EXPECT_THROW_WITH(write_file_atomic(path, std::string(1 << 16, 'x')), path, "No space left on device",
+                          "unchanged");
+    EXPECT_EQ(test::read_file(path), "second");
+    EXPECT_FALSE(std::filesystem::exists(std::filesystem::symlink_status(tmp)));
+    EXPECT_NO_THROW(outer.commit());
+    write_file_atomic(path, "third");
+    EXPECT_NO_THROW(outer.commit());
+  }
+  EXPECT_EQ(test::read_file(path), "third");
+  write_file_atomic(path, "fourth");  // durable file by file again
+  EXPECT_EQ(test::read_file(path), "fourth");
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir), std::filesystem::directory_iterator()), 1);
+}
+
 // What is not a regular file is never replaced by one: a symbolic link is followed (its target is
 // replaced, the link stays), a FIFO or a device is written into (and its errors reported), the
 // process's own descriptors (/dev/fd/N) are written into, a folder is refused.
