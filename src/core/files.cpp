@@ -15,6 +15,7 @@
 #include <mutex>
 #include <set>
 #include <stdexcept>
+#include <utility>
 
 namespace geo {
 namespace fs = std::filesystem;
@@ -173,28 +174,31 @@ void write_file_durable(const std::string& requested, const std::function<void(c
   if (!deferred) sync_dir(folder);
 }
 
+namespace {
+// The folders written into since the last flush, taken for flushing.
+std::set<std::string> take_deferred_folders() {
+  std::lock_guard<std::mutex> lock(g_deferred_mutex);
+  return std::exchange(g_deferred_folders, {});
+}
+}  // namespace
+
 DeferredSync::DeferredSync() {
   std::lock_guard<std::mutex> lock(g_deferred_mutex);
   ++g_deferred;
 }
 
 void DeferredSync::commit() {
-  std::set<std::string> folders;
-  {
-    std::lock_guard<std::mutex> lock(g_deferred_mutex);
-    folders.swap(g_deferred_folders);
-  }
-  const auto error = flush_file_systems(folders);
+  const auto error = flush_file_systems(take_deferred_folders());
   if (!error.empty()) throw std::runtime_error("cannot flush the files written to disk: " + error);
 }
 
 DeferredSync::~DeferredSync() {
-  std::set<std::string> folders;
+  bool last = false;
   {
     std::lock_guard<std::mutex> lock(g_deferred_mutex);
-    if (--g_deferred == 0) folders.swap(g_deferred_folders);
+    last = --g_deferred == 0;
   }
-  flush_file_systems(folders);  // (a destructor throws nothing: commit() reports errors)
+  if (last) flush_file_systems(take_deferred_folders());  // (a destructor throws nothing: commit() reports errors)
 }
 
 void write_file_atomic(const std::string& path, const std::string& content) {

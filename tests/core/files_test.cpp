@@ -15,19 +15,24 @@
 namespace geo {
 namespace {
 
+// A write of `path` on a full disk (this process's temporary file a link to /dev/full: every write
+// fails with ENOSPC) names the path and the error, leaves `content` where it was and cleans up.
+void expect_full_disk_leaves(const std::string& path, const std::string& content) {
+  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
+  ASSERT_EQ(::symlink("/dev/full", tmp.c_str()), 0);
+  GEO_EXPECT_THROW_WITH(write_file_atomic(path, std::string(1 << 16, 'x')), path, "No space left on device",
+                        "unchanged");
+  EXPECT_EQ(test::read_file(path), content);
+  EXPECT_FALSE(std::filesystem::exists(std::filesystem::symlink_status(tmp)));  // cleaned up
+}
+
 TEST(Files, AtomicWriteReplacesAndAFullDiskLeavesTheOldFile) {
   const auto dir = test::fresh_dir("files");
   const std::string path = dir + "/result.json";
   write_file_atomic(path, "first");
   write_file_atomic(path, "second");
   EXPECT_EQ(test::read_file(path), "second");
-  // The temporary file of this process is a link to /dev/full: every write fails with ENOSPC.
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
-  ASSERT_EQ(::symlink("/dev/full", tmp.c_str()), 0);
-  GEO_EXPECT_THROW_WITH(write_file_atomic(path, std::string(1 << 16, 'x')), path, "No space left on device",
-                        "unchanged");
-  EXPECT_EQ(test::read_file(path), "second");
-  EXPECT_FALSE(std::filesystem::exists(std::filesystem::symlink_status(tmp)));  // cleaned up
+  expect_full_disk_leaves(path, "second");
   GEO_EXPECT_THROW_WITH(write_file_atomic(dir + "/missing/x.txt", "x"), dir + "/missing/x.txt", "No such file");
 }
 
@@ -48,12 +53,7 @@ TEST(Files, DeferredSyncStillReplacesAtomicallyAndCommits) {
       std::filesystem::remove_all(dir + "/gone");
     }
     EXPECT_EQ(test::read_file(path), "second");
-    const std::string tmp = path + ".tmp." + std::to_string(::getpid());
-    ASSERT_EQ(::symlink("/dev/full", tmp.c_str()), 0);
-    GEO_EXPECT_THROW_WITH(write_file_atomic(path, std::string(1 << 16, 'x')), path, "No space left on device",
-                          "unchanged");
-    EXPECT_EQ(test::read_file(path), "second");
-    EXPECT_FALSE(std::filesystem::exists(std::filesystem::symlink_status(tmp)));
+    expect_full_disk_leaves(path, "second");
     EXPECT_NO_THROW(outer.commit());
     write_file_atomic(path, "third");
     EXPECT_NO_THROW(outer.commit());
