@@ -34,10 +34,10 @@ FlowOutput FlowNetImpl::forward(const torch::Tensor& input) {
   FlowOutput out;
   for (auto f : net(input.to(compute_dtype))) {
     f = f.to(torch::kFloat32);
-    // Normalised flow -> pixels of its scale: u * W_s, v * H_s (GeoNet).
-    auto factor =
-        torch::tensor({static_cast<double>(f.size(3)), static_cast<double>(f.size(2))}, f.options()).view({1, 2, 1, 1});
-    out.flow.push_back(f * factor);
+    // Normalised flow -> pixels of its scale: u * W_s, v * H_s (GeoNet). Scalar products, not a
+    // factor tensor made from host values: that would be a host-to-device copy (a wait) per scale.
+    out.flow.push_back(torch::cat(
+        {f.narrow(1, 0, 1) * static_cast<double>(f.size(3)), f.narrow(1, 1, 1) * static_cast<double>(f.size(2))}, 1));
   }
   return out;
 }

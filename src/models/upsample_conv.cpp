@@ -2,6 +2,9 @@
 
 #include <torch/autograd.h>
 
+#include <mutex>
+#include <vector>
+
 #include "models/conv.h"
 
 namespace geo {
@@ -10,8 +13,16 @@ namespace {
 
 // [16, 9]: row (a, b, u, v) = phase (a, b), tap (u, v) of the 2x2 phase kernel; column (k, l) = tap
 // of the 3x3 kernel. Along one dim, phase 0 has taps (w0, w1 + w2), phase 1 (w0 + w1, w2).
+// Made once per device and type: on a GPU a copy from the host per call would wait for the
+// device, and cannot be part of a CUDA graph (core/cuda_graph.h).
 torch::Tensor phase_matrix(const torch::TensorOptions& options) {
+  static std::mutex mutex;
+  static std::vector<torch::Tensor> made;
+  const std::lock_guard<std::mutex> lock(mutex);
+  for (const auto& m : made)
+    if (m.device() == options.device() && m.dtype() == options.dtype()) return m;
   static const float P[2][2][3] = {{{1, 0, 0}, {0, 1, 1}}, {{1, 1, 0}, {0, 0, 1}}};
+  const c10::InferenceMode normal_tensor(false);  // usable in training too, whoever asks first
   auto m = torch::zeros({16, 9}, torch::kFloat32);
   auto acc = m.accessor<float, 2>();
   for (int a = 0; a < 2; ++a)
@@ -20,7 +31,8 @@ torch::Tensor phase_matrix(const torch::TensorOptions& options) {
         for (int v = 0; v < 2; ++v)
           for (int k = 0; k < 3; ++k)
             for (int l = 0; l < 3; ++l) acc[((a * 2 + b) * 2 + u) * 2 + v][k * 3 + l] = P[a][u][k] * P[b][v][l];
-  return m.to(options);
+  made.push_back(m.to(options));
+  return made.back();
 }
 
 // y [B,2,2,Co,h+1,w+1] (phase (a, b) of output pixel (2i+a, 2j+b) at y[:, a, b, :, i+a, j+b])
