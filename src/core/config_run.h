@@ -57,6 +57,11 @@ struct RunConfig {
   // CUDA: cuDNN's deterministic algorithms and no autotuning (run to run the same up to the atomic
   // additions of some backward kernels, e.g. grid_sample's; slower). No effect on CPU.
   bool deterministic = false;
+  // CUDA: each training step after the first two replays one CUDA graph of the whole update
+  // (forward, losses, backward, clipping, Adam) instead of launching its kernels one by one; off:
+  // the eager step (host-side checks between the kernels; for debugging). No effect on CPU and in
+  // multi-process training.
+  bool cuda_graphs = true;
   DistributedConfig distributed;
 
   template <class V>
@@ -68,6 +73,7 @@ struct RunConfig {
     v("threads", threads);
     v("precision", precision);
     v("deterministic", deterministic);
+    v("cuda_graphs", cuda_graphs);
     v("distributed", distributed);
   }
   void validate(Checker& c) const;

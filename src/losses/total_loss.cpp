@@ -232,8 +232,8 @@ LossTerms total_loss(const RigidTerms& rigid, const FlowTerms* flow, const LossW
   return t;
 }
 
-std::vector<std::pair<std::string, double>> LossTerms::values() const {
-  std::vector<const char*> names;
+std::pair<std::vector<std::string>, torch::Tensor> LossTerms::stacked() const {
+  std::vector<std::string> names;
   std::vector<torch::Tensor> scalars;
   for (const auto& [name, v] : {std::pair<const char*, const torch::Tensor&>{"rigid", rigid},
                                 {"flow", flow},
@@ -245,12 +245,18 @@ std::vector<std::pair<std::string, double>> LossTerms::values() const {
                                 {"automasked", automasked},
                                 {"total", total}})
     if (v.defined()) {
-      names.push_back(name);
+      names.emplace_back(name);
       scalars.push_back(v.detach().reshape({}).to(torch::kFloat64));
     }
+  if (scalars.empty()) return {names, {}};
+  return {names, torch::stack(scalars)};
+}
+
+std::vector<std::pair<std::string, double>> LossTerms::values() const {
+  const auto [names, device] = stacked();
   std::vector<std::pair<std::string, double>> out;
-  if (scalars.empty()) return out;
-  const auto host = torch::stack(scalars).cpu();  // one device-to-host copy
+  if (names.empty()) return out;
+  const auto host = device.cpu();  // one device-to-host copy
   for (size_t i = 0; i < names.size(); ++i) out.emplace_back(names[i], host[static_cast<int64_t>(i)].item<double>());
   return out;
 }

@@ -73,8 +73,11 @@ struct LossTerms {
   torch::Tensor automasked;  // not a loss: RigidTerms::automasked, reported beside the terms
 
   // (name, value) of every defined term, the auto-masked share when defined, and the total last, for
-  // logging (one device-to-host copy).
+  // logging (one device-to-host copy of stacked()).
   std::vector<std::pair<std::string, double>> values() const;
+  // The same on the device, without reading it: their names, and the values as one float64 vector
+  // (undefined when no term is defined).
+  std::pair<std::vector<std::string>, torch::Tensor> stacked() const;
 };
 
 // Eq. 16. `flow` may be null (stages that do not train flow): flow terms are then left undefined.

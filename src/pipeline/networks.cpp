@@ -238,4 +238,21 @@ PairPrediction predict_pair(Networks& nets, const torch::Tensor& tgt, const torc
   return p;
 }
 
+GraphedPairPredictor::GraphedPairPredictor(Networks& nets, const torch::Device& device)
+    : graph_(std::make_unique<CudaGraphCall>(
+          [&nets](const std::vector<torch::Tensor>& in) {
+            const PairPrediction p = predict_pair(nets, in[0], in[1], in[2]);
+            return std::vector<torch::Tensor>{p.disp, p.src_from_tgt, p.rigid_flow, p.flow, p.K};
+          },
+          device)) {}
+
+GraphedPairPredictor::~GraphedPairPredictor() = default;
+
+PairPrediction GraphedPairPredictor::operator()(const torch::Tensor& tgt, const torch::Tensor& src,
+                                                const torch::Tensor& K) {
+  TORCH_CHECK(K.defined(), "GraphedPairPredictor: give the camera");
+  const auto out = (*graph_)({tgt, src, K});
+  return PairPrediction{out[0], out[1], out[2], out[3], out[4]};
+}
+
 }  // namespace geo

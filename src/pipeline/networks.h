@@ -5,10 +5,12 @@
 #pragma once
 
 #include "core/config.h"
+#include "core/cuda_graph.h"
 #include "models/depth_net.h"
 #include "models/flow_net.h"
 #include "models/pose_net.h"
 
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -107,5 +109,18 @@ struct PairPrediction {
 // repeating tgt before it.
 PairPrediction predict_pair(Networks& nets, const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& K,
                             const torch::Tensor& prev = {});
+
+// predict_pair (with a given camera) as one CUDA graph (core/cuda_graph.h): its first two calls
+// run eagerly, the third captures it, later calls of the same shapes replay it. What it returns is
+// overwritten by the next call. Throws where this build has no CUDA.
+class GraphedPairPredictor {
+ public:
+  GraphedPairPredictor(Networks& nets, const torch::Device& device);
+  ~GraphedPairPredictor();
+  PairPrediction operator()(const torch::Tensor& tgt, const torch::Tensor& src, const torch::Tensor& K);
+
+ private:
+  std::unique_ptr<CudaGraphCall> graph_;
+};
 
 }  // namespace geo

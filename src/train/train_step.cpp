@@ -1,9 +1,17 @@
 #include "train/train_step.h"
 
+#include <torch/version.h>
+
 #include <cmath>
 #include <map>
 #include <sstream>
 #include <type_traits>
+
+// LibTorch's fused Adam with a tensor learning rate, device step counts and found_inf, on CPU and
+// CUDA: 2.4 and later.
+#if TORCH_VERSION_MAJOR > 2 || (TORCH_VERSION_MAJOR == 2 && TORCH_VERSION_MINOR >= 4)
+#define GEO_FUSED_ADAM 1
+#endif
 
 namespace geo {
 
@@ -132,13 +140,52 @@ TrainStep::TrainStep(Networks& nets, const Config& config, const StageConfig& st
   adam_ = make_adam(params_, stage_.learning_rate, config_.optimizer);
 }
 
+TrainStep::~TrainStep() = default;
+
 void TrainStep::set_gradient_averager(GradientAverager* averager, bool overlap) {
   averager_ = averager;
   overlap_ = averager && overlap;
   if (overlap_) averager_->attach(params_);
 }
 
+bool TrainStep::device_checks_available() {
+#ifdef GEO_FUSED_ADAM
+  return true;
+#else
+  return false;
+#endif
+}
+
+TrainStep::Mode TrainStep::mode() const {
+  if (mode_) return *mode_;
+  const bool cuda = !params_.empty() && params_.front().is_cuda();
+  if (cuda && config_.run.cuda_graphs && !averager_ && device_checks_available() && CudaGraphCall::available())
+    return Mode::kGraphed;
+  return Mode::kEager;
+}
+
+void TrainStep::set_mode(Mode mode) {
+  if (device_updates_started_)
+    throw std::logic_error("TrainStep::set_mode: the step has run with device checks already; its mode stays");
+  if (mode != Mode::kEager) {
+    if (!device_checks_available())
+      throw std::runtime_error(std::string("the training step with device-side checks needs LibTorch 2.4 or later "
+                                           "(its fused Adam); this is ") +
+                               TORCH_VERSION + ": run.cuda_graphs does nothing here");
+    if (averager_) throw std::runtime_error("multi-process training runs the eager step (run.cuda_graphs is ignored)");
+  }
+  if (mode == Mode::kGraphed && !(CudaGraphCall::available() && !params_.empty() && params_.front().is_cuda()))
+    throw std::runtime_error("CUDA graphs need a CUDA build of geo and the networks on a CUDA device");
+  mode_ = mode;
+}
+
 StepResult TrainStep::run(const torch::Tensor& tgt, const torch::Tensor& srcs, const torch::Tensor& K, double lr) {
+  if (!mode_) mode_ = mode();
+  return *mode_ == Mode::kEager ? run_eager(tgt, srcs, K, lr) : run_device_checks(tgt, srcs, K, lr);
+}
+
+StepResult TrainStep::run_eager(const torch::Tensor& tgt, const torch::Tensor& srcs, const torch::Tensor& K,
+                                double lr) {
   for (auto& group : adam_->param_groups()) static_cast<torch::optim::AdamOptions&>(group.options()).lr(lr);
   adam_->zero_grad();
   StepResult r;
@@ -180,4 +227,103 @@ StepResult TrainStep::run(const torch::Tensor& tgt, const torch::Tensor& srcs, c
   return r;
 }
 
+StepResult TrainStep::run_device_checks(const torch::Tensor& tgt, const torch::Tensor& srcs, const torch::Tensor& K,
+                                        double lr) {
+  // A fill on the device, not a copy from the host: a graph input like the batch.
+  const std::vector<torch::Tensor> in{tgt, srcs, K, torch::full({}, lr, tgt.options().dtype(torch::kFloat32))};
+  std::vector<torch::Tensor> out;
+  bool replayed = false;
+  if (*mode_ == Mode::kGraphed) {
+    if (!graph_)
+      graph_ = std::make_unique<CudaGraphCall>([this](const std::vector<torch::Tensor>& x) { return device_update(x); },
+                                               tgt.device(), 2);
+    capturing_ = graph_->next_call_captures();
+    out = (*graph_)(in);
+    capturing_ = false;
+    replayed = graph_->replayed();
+    if (replayed && !graph_out_.losses.total.defined()) graph_out_ = device_out_;  // the capture's maps
+  } else {
+    out = device_update(in);
+  }
+  device_updates_started_ = true;
+  const auto host = out.at(0).cpu();  // the step's one read, after the update
+  const auto h = host.accessor<double, 1>();
+  const int64_t n = static_cast<int64_t>(loss_names_.size());
+  StepResult r;
+  for (int64_t i = 0; i < n; ++i) r.losses.emplace_back(loss_names_[static_cast<size_t>(i)], h[i]);
+  r.finite = h[n + 1] == 0;
+  r.grad_norm = r.finite ? h[n] : 0.0;
+  if (host.size(0) == n + 6) r.camera = {h[n + 2], h[n + 3], h[n + 4], h[n + 5]};
+  if (r.finite)  // the device counts advanced with the update; the checkpointed counts follow
+    for (auto* st : device_states_) st->step(st->step() + 1);
+  r.out = replayed ? graph_out_ : device_out_;
+  return r;
+}
+
+std::vector<torch::Tensor> TrainStep::device_update(const std::vector<torch::Tensor>& in) {
+#ifdef GEO_FUSED_ADAM
+  const torch::Tensor &tgt = in.at(0), &srcs = in.at(1), &K = in.at(2), &lr = in.at(3);
+  // Gradients are assigned, not accumulated: under capture they are the graph's own tensors.
+  for (auto& p : params_) p.mutable_grad() = torch::Tensor();
+  StepOutput out = compute_losses(nets_, tgt, srcs, K, stage_, config_, teacher_);
+  out.losses.total.backward();
+  TORCH_CHECK(adam_->param_groups().size() == 1, "the device-checked step takes one Adam parameter group");
+  auto& group = adam_->param_groups().front();
+  const auto& o = static_cast<const torch::optim::AdamOptions&>(group.options());
+  TORCH_CHECK(!o.amsgrad(), "the device-checked step has no amsgrad");
+  using Key = typename std::decay_t<decltype(adam_->state())>::key_type;
+  std::vector<torch::Tensor> ps, grads, exp_avgs, exp_avg_sqs, steps;
+  device_states_.clear();
+  for (auto& p : group.params()) {
+    if (!p.grad().defined()) continue;
+    const Key key = state_key<Key>(p);
+    auto it = adam_->state().find(key);
+    auto step = device_steps_.find(p.unsafeGetTensorImpl());
+    if (it == adam_->state().end() || step == device_steps_.end()) {
+      // Fresh state is made by the eager calls before a capture: made during one, its zeros would
+      // be written again by every replay.
+      TORCH_CHECK(!capturing_, "the CUDA graph's step met a parameter without Adam state: ", p.sizes());
+      if (it == adam_->state().end()) {
+        auto fresh = std::make_unique<torch::optim::AdamParamState>();
+        fresh->step(0);
+        fresh->exp_avg(torch::zeros_like(p, torch::MemoryFormat::Preserve));
+        fresh->exp_avg_sq(torch::zeros_like(p, torch::MemoryFormat::Preserve));
+        it = adam_->state().emplace(key, std::move(fresh)).first;
+      }
+      const auto count = static_cast<double>(static_cast<torch::optim::AdamParamState&>(*it->second).step());
+      step = device_steps_.emplace(p.unsafeGetTensorImpl(), torch::full({}, count, p.options().dtype(torch::kFloat32)))
+                 .first;
+    }
+    auto& st = static_cast<torch::optim::AdamParamState&>(*it->second);
+    device_states_.push_back(&st);
+    ps.push_back(p);
+    grads.push_back(p.grad());
+    exp_avgs.push_back(st.exp_avg());
+    exp_avg_sqs.push_back(st.exp_avg_sq());
+    steps.push_back(step->second);
+  }
+  TORCH_CHECK(!ps.empty(), "the training step produced no gradient");
+  const auto norm = torch::stack(at::_foreach_norm(grads)).norm();
+  const auto skip =
+      torch::logical_not(torch::isfinite(out.losses.total.detach()) & torch::isfinite(norm)).to(torch::kFloat32);
+  std::optional<torch::Tensor> divide_by;  // optimizer.grad_clip: clip_grad_norm_'s factor, inverted
+  if (config_.optimizer.grad_clip > 0) divide_by = torch::clamp_min((norm + 1e-6) / config_.optimizer.grad_clip, 1.0);
+  at::_foreach_add_(steps, 1);
+  at::_fused_adam_(ps, grads, exp_avgs, exp_avg_sqs, {}, steps, lr, std::get<0>(o.betas()), std::get<1>(o.betas()),
+                   o.weight_decay(), o.eps(), /*amsgrad=*/false, /*maximize=*/false, divide_by, skip);
+  at::_foreach_sub_(steps, std::vector<torch::Tensor>(steps.size(), skip));  // a skipped update takes no step
+  auto [names, values] = out.losses.stacked();
+  loss_names_ = names;
+  std::vector<torch::Tensor> summary{values, norm.to(torch::kFloat64).view({1}), skip.to(torch::kFloat64).view({1})};
+  if (out.K.defined()) {
+    const auto k = out.K.detach().mean(0).to(torch::kFloat64);
+    summary.push_back(torch::stack({k[0][0], k[1][1], k[0][2], k[1][2]}));
+  }
+  device_out_ = std::move(out);
+  return {torch::cat(summary)};
+#else
+  (void)in;
+  throw std::logic_error("the device-checked training step needs LibTorch 2.4 or later");
+#endif
+}
 }  // namespace geo

@@ -4,10 +4,13 @@
 #pragma once
 
 #include "core/config.h"
+#include "core/cuda_graph.h"
 #include "train/distributed.h"
 #include "train/compute_losses.h"
 
+#include <map>
 #include <memory>
+#include <optional>
 
 namespace geo {
 
@@ -54,12 +57,28 @@ torch::Tensor gradient_norm(const std::vector<torch::Tensor>& parameters);
 
 // Binds networks, config and one stage: sets the networks' modes and trainable parameters for the
 // stage and builds Adam over them. run() does forward, loss (eq. 16), backward, the finiteness
-// check, optional clipping (optimizer.grad_clip) and the Adam update. It reads the device twice
-// per step: all loss terms in one copy, then the gradient norm (one multi-tensor reduction); the
-// guard needs both on the host to skip backward and leave weights and Adam untouched.
+// check, optional clipping (optimizer.grad_clip) and the Adam update, in one of three ways (Mode).
 class TrainStep {
  public:
+  enum class Mode {
+    // Reads the device twice per step: all loss terms in one copy, then the gradient norm (one
+    // multi-tensor reduction); the guard needs both on the host to skip backward and leave weights
+    // and Adam untouched. CPU, multi-process training, run.cuda_graphs off.
+    kEager,
+    // No host read until the update is done: backward always runs, the finiteness check and the
+    // clipping factor stay on the device, and LibTorch's fused Adam kernel (_fused_adam_: the same
+    // update to rounding, one launch) skips the update where the check failed (found_inf), its step
+    // counts on the device. Needs LibTorch >= 2.4; what kGraphed captures. On the CPU for tests
+    // only: grid_sample's CPU backward does not survive the NaN coordinates of a NaN batch.
+    kDeviceChecks,
+    // kDeviceChecks run eagerly for two steps, then captured as one CUDA graph and replayed
+    // (core/cuda_graph.h). CUDA with run.cuda_graphs on (the default), one process.
+    kGraphed,
+  };
+  static bool device_checks_available();  // this LibTorch has the fused Adam kDeviceChecks needs
+
   TrainStep(Networks& nets, const Config& config, const StageConfig& stage);
+  ~TrainStep();
   // tgt [B,3,H,W], srcs [B,N,3,H,W], K [B,3,3] on the networks' device.
   StepResult run(const torch::Tensor& tgt, const torch::Tensor& srcs, const torch::Tensor& K, double lr);
   torch::optim::Adam& optimizer() { return *adam_; }
@@ -70,8 +89,19 @@ class TrainStep {
   void set_gradient_averager(GradientAverager* averager, bool overlap = false);
   // The depth anchor's teacher (compute_losses); nullptr (the default): no anchor term.
   void set_anchor(DepthNet teacher) { teacher_ = std::move(teacher); }
+  // The mode the next run() uses: kGraphed on CUDA with run.cuda_graphs, one process and LibTorch's
+  // fused Adam; else kEager. set_mode chooses another before the first run() (tests, geo_bench);
+  // a mode this build or device cannot run throws.
+  Mode mode() const;
+  void set_mode(Mode mode);
 
  private:
+  StepResult run_eager(const torch::Tensor& tgt, const torch::Tensor& srcs, const torch::Tensor& K, double lr);
+  StepResult run_device_checks(const torch::Tensor& tgt, const torch::Tensor& srcs, const torch::Tensor& K, double lr);
+  // The kDeviceChecks update on static inputs {tgt, srcs, K, lr}: {one float64 vector of the loss
+  // terms, the gradient norm, 1 when skipped, and the learned camera's mean fx fy cx cy}.
+  std::vector<torch::Tensor> device_update(const std::vector<torch::Tensor>& in);
+
   Networks& nets_;
   const Config& config_;
   StageConfig stage_;
@@ -80,6 +110,16 @@ class TrainStep {
   GradientAverager* averager_ = nullptr;
   DepthNet teacher_{nullptr};
   bool overlap_ = false;
+  std::optional<Mode> mode_;
+  // kDeviceChecks / kGraphed: Adam's step count per parameter on the device (float, as the fused
+  // kernel reads it), the graph, the names of the loss terms and the last update's maps.
+  std::map<const void*, torch::Tensor> device_steps_;
+  std::vector<torch::optim::AdamParamState*> device_states_;  // those the update advances
+  std::unique_ptr<CudaGraphCall> graph_;
+  std::vector<std::string> loss_names_;
+  StepOutput device_out_, graph_out_;  // the last eager update's maps; the capture's
+  bool device_updates_started_ = false;
+  bool capturing_ = false;
 };
 
 }  // namespace geo

@@ -2,6 +2,7 @@
 // device is visible (the CPU build and CI compile them, they run where a GPU is).
 #include "core/config.h"
 #include "train/compute_losses.h"
+#include "train/train_step.h"
 #include "train/trainer.h"
 
 #include <gtest/gtest.h>
@@ -114,6 +115,126 @@ TEST(Cuda, Fp32StepMatchesTheCpuStep) {
   }
 }
 
+// run.cuda_graphs: the training step replayed from a CUDA graph against the same update run
+// eagerly (TrainStep::Mode::kDeviceChecks), fp32 with cuDNN's deterministic algorithms, all three
+// networks trained, clipping at work, a new batch and a new learning rate every step (a graph that
+// kept the captured batch or rate fails). Two eager runs of that update differ too: grid_sample's
+// backward adds with atomics in no fixed order, and eq. 16's kinks amplify such rounding (see
+// above); that difference is the yardstick. Over six steps (two eager warm-ups, the capture, three
+// replays) each step's loss terms and the weights' updates at the end are within 3x the yardstick
+// (plus 1e-4). Also the first two steps against the eager step of kEager (torch::optim::Adam's
+// arithmetic): loss terms within 1e-3. A batch with a NaN pixel: the graph reports it and leaves
+// weights, Adam's moments and step counts as they were, bit for bit; the next batch updates again.
+// A batch of another size runs eagerly.
+TEST(Cuda, GraphedStepMatchesTheEagerStep) {
+  GEO_REQUIRE_CUDA();
+  NoTf32 fp32;
+  const bool was_deterministic = at::globalContext().deterministicCuDNN();
+  const bool was_benchmark = at::globalContext().benchmarkCuDNN();
+  at::globalContext().setDeterministicCuDNN(true);
+  at::globalContext().setBenchmarkCuDNN(false);
+  const torch::Device cuda(torch::kCUDA, 0);
+  Config c = parse_config("model: {encoder_depth: 18}\noptimizer: {grad_clip: 0.1}\n");
+  StageConfig stage = c.stages[0];
+  stage.train = NetworkSet{true, true, true};
+  struct Run {
+    Networks nets;
+    std::unique_ptr<TrainStep> step;
+    std::vector<std::vector<double>> losses;  // per step
+  };
+  const auto make = [&](TrainStep::Mode mode) {
+    torch::manual_seed(7);
+    auto r = std::make_unique<Run>(Run{Networks::create(NetworkSpec::of(c), true), nullptr, {}});
+    r->nets.to(cuda);
+    r->step = std::make_unique<TrainStep>(r->nets, c, stage);
+    if (mode != TrainStep::Mode::kGraphed) r->step->set_mode(mode);
+    EXPECT_EQ(r->step->mode(), mode);  // kGraphed: the default on CUDA
+    return r;
+  };
+  auto eager = make(TrainStep::Mode::kEager), device = make(TrainStep::Mode::kDeviceChecks),
+       device2 = make(TrainStep::Mode::kDeviceChecks), graphed = make(TrainStep::Mode::kGraphed);
+  namespace F = torch::nn::functional;
+  const auto smooth = [&cuda](const torch::Tensor& low) {
+    return F::interpolate(low, F::InterpolateFuncOptions()
+                                   .size(std::vector<int64_t>{64, 128})
+                                   .mode(torch::kBilinear)
+                                   .align_corners(false))
+        .to(cuda);
+  };
+  const auto K =
+      torch::tensor({60.f, 0.f, 64.f, 0.f, 60.f, 32.f, 0.f, 0.f, 1.f}).view({1, 3, 3}).repeat({2, 1, 1}).to(cuda);
+  std::vector<torch::Tensor> start;
+  for (const auto& p : device->nets.trainable_parameters()) start.push_back(p.detach().clone());
+  torch::Tensor tgt, srcs;
+  const auto gap = [](const Run& a, const Run& b, size_t i) {
+    double g = 0;
+    for (size_t t = 0; t < a.losses[i].size(); ++t)
+      g = std::max(g, std::abs(b.losses[i][t] - a.losses[i][t]) / std::abs(a.losses[i][t]));
+    return g;
+  };
+  for (size_t i = 0; i < 6; ++i) {
+    torch::manual_seed(100 + static_cast<int>(i));
+    tgt = smooth(torch::rand({2, 3, 8, 16}));
+    srcs = smooth(torch::rand({4, 3, 8, 16})).view({2, 2, 3, 64, 128});
+    const double lr = 1e-3 / static_cast<double>(i + 1);
+    for (Run* r : {eager.get(), device.get(), device2.get(), graphed.get()}) {
+      const StepResult s = r->step->run(tgt, srcs, K, lr);
+      ASSERT_TRUE(s.finite) << "step " << i;
+      r->losses.emplace_back();
+      for (const auto& [name, v] : s.losses) r->losses.back().push_back(v);
+      if (i == 0) {
+        EXPECT_GT(s.grad_norm, 0.1);  // clipping at work
+      }
+    }
+    const double yardstick = gap(*device, *device2, i), graph_gap = gap(*device, *graphed, i);
+    std::cout << "step " << i << ": loss terms, graphed vs eager " << graph_gap << ", eager vs eager " << yardstick
+              << ", eager vs kEager " << gap(*eager, *device, i) << "\n";
+    EXPECT_LT(graph_gap, 3 * yardstick + 1e-4) << "step " << i;
+    if (i < 2) {
+      EXPECT_LT(gap(*eager, *device, i), 1e-3) << "step " << i;
+    }
+  }
+  const auto update_gap = [&start](const Run& a, const Run& b) {
+    const auto pa = a.nets.trainable_parameters(), pb = b.nets.trainable_parameters();
+    double diff = 0, moved = 0;
+    for (size_t i = 0; i < pa.size(); ++i) {
+      diff += (pb[i] - pa[i]).pow(2).sum().item<double>();
+      moved += (pa[i] - start[i]).pow(2).sum().item<double>();
+    }
+    EXPECT_GT(moved, 0);
+    return std::sqrt(diff / moved);
+  };
+  const double yardstick = update_gap(*device, *device2), graph_gap = update_gap(*device, *graphed);
+  std::cout << "weight updates after 6 steps: graphed vs eager " << graph_gap << ", eager vs eager " << yardstick
+            << ", eager vs kEager " << update_gap(*eager, *device) << "\n";
+  EXPECT_LT(graph_gap, 3 * yardstick + 1e-4);
+  const auto pb = graphed->nets.trainable_parameters();
+  for (const auto& p : pb) EXPECT_EQ(adam_state_of(graphed->step->optimizer(), p)->step(), 6);
+  TrainStep& graph = *graphed->step;
+
+  std::vector<torch::Tensor> weights, moments;
+  for (const auto& p : pb) {
+    weights.push_back(p.detach().clone());
+    moments.push_back(adam_state_of(graph.optimizer(), p)->exp_avg().clone());
+  }
+  auto bad = tgt.clone();
+  bad.index_put_({1, 2, 10, 20}, std::nan(""));
+  EXPECT_FALSE(graph.run(bad, srcs, K, 1e-3).finite);
+  for (size_t i = 0; i < pb.size(); ++i) {
+    EXPECT_TRUE(torch::equal(pb[i], weights[i])) << "parameter " << i;
+    EXPECT_TRUE(torch::equal(adam_state_of(graph.optimizer(), pb[i])->exp_avg(), moments[i])) << i;
+    EXPECT_EQ(adam_state_of(graph.optimizer(), pb[i])->step(), 6) << i;
+  }
+  EXPECT_TRUE(graph.run(tgt, srcs, K, 1e-3).finite);
+  EXPECT_EQ(adam_state_of(graph.optimizer(), pb[0])->step(), 7);
+  EXPECT_FALSE(torch::equal(pb[0], weights[0]));
+  const StepResult other = graph.run(tgt.narrow(0, 0, 1), srcs.narrow(0, 0, 1), K.narrow(0, 0, 1), 1e-3);
+  EXPECT_TRUE(other.finite);
+  EXPECT_EQ(adam_state_of(graph.optimizer(), pb[0])->step(), 8);
+  at::globalContext().setDeterministicCuDNN(was_deterministic);
+  at::globalContext().setBenchmarkCuDNN(was_benchmark);
+}
+
 // fp32 with cuDNN's deterministic algorithms (run.deterministic): with TF32 and autotuning each
 // process picks its own algorithms, and a few Adam steps amplify their rounding (measured on an
 // H200: the first stage-2 step of two such runs 5% apart in flow smoothness; with this, within 1e-3).
@@ -156,11 +277,14 @@ void expect_same_losses(const std::string& a, const std::string& b, double rel) 
   EXPECT_FALSE(static_cast<bool>(std::getline(sb, lb))) << "more rows than " << a;
 }
 
-// Killed during stage 2 and resumed on CUDA: the same losses as an uninterrupted CUDA run.
+// Killed during stage 2 and resumed on CUDA: the same losses as an uninterrupted CUDA run, to 5e-3.
+// The bound is what two uninterrupted runs give: with the update checked on the device (the CUDA
+// default, run.cuda_graphs), the flow term after stage 2's first update came out 2.1459 and 2.1513
+// in two runs of the same build on an H200 (the rows before it agree to 4 digits).
 TEST(Cuda, ResumeOnCudaContinuesTheRun) {
   GEO_REQUIRE_CUDA();
   const auto r = test::killed_and_resumed(cuda_run_config(), test::fresh_dir("cuda_resume"), 4);
-  expect_same_losses(r.whole, r.resumed, 1e-3);
+  expect_same_losses(r.whole, r.resumed, 5e-3);
 }
 
 // A checkpoint written on CUDA resumes on the CPU, and a CPU one on CUDA.
