@@ -282,14 +282,18 @@ std::vector<Row> inference_rows(const geo::Config& config, const std::vector<boo
     std::vector<torch::Tensor> srcs(N, img2);
     const auto flow_in = torch::rand({b, 12, H, W}, device);
     const auto K = intrinsics(b, H, W, device);
+    const std::vector<std::string> kinds = {"DepthNet", "PoseNet",          "FlowNet",
+                                            "pipeline", "pipeline graphed", "Model::depth"};
     std::vector<Row> batch_rows;
-    batch_rows.reserve(5 * made.size());
+    batch_rows.reserve(kinds.size() * made.size());  // the timed calls hold pointers to their rows
     // The library path: geo::Model::depth on a uint8 [3,H,W] frame (its conversion, the network,
     // the depth at the frame's size), beside the DepthNet's own forward.
     const auto frame8 = (img * 255).to(torch::kUInt8);
     std::vector<std::unique_ptr<geo::Model>> models;
+    std::vector<std::unique_ptr<geo::GraphedPairPredictor>> graphed;
     // One kind of call at a time (DepthNet, PoseNet, ...), its FR variants side by side.
-    for (const std::string what : {"DepthNet", "PoseNet", "FlowNet", "pipeline", "Model::depth"}) {
+    for (const std::string& what : kinds) {
+      if (what == "pipeline graphed" && !(device.is_cuda() && geo::CudaGraphCall::available())) continue;
       std::vector<std::pair<Row*, std::function<void()>>> calls;
       for (size_t k = 0; k < made.size(); ++k) {
         const bool pose = what == "PoseNet";
@@ -300,13 +304,21 @@ std::vector<Row> inference_rows(const geo::Config& config, const std::vector<boo
                 b};
         row.bf16 = precision == "bf16";
         row.int8 = precision == "int8";
-        row.gflops = gflops_at(params, what == "Model::depth" ? "DepthNet" : what, row.fr, b);
+        row.gflops = gflops_at(params,
+                               what == "Model::depth"       ? "DepthNet"
+                               : what == "pipeline graphed" ? "pipeline"
+                                                            : what,
+                               row.fr, b);
         batch_rows.push_back(row);
         std::function<void()> fn;
         if (what == "DepthNet") fn = [&nets, &img] { nets.depth(img); };
         if (pose) fn = [&nets, &img, &srcs] { nets.pose(img, srcs); };
         if (what == "FlowNet") fn = [&nets, &flow_in] { nets.flow(flow_in); };
         if (what == "pipeline") fn = [&nets, &img, &img2, &K] { geo::predict_pair(nets, img, img2, K); };
+        if (what == "pipeline graphed") {  // one CUDA graph: captured during the warm-up, replayed
+          graphed.push_back(std::make_unique<geo::GraphedPairPredictor>(nets, device));
+          fn = [g = graphed.back().get(), &img, &img2, &K] { (*g)(img, img2, K); };
+        }
         if (what == "Model::depth") {  // the library's call: an 8-bit RGB frame in, depth at its size out
           geo::LoadOptions lo;
           lo.device = device.str();
@@ -351,6 +363,7 @@ std::vector<Row> training_rows(const geo::Config& config, const std::vector<geo:
       row.bf16 = config.run.precision == geo::Precision::kBf16;
       auto t = std::make_unique<Trainee>(Trainee{made.first, made.second, nullptr, row});
       t->step = std::make_unique<geo::TrainStep>(t->nets, t->config, stage);
+      if (t->step->mode() == geo::TrainStep::Mode::kGraphed) t->row.name += " graphed";
       // FLOPs counted in fp32: under autocast the profiler sees each convolution twice (the autocast
       // wrapper and the bf16 call it makes); the arithmetic is the same.
       geo::Config counting = t->config;
@@ -365,7 +378,10 @@ std::vector<Row> training_rows(const geo::Config& config, const std::vector<geo:
     std::vector<std::pair<Row*, std::function<void()>>> calls;
     for (auto& t : trainees)
       calls.emplace_back(&t->row, [&t, &tgt, &srcs, &K, &stage] { t->step->run(tgt, srcs, K, stage.learning_rate); });
-    geo::bench::time_side_by_side(calls, o.train_warmup, o.train_iters, device);
+    // A graphed step runs eagerly twice and is captured on its third call: all three untimed.
+    const bool graphed = std::any_of(trainees.begin(), trainees.end(),
+                                     [](const auto& t) { return t->step->mode() == geo::TrainStep::Mode::kGraphed; });
+    geo::bench::time_side_by_side(calls, graphed ? std::max(o.train_warmup, 3) : o.train_warmup, o.train_iters, device);
     for (size_t k = 0; k < trainees.size(); ++k) {
       rows.push_back(trainees[k]->row);
       if (o.profile_top > 0)

@@ -16,6 +16,7 @@ SSIM + L1 reconstruction (alpha 0.85), edge-aware disparity smoothness, backward
   python3 benchmarks/geonet_pytorch.py --row depth --threads 2 --iters 9    DepthNet inference, batch 1
   python3 benchmarks/geonet_pytorch.py --row step --batch 4 --iters 3       a stage-1 training step
   python3 benchmarks/geonet_pytorch.py --row ceiling                        a large fp32/bf16 matrix product
+  python3 benchmarks/geonet_pytorch.py --row step --device cuda             the same step on a GPU (eager PyTorch)
   python3 benchmarks/geonet_pytorch.py --export-onnx depth.onnx                   the DepthNet as ONNX (ONNX Runtime's input)
   options: --precision fp32|bf16 (bf16: the networks under torch.autocast, the losses in fp32),
            --channels-last, --compile (torch.compile, PyTorch >= 2.0)
@@ -210,9 +211,12 @@ def stage1_loss(depth_net, pose_net, tgt, srcs, K, autocast, num_scales=4):
 
 def timed(fn, warmup, iters):
     times = []
+    cuda = torch.cuda.is_available() and torch.cuda.is_initialized()
     for i in range(warmup + iters):
         t0 = time.perf_counter()
         fn()
+        if cuda:  # the kernels' time, not their launches'
+            torch.cuda.synchronize()
         if i >= warmup:
             times.append(1e3 * (time.perf_counter() - t0))
     return times
@@ -225,6 +229,7 @@ def main():
     ap.add_argument("--width", type=int, default=416)
     ap.add_argument("--batch", type=int, default=0, help="default: 1 for depth, 4 for step")
     ap.add_argument("--threads", type=int, default=0, help="intra-op threads (0: PyTorch's default)")
+    ap.add_argument("--device", default="cpu", help="cpu, or cuda (PyTorch >= 2.0: everything made on it)")
     ap.add_argument("--precision", choices=("fp32", "bf16"), default="fp32")
     ap.add_argument("--channels-last", action="store_true")
     ap.add_argument("--compile", action="store_true", help="torch.compile the networks (PyTorch >= 2.0)")
@@ -236,9 +241,11 @@ def main():
     if a.threads > 0:
         torch.set_num_threads(a.threads)
     torch.manual_seed(0)
+    if a.device != "cpu":
+        torch.set_default_device(a.device)
     batch = a.batch or (4 if a.row == "step" else 1)
     warmup = a.warmup or (2 if a.row == "step" else 5)
-    out = {"row": a.row, "torch": torch.__version__, "threads": torch.get_num_threads(), "precision": a.precision,
+    out = {"row": a.row, "device": a.device, "torch": torch.__version__, "threads": torch.get_num_threads(), "precision": a.precision,
            "channels_last": a.channels_last, "compile": a.compile, "batch": batch,
            "height": a.height, "width": a.width}
     if a.row == "ceiling":  # the best of 7 runs of a 2048 x 2048 product, as geo_bench measures it
@@ -264,7 +271,8 @@ def main():
         sys.exit(f"torch.compile is not in PyTorch {torch.__version__}")
     fmt = torch.channels_last if a.channels_last else torch.contiguous_format
     bf16 = a.precision == "bf16"
-    autocast = (lambda: torch.autocast("cpu", dtype=torch.bfloat16)) if bf16 else contextlib.nullcontext
+    kind = a.device.split(":")[0]
+    autocast = (lambda: torch.autocast(kind, dtype=torch.bfloat16)) if bf16 else contextlib.nullcontext
     img = torch.rand(batch, 3, a.height, a.width).contiguous(memory_format=fmt)
     if a.row == "depth":
         depth_net = depth_net.eval().to(memory_format=fmt)

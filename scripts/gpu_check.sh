@@ -6,9 +6,13 @@
 #      checkpoints moving between CUDA and CPU) and then the whole suite on that build,
 #   3. trains the smoke config on the in-memory synthetic world on CUDA (both stages, validation,
 #      checkpoints, resume-ready run folder) and prints its speed from metrics.csv,
-#   4. runs scripts/bench.sh cuda (training steps at the paper's batch and size, inference, peak
-#      memory; TF32, the default run.precision) and the same in bf16 into build-gpu/bench/,
-#   5. where this geo has NCCL, trains two processes over NCCL on the first GPU (NCCL itself may
+#   4. runs scripts/bench.sh cuda (training steps at the paper's batch and size, replayed as CUDA
+#      graphs, inference, the pipeline graphed and not, peak memory; TF32, the default
+#      run.precision), the training steps again without CUDA graphs (run.cuda_graphs=false, with
+#      the profile's top operators) and everything in bf16, into build-gpu/bench/,
+#   5. times PyTorch's eager GeoNet port (benchmarks/geonet_pytorch.py --device cuda: DepthNet at
+#      batch 1, the stage-1 step at batch 4) as the reference,
+#   6. where this geo has NCCL, trains two processes over NCCL on the first GPU (NCCL itself may
 #      refuse two ranks on one GPU: that is reported, not a failure of geo).
 # Each step runs even when an earlier one failed; the summary at the end names the failed steps and
 # the exit status is non-zero if any did. Record what it prints, with the GPU, driver, CUDA and
@@ -16,6 +20,7 @@
 #   GEO_TORCH / GEO_BUILD_DIR / GEO_OPENCV / GEO_TARGETS / GEO_JOBS as for scripts/setup.sh
 #                    (defaults python, build-gpu, auto, everything, all cores)
 #   GEO_GPU_SUITE=0  skip the whole suite (step 2's second half; it takes the longest)
+#   GEO_GPU_BF16=0   skip the bf16 benchmark;  GEO_GPU_NCCL=0  skip the two NCCL processes
 #   GEO_GPU_LOG_DIR  also keep each step's log there (default: none)
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -57,10 +62,19 @@ step train-cuda "$BUILD/apps/geo_train" --config smoke.yaml --device cuda --run-
 [ -f "$RUN/metrics.csv" ] && echo "geo gpu check: checkpoints in $RUN/checkpoints, losses and step times in $RUN/metrics.csv"
 
 step bench-tf32 scripts/bench.sh cuda
-step bench-bf16 env GEO_BENCH_OUT="$BUILD/bench/bf16" scripts/bench.sh cuda --precision bf16
+step bench-eager env GEO_BENCH_OUT="$BUILD/bench/eager" scripts/bench.sh cuda --no-infer --no-comm \
+  --set run.cuda_graphs=false --profile 15
+[ "${GEO_GPU_BF16:-1}" = 1 ] && step bench-bf16 env GEO_BENCH_OUT="$BUILD/bench/bf16" scripts/bench.sh cuda --precision bf16
+pytorch_eager() {
+  python3 benchmarks/geonet_pytorch.py --device cuda --row depth --iters 20 &&
+    python3 benchmarks/geonet_pytorch.py --device cuda --row step --iters 5
+}
+step pytorch-eager pytorch_eager
 
 # Two processes over NCCL on GPU 0 (a machine with two GPUs would give each its own).
-if grep -q 'GEO_WITH_NCCL' "$BUILD/build.ninja" "$BUILD/src/CMakeFiles/geo_train_parts.dir/flags.make" 2>/dev/null; then
+if [ "${GEO_GPU_NCCL:-1}" != 1 ]; then
+  echo "geo gpu check: GEO_GPU_NCCL=0: no multi-process GPU check"
+elif grep -q 'GEO_WITH_NCCL' "$BUILD/build.ninja" "$BUILD/src/CMakeFiles/geo_train_parts.dir/flags.make" 2>/dev/null; then
   nccl_pair() {
     local port pids=() rc=0
     port=$((29500 + RANDOM % 1000))

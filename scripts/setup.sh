@@ -14,6 +14,8 @@
 #                   LibTorch, elsewhere the one on the PATH, else GCC) or gcc; an existing build
 #                   folder keeps its compiler (scripts/compiler.sh says why Clang).
 #   GEO_SETUP_PACKAGES_ONLY=1  install the packages, build nothing (scripts/fuzz.sh)
+#   GEO_SETUP_OFFLINE=1  install nothing: for a machine without a package mirror whose libraries
+#                   were put in place otherwise (an offline GPU image)
 #   GEO_SETUP_BROWSER=0  do not install Chromium (only the browser test of geo_infer --report needs it)
 #   GEO_TARGETS     build only these targets (space-separated, e.g. "geo_train geo_eval"; default: all,
 #                   the tests included)
@@ -95,7 +97,9 @@ missing=()
 for p in "${PACKAGES[@]}"; do
   installed "$p" || missing+=("$p")
 done
-if ((${#missing[@]})); then
+if ((${#missing[@]})) && [ "${GEO_SETUP_OFFLINE:-0}" = 1 ]; then
+  echo "geo setup: GEO_SETUP_OFFLINE=1: not installing ${missing[*]} (CMake finds what is there, or says what is not)"
+elif ((${#missing[@]})); then
   echo "geo setup: installing ${missing[*]}"
   SUDO=""
   if [ "$(id -u)" -ne 0 ]; then
