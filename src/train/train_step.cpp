@@ -45,6 +45,22 @@ Key state_key(const torch::Tensor& p) {
   }
 }
 
+// The Adam state of `p`, made (step 0, zero moments) when it has none yet: what torch::optim::Adam
+// does at a parameter's first update.
+torch::optim::AdamParamState& adam_state_for(torch::optim::Adam& adam, const torch::Tensor& p) {
+  using Key = typename std::decay_t<decltype(adam.state())>::key_type;
+  const Key key = state_key<Key>(p);
+  auto it = adam.state().find(key);
+  if (it == adam.state().end()) {
+    auto fresh = std::make_unique<torch::optim::AdamParamState>();
+    fresh->step(0);
+    fresh->exp_avg(torch::zeros_like(p, torch::MemoryFormat::Preserve));
+    fresh->exp_avg_sq(torch::zeros_like(p, torch::MemoryFormat::Preserve));
+    it = adam.state().emplace(key, std::move(fresh)).first;
+  }
+  return static_cast<torch::optim::AdamParamState&>(*it->second);
+}
+
 }  // namespace
 
 const torch::optim::AdamParamState* adam_state_of(const torch::optim::Adam& adam, const torch::Tensor& p) {
@@ -63,7 +79,6 @@ torch::Tensor MultiTensorAdam::step(LossClosure closure) {
     at::AutoGradMode enable_grad(true);
     loss = closure();
   }
-  using Key = typename std::decay_t<decltype(state())>::key_type;
   for (auto& group : param_groups()) {
     const auto& o = static_cast<const torch::optim::AdamOptions&>(group.options());
     // Parameters that first got a gradient later have taken fewer steps: one update per step count.
@@ -74,16 +89,7 @@ torch::Tensor MultiTensorAdam::step(LossClosure closure) {
     for (auto& p : group.params()) {
       if (!p.grad().defined()) continue;
       TORCH_CHECK(!p.grad().is_sparse(), "Adam does not support sparse gradients");
-      const Key key = state_key<Key>(p);
-      auto it = state().find(key);
-      if (it == state().end()) {
-        auto fresh = std::make_unique<torch::optim::AdamParamState>();
-        fresh->step(0);
-        fresh->exp_avg(torch::zeros_like(p, torch::MemoryFormat::Preserve));
-        fresh->exp_avg_sq(torch::zeros_like(p, torch::MemoryFormat::Preserve));
-        it = state().emplace(key, std::move(fresh)).first;
-      }
-      auto& st = static_cast<torch::optim::AdamParamState&>(*it->second);
+      auto& st = adam_state_for(*this, p);
       st.step(st.step() + 1);
       Lists& l = by_step[st.step()];
       l.params.push_back(p);
@@ -271,30 +277,21 @@ std::vector<torch::Tensor> TrainStep::device_update(const std::vector<torch::Ten
   auto& group = adam_->param_groups().front();
   const auto& o = static_cast<const torch::optim::AdamOptions&>(group.options());
   TORCH_CHECK(!o.amsgrad(), "the device-checked step has no amsgrad");
-  using Key = typename std::decay_t<decltype(adam_->state())>::key_type;
   std::vector<torch::Tensor> ps, grads, exp_avgs, exp_avg_sqs, steps;
   device_states_.clear();
   for (auto& p : group.params()) {
     if (!p.grad().defined()) continue;
-    const Key key = state_key<Key>(p);
-    auto it = adam_->state().find(key);
     auto step = device_steps_.find(p.unsafeGetTensorImpl());
-    if (it == adam_->state().end() || step == device_steps_.end()) {
-      // Fresh state is made by the eager calls before a capture: made during one, its zeros would
-      // be written again by every replay.
+    // Fresh state is made by the eager calls before a capture: made during one, its zeros would be
+    // written again by every replay.
+    if (step == device_steps_.end() || !adam_state_of(*adam_, p))
       TORCH_CHECK(!capturing_, "the CUDA graph's step met a parameter without Adam state: ", p.sizes());
-      if (it == adam_->state().end()) {
-        auto fresh = std::make_unique<torch::optim::AdamParamState>();
-        fresh->step(0);
-        fresh->exp_avg(torch::zeros_like(p, torch::MemoryFormat::Preserve));
-        fresh->exp_avg_sq(torch::zeros_like(p, torch::MemoryFormat::Preserve));
-        it = adam_->state().emplace(key, std::move(fresh)).first;
-      }
-      const auto count = static_cast<double>(static_cast<torch::optim::AdamParamState&>(*it->second).step());
-      step = device_steps_.emplace(p.unsafeGetTensorImpl(), torch::full({}, count, p.options().dtype(torch::kFloat32)))
+    auto& st = adam_state_for(*adam_, p);
+    if (step == device_steps_.end())
+      step = device_steps_
+                 .emplace(p.unsafeGetTensorImpl(),
+                          torch::full({}, static_cast<double>(st.step()), p.options().dtype(torch::kFloat32)))
                  .first;
-    }
-    auto& st = static_cast<torch::optim::AdamParamState&>(*it->second);
     device_states_.push_back(&st);
     ps.push_back(p);
     grads.push_back(p.grad());
@@ -303,7 +300,7 @@ std::vector<torch::Tensor> TrainStep::device_update(const std::vector<torch::Ten
     steps.push_back(step->second);
   }
   TORCH_CHECK(!ps.empty(), "the training step produced no gradient");
-  const auto norm = torch::stack(at::_foreach_norm(grads)).norm();
+  const auto norm = gradient_norm(ps);
   const auto skip =
       torch::logical_not(torch::isfinite(out.losses.total.detach()) & torch::isfinite(norm)).to(torch::kFloat32);
   std::optional<torch::Tensor> divide_by;  // optimizer.grad_clip: clip_grad_norm_'s factor, inverted
