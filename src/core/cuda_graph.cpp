@@ -8,6 +8,7 @@
 #include <ATen/autocast_mode.h>
 #include <ATen/cuda/CUDAEvent.h>
 #include <ATen/cuda/CUDAGraph.h>
+#include <c10/cuda/CUDACachingAllocator.h>
 #include <c10/cuda/CUDAGuard.h>
 #include <c10/cuda/CUDAStream.h>
 #endif
@@ -46,6 +47,9 @@ struct CudaGraphCall::Impl {
   // Captures fn on `stream` (current): the autocast cache off meanwhile, since a weight cast
   // cached during the capture would be a graph's tensor outside it.
   void capture() {
+    // The warm-up's freed blocks back to the device first: the graph keeps a pool of its own for
+    // everything the capture allocates, and both at once would double a step's peak memory.
+    c10::cuda::CUDACachingAllocator::emptyCache();
     const bool cache = at::autocast::is_autocast_cache_enabled();
     at::autocast::set_autocast_cache_enabled(false);
     // Thread-local: the CUDA calls of other threads (the data loader pinning batches) go on
