@@ -121,7 +121,6 @@ std::vector<torch::Tensor> CudaGraphCall::operator()(const std::vector<torch::Te
   return out;
 }
 
-bool CudaGraphCall::captured() const { return impl_->captured; }
 bool CudaGraphCall::replayed() const { return impl_->replayed; }
 bool CudaGraphCall::next_call_captures() const { return !impl_->captured && impl_->calls >= impl_->warmup; }
 
@@ -139,7 +138,6 @@ std::vector<torch::Tensor> CudaGraphCall::operator()(const std::vector<torch::Te
   throw std::logic_error("CUDA graphs: this geo was built without CUDA");
 }
 
-bool CudaGraphCall::captured() const { return false; }
 bool CudaGraphCall::replayed() const { return false; }
 bool CudaGraphCall::next_call_captures() const { return false; }
 

@@ -36,7 +36,6 @@ class CudaGraphCall {
   // shapes than the captured ones run eagerly (said once in the log).
   std::vector<torch::Tensor> operator()(const std::vector<torch::Tensor>& inputs);
 
-  bool captured() const;
   bool replayed() const;            // the last call ran the graph (its outputs are the capture's)
   bool next_call_captures() const;  // the coming call with the same shapes is the capture
 

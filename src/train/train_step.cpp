@@ -162,11 +162,13 @@ bool TrainStep::device_checks_available() {
 #endif
 }
 
+bool TrainStep::graphs_possible() const {
+  return CudaGraphCall::available() && !params_.empty() && params_.front().is_cuda();
+}
+
 TrainStep::Mode TrainStep::mode() const {
   if (mode_) return *mode_;
-  const bool cuda = !params_.empty() && params_.front().is_cuda();
-  if (cuda && config_.run.cuda_graphs && !averager_ && device_checks_available() && CudaGraphCall::available())
-    return Mode::kGraphed;
+  if (graphs_possible() && config_.run.cuda_graphs && !averager_ && device_checks_available()) return Mode::kGraphed;
   return Mode::kEager;
 }
 
@@ -180,7 +182,7 @@ void TrainStep::set_mode(Mode mode) {
                                TORCH_VERSION + ": run.cuda_graphs does nothing here");
     if (averager_) throw std::runtime_error("multi-process training runs the eager step (run.cuda_graphs is ignored)");
   }
-  if (mode == Mode::kGraphed && !(CudaGraphCall::available() && !params_.empty() && params_.front().is_cuda()))
+  if (mode == Mode::kGraphed && !graphs_possible())
     throw std::runtime_error("CUDA graphs need a CUDA build of geo and the networks on a CUDA device");
   mode_ = mode;
 }

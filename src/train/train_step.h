@@ -96,6 +96,7 @@ class TrainStep {
   void set_mode(Mode mode);
 
  private:
+  bool graphs_possible() const;  // a CUDA build, the networks on a CUDA device
   StepResult run_eager(const torch::Tensor& tgt, const torch::Tensor& srcs, const torch::Tensor& K, double lr);
   StepResult run_device_checks(const torch::Tensor& tgt, const torch::Tensor& srcs, const torch::Tensor& K, double lr);
   // The kDeviceChecks update on static inputs {tgt, srcs, K, lr}: {one float64 vector of the loss
