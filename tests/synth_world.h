@@ -14,8 +14,11 @@ inline SynthOptions tiny_options() {
   return o;
 }
 
-inline std::string write_small_world(const std::string& name, int64_t frames, int flow_pairs, int64_t odometry_frames) {
+// `traffic`: stop-and-go traffic (SynthOptions::traffic).
+inline std::string write_small_world(const std::string& name, int64_t frames, int flow_pairs, int64_t odometry_frames,
+                                     bool traffic = false) {
   auto o = SynthOptions::preset_named("tiny");
+  o.traffic = traffic;
   o.train_drives = 1;
   o.test_drives = 1;
   o.frames_per_drive = frames;

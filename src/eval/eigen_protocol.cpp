@@ -17,6 +17,8 @@
 
 #include <cmath>
 #include <filesystem>
+#include <map>
+#include <optional>
 #include <set>
 #include <sstream>
 
@@ -74,9 +76,27 @@ struct EigenTally {
   bool from_files = false;          // predictions from files, meant at the image's size
   int64_t predictions_resized = 0;  // of them, those of another size (resized bilinearly)
   // Where the data root marks moving objects (geo_synth's raw/<drive>/obj_map/image_0X/<frame>.png,
-  // 0 = static), their pixels are also scored apart, at the whole image's scale, pooled over pixels.
-  double moving_abs_rel_sum = 0, moving_a1_sum = 0;
-  int64_t moving_pixels = 0, images_with_object_maps = 0;
+  // 0 = static), their pixels are also scored apart, at the whole image's scale, pooled over pixels;
+  // among them those of the objects that keep their distance to the camera, where
+  // raw/<drive>/obj_map/with_camera.txt lists their values.
+  struct Pooled {
+    double abs_rel_sum = 0, a1_sum = 0;
+    int64_t pixels = 0;
+    void add(const DepthErrors& m) {
+      abs_rel_sum += m.abs_rel * static_cast<double>(m.pixels);
+      a1_sum += m.a1 * static_cast<double>(m.pixels);
+      pixels += m.pixels;
+    }
+    // <name>_abs_rel and <name>_a1, where pixels were scored.
+    void report(const std::string& name, EvalResult& r) const {
+      if (pixels == 0) return;
+      r.metrics.emplace_back(name + "_abs_rel", abs_rel_sum / static_cast<double>(pixels));
+      r.metrics.emplace_back(name + "_a1", a1_sum / static_cast<double>(pixels));
+    }
+  };
+  Pooled moving, with_camera;
+  int64_t images_with_object_maps = 0, images_with_camera_lists = 0;
+  std::map<std::string, std::optional<std::vector<int64_t>>> with_camera_lists;  // by list file, read once
 
   // A prediction of line i: finite, of the image's shape (a file of another size is resized, counted
   // and said; one of another shape refused), not <= 0 everywhere (some <= 0 are counted).
@@ -129,22 +149,46 @@ struct EigenTally {
     pixels += err.pixels;
   }
 
-  // The moving objects' pixels of an image whose object map exists, scored at the image's scale.
-  void add_moving(const std::string& objects, const torch::Tensor& gt, const torch::Tensor& depth,
-                  const EigenOptions& eo, double applied) {
-    const auto moving = read_object_map(objects) > 0;
-    if (moving.size(0) != gt.size(0) || moving.size(1) != gt.size(1))
-      throw std::runtime_error("object map '" + objects + "' is " + std::to_string(moving.size(0)) + "x" +
-                               std::to_string(moving.size(1)) + ", its image " + std::to_string(gt.size(0)) + "x" +
+  // The values a drive's with_camera.txt lists (null without the file), read once a file.
+  const std::vector<int64_t>* with_camera_values(const std::string& list) {
+    const auto known = with_camera_lists.find(list);
+    if (known != with_camera_lists.end()) return known->second ? &*known->second : nullptr;
+    std::optional<std::vector<int64_t>> values;
+    if (fs::exists(list)) values.emplace();
+    if (values)
+      for (const double v : parse_doubles(read_text_file(list), list)) {
+        if (!(v >= 1 && v <= 255) || v != std::floor(v))
+          throw std::runtime_error(list + ": '" + fmt::format("{}", v) +
+                                   "' is not an object-map value (a whole number from 1 to 255)");
+        values->push_back(static_cast<int64_t>(v));
+      }
+    const auto& kept = with_camera_lists.emplace(list, std::move(values)).first->second;
+    return kept ? &*kept : nullptr;
+  }
+
+  // The moving objects' pixels of an image whose object map exists, scored at the image's scale;
+  // those of the objects `with_camera_list` names apart as well.
+  void add_moving(const std::string& objects, const std::string& with_camera_list, const torch::Tensor& gt,
+                  const torch::Tensor& depth, const EigenOptions& eo, double applied) {
+    const auto map = read_object_map(objects);
+    if (map.size(0) != gt.size(0) || map.size(1) != gt.size(1))
+      throw std::runtime_error("object map '" + objects + "' is " + std::to_string(map.size(0)) + "x" +
+                               std::to_string(map.size(1)) + ", its image " + std::to_string(gt.size(0)) + "x" +
                                std::to_string(gt.size(1)));
     ++images_with_object_maps;
     EigenOptions at_scale = eo;
     at_scale.median_scaling = false;
     at_scale.fixed_scale = applied;
-    const auto m = eigen_image_errors(gt * moving.to(gt.dtype()), depth, at_scale);
-    moving_abs_rel_sum += m.abs_rel * static_cast<double>(m.pixels);
-    moving_a1_sum += m.a1 * static_cast<double>(m.pixels);
-    moving_pixels += m.pixels;
+    const auto score = [&](const torch::Tensor& mask) {
+      return eigen_image_errors(gt * mask.to(gt.dtype()), depth, at_scale);
+    };
+    moving.add(score(map > 0));
+    const auto* values = with_camera_values(with_camera_list);
+    if (!values) return;
+    ++images_with_camera_lists;
+    auto mask = torch::zeros_like(map, torch::kBool);
+    for (const int64_t v : *values) mask |= map == v;
+    with_camera.add(score(mask));
   }
 
   // What was left out, clamped or resized, said once each.
@@ -197,10 +241,8 @@ struct EigenTally {
     };
     spread("scale_ratio", median_ratios);
     spread("scale_agreement", agreements);
-    if (moving_pixels > 0) {
-      r.metrics.emplace_back("moving_abs_rel", moving_abs_rel_sum / static_cast<double>(moving_pixels));
-      r.metrics.emplace_back("moving_a1", moving_a1_sum / static_cast<double>(moving_pixels));
-    }
+    moving.report("moving", r);
+    with_camera.report("with_camera", r);
     r.counts = {{"images", images},
                 {"pixels", pixels},
                 {"listed", static_cast<int64_t>(listed)},
@@ -210,8 +252,9 @@ struct EigenTally {
                 {"images_without_road_plane", static_cast<int64_t>(without_plane.size())}};
     if (images_with_object_maps > 0) {
       r.counts.emplace_back("images_with_object_maps", images_with_object_maps);
-      r.counts.emplace_back("moving_pixels", moving_pixels);
+      r.counts.emplace_back("moving_pixels", moving.pixels);
     }
+    if (images_with_camera_lists > 0) r.counts.emplace_back("with_camera_pixels", with_camera.pixels);
     if (from_files) r.counts.emplace_back("predictions_resized", predictions_resized);
     return r;
   }
@@ -258,7 +301,8 @@ EvalResult eval_eigen(const EvalOptions& o, const std::string& root, PredictionS
       const std::string objects = root + "/" + entries[i].folder + "/obj_map/image_0" +
                                   std::to_string(entries[i].camera()) + "/" + zero_padded(entries[i].frame, 10) +
                                   ".png";
-      if (fs::exists(objects)) tally.add_moving(objects, gt, depth, eo, applied);
+      if (fs::exists(objects))
+        tally.add_moving(objects, root + "/" + entries[i].folder + "/obj_map/with_camera.txt", gt, depth, eo, applied);
     } else {
       tally.without_gt.push_back(test.velodyne);
     }

@@ -58,6 +58,9 @@ TEST(Synth, TrafficStandsStartsAndKeepsTheCarAhead) {
     if (scene.boxes()[id].follows_camera) leader = static_cast<int>(id);
   ASSERT_GE(leader, 0);
   EXPECT_TRUE(scene.is_moving(leader));
+  // The leader's value in the object map is the one value the world lists as moving with the camera.
+  const auto with_camera = synth_with_camera_objects(scene);
+  ASSERT_EQ(with_camera.size(), 1u);
   std::vector<double> leader_depth;
   for (int64_t f = 1; f < 80; ++f) {
     const auto a = scene.camera(f - 1), b = scene.camera(f);
@@ -76,6 +79,7 @@ TEST(Synth, TrafficStandsStartsAndKeepsTheCarAhead) {
     // The leader's pixels: moving objects all, the same depth at every frame (within the sway).
     const auto on_leader = frame.object == leader;
     EXPECT_TRUE(mask.masked_select(on_leader).all().item<bool>());
+    EXPECT_TRUE(torch::equal(synth_object_map(scene, frame.object) == with_camera[0], on_leader)) << f;
     if (on_leader.sum().item<int64_t>() > 50)
       leader_depth.push_back(frame.depth[0].masked_select(on_leader).min().item<double>());
     // A truck beside a standing camera fills much of the image's right half.
@@ -91,6 +95,7 @@ TEST(Synth, TrafficStandsStartsAndKeepsTheCarAhead) {
   // Without traffic the camera never stands.
   const SynthScene plain(11, 80);
   for (int64_t f = 1; f < 80; ++f) EXPECT_TRUE(plain.camera_moves(f));
+  EXPECT_TRUE(synth_with_camera_objects(plain).empty());
 }
 
 // The exact flow holds for objects that move with the camera as for the others: it warps the next

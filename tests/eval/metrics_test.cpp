@@ -166,10 +166,10 @@ TEST(PoseMetrics, KittiOdometryErrorsAsTheDevkitOnAHandMadePair) {
 }
 
 // A small synthetic world of its own for each protocol test (6 frames per drive, 2 flow pairs, 8
-// odometry frames), in <name>/world.
-std::string protocol_world(const std::string& name) {
+// odometry frames), in <name>/world; `traffic`: stop-and-go traffic.
+std::string protocol_world(const std::string& name, bool traffic = false) {
   const auto root = test::fresh_dir(name);
-  std::filesystem::rename(test::write_small_world(name + "_world", 6, 2, 8), root + "/world");
+  std::filesystem::rename(test::write_small_world(name + "_world", 6, 2, 8, traffic), root + "/world");
   return root;
 }
 
@@ -257,6 +257,52 @@ TEST(Protocols, EigenDepthOfTheTruthScoresNearlyPerfectly) {
     EXPECT_NEAR(metric_of(itself, "scale_ratio_median"), 1.0, 1e-3);
   }
   EXPECT_NE(test::read_file(root + "/gt_offset/000000.png"), test::read_file(root + "/gt_exact/000000.png"));
+}
+
+// In traffic the car ahead that keeps its distance (raw/<drive>/obj_map/with_camera.txt) is scored
+// on its own as well: the dense truth in metres scores it near 0; the same predictions with that car
+// twice as far score it near 1, every one of its pixels outside delta < 1.25, and move the moving
+// objects' pooled error by exactly what they add (no other pixel changed).
+TEST(Protocols, EigenScoresTheCarsThatKeepTheirDistanceApart) {
+  const auto root = protocol_world("protocols_with_camera", true);
+  const auto tests = dense_truth_as_predictions(root);
+  EvalOptions e = options_for("eigen", root);
+  e.scaling = DepthScaling::kNone;
+  e.matlab_offset = false;
+  const auto truth = score_files(e, root + "/depth");
+  const int64_t pixels = count_of(truth, "with_camera_pixels");
+  EXPECT_GT(pixels, 50);
+  EXPECT_LT(pixels, count_of(truth, "moving_pixels"));
+  EXPECT_LT(metric_of(truth, "with_camera_abs_rel"), 0.05);
+  for (size_t i = 0; i < tests.size(); ++i) {
+    const auto drive = tests[i].substr(0, tests[i].find("/image_02"));
+    const auto frame = tests[i].substr(tests[i].rfind('/') + 1);
+    const auto values = read_lines(root + "/world/raw/" + drive + "/obj_map/with_camera.txt");
+    ASSERT_EQ(values.size(), 1u);
+    const auto map = read_object_map(root + "/world/raw/" + drive + "/obj_map/image_02/" + frame);
+    const std::string file = root + "/depth/" + zero_padded(static_cast<long long>(i), 6) + ".png";
+    auto depth = read_depth_png(file);
+    depth = torch::where(map == std::stoi(values[0]), 2 * depth, depth);
+    write_depth_png(file, depth);
+  }
+  const auto doubled = score_files(e, root + "/depth");
+  EXPECT_EQ(count_of(doubled, "with_camera_pixels"), pixels);
+  EXPECT_NEAR(metric_of(doubled, "with_camera_abs_rel"), 1.0, 0.1);
+  EXPECT_EQ(metric_of(doubled, "with_camera_a1"), 0.0);
+  const auto pooled = [](const EvalResult& r, const std::string& name) {
+    return metric_of(r, name + "_abs_rel") * static_cast<double>(count_of(r, name + "_pixels"));
+  };
+  EXPECT_NEAR(pooled(doubled, "moving") - pooled(truth, "moving"),
+              pooled(doubled, "with_camera") - pooled(truth, "with_camera"), 1e-6 * static_cast<double>(pixels));
+  // A list that names no object-map value is refused naming the file; without lists no such rows.
+  const auto drive = tests[0].substr(0, tests[0].find("/image_02"));
+  const std::string list = root + "/world/raw/" + drive + "/obj_map/with_camera.txt";
+  test::write_text(list, "1.5\n");
+  GEO_EXPECT_THROW_WITH(score_files(e, root + "/depth"), list, "'1.5' is not an object-map value");
+  std::filesystem::remove(list);
+  const auto without = score_files(e, root + "/depth");
+  for (const auto& m : without.metrics) EXPECT_NE(m.first.rfind("with_camera", 0), 0u) << m.first;
+  EXPECT_EQ(metric_of(without, "moving_abs_rel"), metric_of(doubled, "moving_abs_rel"));
 }
 
 TEST(Protocols, Kitti2015FlowOfTheTruthScoresPerfectly) {

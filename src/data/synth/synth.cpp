@@ -384,6 +384,18 @@ torch::Tensor synth_object_map(const SynthScene& scene, const torch::Tensor& obj
   return map;
 }
 
+std::vector<int> synth_with_camera_objects(const SynthScene& scene) {
+  std::vector<int> values;
+  int k = 0;
+  for (int id = 0; id < static_cast<int>(scene.boxes().size()); ++id)
+    if (scene.is_moving(id)) {
+      ++k;
+      // Past 254 moving objects every further one shares the map's value 255: not one object.
+      if (scene.boxes()[static_cast<size_t>(id)].follows_camera && k < 255) values.push_back(k);
+    }
+  return values;
+}
+
 SynthFlow render_flow(const SynthScene& scene, int64_t frame, const SynthOptions& o) {
   const int64_t H = o.height, W = o.width;
   const auto& k = o.intrinsics;

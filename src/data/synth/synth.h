@@ -120,6 +120,10 @@ SynthFrame render_frame(const SynthScene& scene, int64_t frame, const SynthOptio
 // KITTI 2015's obj_map of a frame: 0 = static scene (ground, buildings, poles, boxes, sky),
 // k = the k-th moving object of the scene (1-based, in box order) -> [H,W] uint8.
 torch::Tensor synth_object_map(const SynthScene& scene, const torch::Tensor& object);
+// The object-map values (as in synth_object_map) of the objects that move with the camera, keeping
+// their distance (the car ahead in traffic), ascending; empty without traffic. geo_synth writes them
+// to raw/<drive>/obj_map/with_camera.txt, one a line, and geo_eval scores their pixels apart.
+std::vector<int> synth_with_camera_objects(const SynthScene& scene);
 
 struct SynthFlow {
   torch::Tensor flow;       // [2,H,W] float32 from `frame` to `frame + 1`, pixels

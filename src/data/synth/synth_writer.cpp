@@ -99,6 +99,9 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
       tick("drive " + std::to_string(d + 1));
     }
     write_poses(dir + "/poses.txt", relative_poses(scene, 0, o.frames_per_drive));
+    std::string with_camera;
+    for (const int v : synth_with_camera_objects(scene)) with_camera += std::to_string(v) + "\n";
+    write_file_atomic(dir + "/obj_map/with_camera.txt", with_camera);
     if (is_test) test_scenes.push_back(folder.substr(folder.find('/') + 1, folder.size() - folder.find('/') - 6));
   }
   fs::create_directories(raw + "/splits/eigen_zhou");
@@ -157,7 +160,8 @@ void write_synth_world(const std::string& root, const SynthOptions& o,
           ").\nraw/ = KITTI raw layout with Eigen-style "
           "splits in raw/splits; kitti2015/ = KITTI 2015 flow layout (obj_map: the moving objects); odometry/ = "
           "KITTI odometry layout.\nMoving objects per raw frame: raw/<drive>/obj_map/image_02 (uint8, 0 "
-          "static).\nDense ground-truth depth: raw/<drive>/proj_depth/"
+          "static); raw/<drive>/obj_map/with_camera.txt: the values of those that keep their distance to the "
+          "camera, one a line.\nDense ground-truth depth: raw/<drive>/proj_depth/"
           "groundtruth/image_02 and kitti2015/training/depth (uint16, depth x 256).\ncamera_height.txt = "
           "the camera's height above the road in metres (geo_eval --scaling camera-height).\n");
   std::ostringstream height;
