@@ -95,6 +95,10 @@ struct EigenTally {
     }
   };
   Pooled moving, with_camera;
+  // Per image: how deep those cars came out against the static scene, (median(pred) / median(gt)) on
+  // their pixels over the same on the static ones (object map 0); 1 is right, above 1 too far (what
+  // self-supervised depth learns for a car keeping its distance), whatever the image's scale.
+  std::vector<double> with_camera_depth_ratios;
   int64_t images_with_object_maps = 0, images_with_camera_lists = 0;
   std::map<std::string, std::optional<std::vector<int64_t>>> with_camera_lists;  // by list file, read once
 
@@ -189,6 +193,14 @@ struct EigenTally {
     auto mask = torch::zeros_like(map, torch::kBool);
     for (const int64_t v : *values) mask |= map == v;
     with_camera.add(score(mask));
+    double car = 0, scene = 0;  // median(gt) / median(pred) on each
+    EigenOptions medians = eo;
+    medians.median_scaling = true;
+    medians.fixed_scale = 0;
+    const auto on = [&](const torch::Tensor& m, double* ratio) {
+      return eigen_image_errors(gt * m.to(gt.dtype()), depth, medians, nullptr, ratio).pixels;
+    };
+    if (on(mask, &car) > 0 && on(map == 0, &scene) > 0) with_camera_depth_ratios.push_back(scene / car);
   }
 
   // What was left out, clamped or resized, said once each.
@@ -243,6 +255,9 @@ struct EigenTally {
     spread("scale_agreement", agreements);
     moving.report("moving", r);
     with_camera.report("with_camera", r);
+    if (!with_camera_depth_ratios.empty())
+      r.metrics.emplace_back("with_camera_depth_ratio",
+                             numpy_median(torch::tensor(with_camera_depth_ratios, torch::kFloat64)));
     r.counts = {{"images", images},
                 {"pixels", pixels},
                 {"listed", static_cast<int64_t>(listed)},

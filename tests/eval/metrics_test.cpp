@@ -260,9 +260,10 @@ TEST(Protocols, EigenDepthOfTheTruthScoresNearlyPerfectly) {
 }
 
 // In traffic the car ahead that keeps its distance (raw/<drive>/obj_map/with_camera.txt) is scored
-// on its own as well: the dense truth in metres scores it near 0; the same predictions with that car
-// twice as far score it near 1, every one of its pixels outside delta < 1.25, and move the moving
-// objects' pooled error by exactly what they add (no other pixel changed).
+// on its own as well: the dense truth in metres scores it near 0 and as deep as the static scene
+// says (depth ratio 1); the same predictions with that car twice as far score it near 1, every one
+// of its pixels outside delta < 1.25, at twice the ratio, and move the moving objects' pooled error
+// by exactly what they add (no other pixel changed).
 TEST(Protocols, EigenScoresTheCarsThatKeepTheirDistanceApart) {
   const auto root = protocol_world("protocols_with_camera", true);
   const auto tests = dense_truth_as_predictions(root);
@@ -274,6 +275,7 @@ TEST(Protocols, EigenScoresTheCarsThatKeepTheirDistanceApart) {
   EXPECT_GT(pixels, 50);
   EXPECT_LT(pixels, count_of(truth, "moving_pixels"));
   EXPECT_LT(metric_of(truth, "with_camera_abs_rel"), 0.05);
+  EXPECT_NEAR(metric_of(truth, "with_camera_depth_ratio"), 1.0, 0.05);
   for (size_t i = 0; i < tests.size(); ++i) {
     const auto drive = tests[i].substr(0, tests[i].find("/image_02"));
     const auto frame = tests[i].substr(tests[i].rfind('/') + 1);
@@ -289,6 +291,8 @@ TEST(Protocols, EigenScoresTheCarsThatKeepTheirDistanceApart) {
   EXPECT_EQ(count_of(doubled, "with_camera_pixels"), pixels);
   EXPECT_NEAR(metric_of(doubled, "with_camera_abs_rel"), 1.0, 0.1);
   EXPECT_EQ(metric_of(doubled, "with_camera_a1"), 0.0);
+  // Against the static scene the car is twice as deep as the truth's, exactly (a ratio of medians).
+  EXPECT_DOUBLE_EQ(metric_of(doubled, "with_camera_depth_ratio"), 2 * metric_of(truth, "with_camera_depth_ratio"));
   const auto pooled = [](const EvalResult& r, const std::string& name) {
     return metric_of(r, name + "_abs_rel") * static_cast<double>(count_of(r, name + "_pixels"));
   };
