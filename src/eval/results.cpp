@@ -7,6 +7,7 @@
 #include <spdlog/spdlog.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
@@ -91,9 +92,10 @@ std::string format_results(const std::vector<EvalResult>& results, const std::ve
   for (const auto& r : results)
     for (const auto& m : r.metrics)
       if (std::find(keys.begin(), keys.end(), m.first) == keys.end()) keys.push_back(m.first);
-  const auto column = [](const std::string& n) {
-    return fmt::format(" {:>14}", n.size() > 14 ? n.substr(n.size() - 14) : n);
-  };
+  // Columns of 14 characters, wider where a name is longer (names are shown whole).
+  size_t width = 14;
+  for (const auto& n : names) width = std::max(width, n.size());
+  const auto column = [width](const std::string& n) { return fmt::format(" {:>{}}", n, width); };
   s << fmt::format("{:<22}", "metric");
   for (const auto& n : names) s << column(n);
   s << "\n";
@@ -101,7 +103,7 @@ std::string format_results(const std::vector<EvalResult>& results, const std::ve
     s << fmt::format("{:<22}", k);
     for (const auto& r : results) {
       auto it = std::find_if(r.metrics.begin(), r.metrics.end(), [&](const auto& m) { return m.first == k; });
-      s << (it == r.metrics.end() ? fmt::format(" {:>14}", "-") : fmt::format(" {:>14.4f}", it->second));
+      s << (it == r.metrics.end() ? column("-") : fmt::format(" {:>{}.4f}", it->second, width));
     }
     s << "\n";
   }

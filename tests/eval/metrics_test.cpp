@@ -420,6 +420,12 @@ TEST(Protocols, ComparisonsSayHowTheColumnsDiffer) {
   const auto precisions = format_results({fp32, read_result(root + "/int8.json")}, {"fp32", "int8"});
   EXPECT_NE(precisions.find("note: the columns differ in precision: fp32 fp32, int8 int8\n"), std::string::npos)
       << precisions;
+  // Names longer than a column are shown whole, the columns widened to them.
+  const auto long_names = format_results({a, a}, {"automask1200-42", "a"});
+  EXPECT_NE(long_names.find(fmt::format("{:<22} {:>15} {:>15}\n", "metric", "automask1200-42", "a")), std::string::npos)
+      << long_names;
+  EXPECT_NE(long_names.find(fmt::format("{:<22} {:>15} {:>15}\n", "abs_rel", "0.2500", "0.2500")), std::string::npos)
+      << long_names;
   for (const auto& [name, text, why] : std::vector<std::tuple<std::string, std::string, std::string>>{
            {"list.json", "[1, 2]", "not a JSON object"},
            {"config.json", "{\"model\": {\"use_fr\": true}}", "no 'split'"},
