@@ -158,14 +158,15 @@ struct EigenTally {
     const auto known = with_camera_lists.find(list);
     if (known != with_camera_lists.end()) return known->second ? &*known->second : nullptr;
     std::optional<std::vector<int64_t>> values;
-    if (fs::exists(list)) values.emplace();
-    if (values)
+    if (fs::exists(list)) {
+      values.emplace();
       for (const double v : parse_doubles(read_text_file(list), list)) {
         if (!(v >= 1 && v <= 255) || v != std::floor(v))
           throw std::runtime_error(list + ": '" + fmt::format("{}", v) +
                                    "' is not an object-map value (a whole number from 1 to 255)");
         values->push_back(static_cast<int64_t>(v));
       }
+    }
     const auto& kept = with_camera_lists.emplace(list, std::move(values)).first->second;
     return kept ? &*kept : nullptr;
   }
@@ -183,8 +184,9 @@ struct EigenTally {
     EigenOptions at_scale = eo;
     at_scale.median_scaling = false;
     at_scale.fixed_scale = applied;
-    const auto score = [&](const torch::Tensor& mask) {
-      return eigen_image_errors(gt * mask.to(gt.dtype()), depth, at_scale);
+    // The errors on `mask`'s pixels; `ratio`: median(gt) / median(pred) there (whatever the scale).
+    const auto score = [&](const torch::Tensor& mask, double* ratio = nullptr) {
+      return eigen_image_errors(gt * mask.to(gt.dtype()), depth, at_scale, nullptr, ratio);
     };
     moving.add(score(map > 0));
     const auto* values = with_camera_values(with_camera_list);
@@ -192,15 +194,10 @@ struct EigenTally {
     ++images_with_camera_lists;
     auto mask = torch::zeros_like(map, torch::kBool);
     for (const int64_t v : *values) mask |= map == v;
-    with_camera.add(score(mask));
-    double car = 0, scene = 0;  // median(gt) / median(pred) on each
-    EigenOptions medians = eo;
-    medians.median_scaling = true;
-    medians.fixed_scale = 0;
-    const auto on = [&](const torch::Tensor& m, double* ratio) {
-      return eigen_image_errors(gt * m.to(gt.dtype()), depth, medians, nullptr, ratio).pixels;
-    };
-    if (on(mask, &car) > 0 && on(map == 0, &scene) > 0) with_camera_depth_ratios.push_back(scene / car);
+    double car = 0, scene = 0;
+    const auto cars = score(mask, &car);
+    with_camera.add(cars);
+    if (cars.pixels > 0 && score(map == 0, &scene).pixels > 0) with_camera_depth_ratios.push_back(scene / car);
   }
 
   // What was left out, clamped or resized, said once each.
