@@ -376,24 +376,32 @@ SynthFrame render_frame(const SynthScene& scene, int64_t frame, const SynthOptio
   return out;
 }
 
+namespace {
+// Each box's object-map value: k for the k-th moving object (1-based, in box order; every one past
+// the 254th shares 255, a uint8's last value), 0 for static ones.
+std::vector<int> object_map_values(const SynthScene& scene) {
+  std::vector<int> values(scene.boxes().size(), 0);
+  int k = 0;
+  for (size_t id = 0; id < values.size(); ++id)
+    if (scene.is_moving(static_cast<int>(id))) values[id] = std::min(++k, 255);
+  return values;
+}
+}  // namespace
+
 torch::Tensor synth_object_map(const SynthScene& scene, const torch::Tensor& object) {
   auto map = torch::zeros(object.sizes(), torch::kUInt8);
-  int k = 0;
-  for (int id = 0; id < static_cast<int>(scene.boxes().size()); ++id)
-    if (scene.is_moving(id)) map.masked_fill_(object == id, std::min(++k, 255));
+  const auto values = object_map_values(scene);
+  for (size_t id = 0; id < values.size(); ++id)
+    if (values[id] > 0) map.masked_fill_(object == static_cast<int64_t>(id), values[id]);
   return map;
 }
 
 std::vector<int> synth_with_camera_objects(const SynthScene& scene) {
-  std::vector<int> values;
-  int k = 0;
-  for (int id = 0; id < static_cast<int>(scene.boxes().size()); ++id)
-    if (scene.is_moving(id)) {
-      ++k;
-      // Past 254 moving objects every further one shares the map's value 255: not one object.
-      if (scene.boxes()[static_cast<size_t>(id)].follows_camera && k < 255) values.push_back(k);
-    }
-  return values;
+  const auto values = object_map_values(scene);
+  std::vector<int> with_camera;
+  for (size_t id = 0; id < values.size(); ++id)  // 255 is shared, so names no one object
+    if (scene.boxes()[id].follows_camera && values[id] > 0 && values[id] < 255) with_camera.push_back(values[id]);
+  return with_camera;
 }
 
 SynthFlow render_flow(const SynthScene& scene, int64_t frame, const SynthOptions& o) {
