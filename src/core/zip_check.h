@@ -5,7 +5,9 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <string>
+#include <vector>
 
 namespace geo {
 
@@ -17,5 +19,18 @@ uint32_t crc32(const void* data, size_t size, uint32_t crc = 0);
 // inflated by LibTorch's reader and then checked. Throws std::runtime_error naming the file and the damaged record;
 // a file that is no ZIP archive at all is left to the reader (returns false); true when checked.
 bool verify_zip_checksums(const std::string& path);
+
+// A record of a ZIP archive's central directory.
+struct ZipRecord {
+  std::string name;     // as the directory lists it (LibTorch's archives: under their top folder)
+  uint32_t crc = 0;     // its CRC-32 as the directory lists it
+  uint64_t size = 0;    // bytes, uncompressed
+  bool stored = false;  // kept as it is (not compressed)
+  uint64_t offset = 0;  // stored records: where their bytes begin in the file (checked to lie in it)
+};
+// The records of the ZIP archive `path` (ZIP64 included), nothing checked against their CRCs;
+// nullopt for a file that is no ZIP archive; throws std::runtime_error naming the file when its
+// directory or a stored record's header is damaged.
+std::optional<std::vector<ZipRecord>> zip_directory(const std::string& path);
 
 }  // namespace geo
