@@ -1,6 +1,7 @@
 #include "pipeline/checkpoint.h"
 
 #include "core/files.h"
+#include "core/mapped_archive.h"
 #include "core/state_io.h"
 #include "models/conv.h"
 #include "models/int8.h"
@@ -22,6 +23,10 @@ constexpr const char* kModelFormat = "geo-model 1";
 // their int8 kernels kept instead ("int8_kernels_<network>": Int8Graph::kernels). Older geo
 // versions refuse it by this name instead of mistaking it for float weights.
 constexpr const char* kInt8ModelFormat = "geo-model 2 (int8 kernels)";
+// The same with the int8 kernels beside the archive, read where they lie in the file
+// (core/mapped_archive.h: "int8_kernels_<network>/<kernel>"), not copied: what geo_export --int8
+// writes; "geo-model 2" files are still read.
+constexpr const char* kInt8MappedFormat = "geo-model 3 (int8 kernels, mapped)";
 constexpr const char* kNetworks[] = {"depth", "pose", "flow"};
 
 // The int8 graph of a network of `nets` by its file name ("depth", "pose", "flow"); null when it
@@ -79,20 +84,22 @@ void write_model_file(const std::string& path, const Networks& nets, bool half) 
   for (const char* network : kNetworks)
     if (const auto* g = int8_graph(nets, network); g && g->quantized() && g->float_released()) int8_only = true;
   torch::serialize::OutputArchive a;
-  a.write("geo_model_format", c10::IValue(std::string(int8_only ? kInt8ModelFormat : kModelFormat)));
+  a.write("geo_model_format", c10::IValue(std::string(int8_only ? kInt8MappedFormat : kModelFormat)));
   a.write("spec", c10::IValue(nets.spec.to_yaml()));
   write_networks(a, nets, half ? std::optional<torch::ScalarType>(torch::kHalf) : std::nullopt);
+  std::map<std::string, torch::Tensor> kernels;
   for (const char* network : kNetworks) {
     const auto* g = int8_graph(nets, network);
     if (!g || !g->quantized()) continue;
     a.write(std::string("int8_") + network, g->ranges());
     if (!int8_only) continue;
     TORCH_CHECK(g->float_released(), "int8: a model whose networks let go of their float kernels in part");
-    torch::serialize::OutputArchive kernels;
-    for (const auto& [name, t] : g->kernels()) kernels.write(name, t);
-    a.write(std::string("int8_kernels_") + network, kernels);
+    for (const auto& [name, t] : g->kernels()) kernels[std::string("int8_kernels_") + network + "/" + name] = t;
   }
-  save_archive(a, path);
+  if (int8_only)
+    save_archive_with_mapped(a, kernels, path);
+  else
+    save_archive(a, path);
 }
 
 void check_model_file_target(const std::string& label, const std::string& out, const std::string& source, bool force) {
@@ -114,15 +121,26 @@ void check_model_file_target(const std::string& label, const std::string& out, c
                              "checkpoint or another file): refusing to replace it; remove it or pass --force");
 }
 
-CheckpointFile::CheckpointFile(std::string path) : path_(std::move(path)), archive_(open_archive(path_)) {
+CheckpointFile::CheckpointFile(std::string path) : path_(std::move(path)) {
+  if (has_mapped_tensors(path_)) {
+    auto opened = open_mapped_archive(path_);
+    archive_ = std::move(opened.archive);
+    mapped_ = std::move(opened.tensors);
+  } else {
+    archive_ = open_archive(path_);
+  }
   torch::serialize::InputArchive flow;
   has_flow_ = archive_.try_read("flow", flow);
   c10::IValue format;
   if (archive_.try_read("geo_model_format", format)) {
-    if (!format.isString() || (format.toStringRef() != kModelFormat && format.toStringRef() != kInt8ModelFormat))
-      throw std::runtime_error(path_ + ": model file format '" + (format.isString() ? format.toStringRef() : "?") +
-                               "', this geo reads '" + kModelFormat + "' and '" + kInt8ModelFormat + "'");
-    int8_only_ = format.toStringRef() == kInt8ModelFormat;
+    const std::string name = format.isString() ? format.toStringRef() : "?";
+    if (name != kModelFormat && name != kInt8ModelFormat && name != kInt8MappedFormat)
+      throw std::runtime_error(path_ + ": model file format '" + name + "', this geo reads '" + kModelFormat + "', '" +
+                               kInt8ModelFormat + "' and '" + kInt8MappedFormat + "'");
+    int8_only_ = name != kModelFormat;
+    if ((name == kInt8MappedFormat) != mapped_.has_value())
+      throw std::runtime_error(path_ + ": model file format '" + name + "' " +
+                               (mapped_ ? "in a container of mapped kernels" : "without its mapped kernels"));
     c10::IValue spec;
     if (!archive_.try_read("spec", spec) || !spec.isString())
       throw std::runtime_error(path_ + ": model file without its spec");
@@ -226,6 +244,7 @@ std::optional<torch::Tensor> CheckpointFile::int8_ranges(const std::string& netw
 }
 
 std::map<std::string, torch::Tensor> CheckpointFile::int8_kernels(const std::string& network) {
+  if (int8_only_ && mapped_) return mapped_->under("int8_kernels_" + network + "/");
   std::map<std::string, torch::Tensor> kernels;
   torch::serialize::InputArchive sub;
   if (!int8_only_ || !archive_.try_read("int8_kernels_" + network, sub)) return kernels;

@@ -8,10 +8,13 @@
 //     init_configs         the configs the run's initial weights were trained with (optional)
 //
 //   int8 model file (geo_export --int8): a model file whose networks run in int8 only
-//     geo_model_format     "geo-model 2 (int8 kernels)"
+//     geo_model_format     "geo-model 3 (int8 kernels, mapped)"
 //     depth, pose, [flow]  networks, the kernels of the layers that run in int8 left out (empty)
 //     int8_<network>       the calibration: each quantized point's range (models/int8.h)
-//     int8_kernels_<network>  those layers' int8 kernels (Int8Graph::kernels)
+//   and beside that archive, read where they lie in the file (core/mapped_archive.h):
+//     int8_kernels_<network>/<kernel>  those layers' int8 kernels (Int8Graph::kernels)
+//   "geo-model 2 (int8 kernels)" files (earlier geo) keep the kernels inside the archive, as a
+//   sub-archive int8_kernels_<network>; still read.
 //   A model file quantized with its float kernels kept ("geo-model 1") has int8_<network> alone.
 //
 // Checkpoints written before the typed train state (a float64 "meta" [stage, iteration, best] and a
@@ -21,6 +24,7 @@
 #pragma once
 
 #include "core/config.h"
+#include "core/mapped_archive.h"
 #include "pipeline/networks.h"
 #include "pipeline/run_folder.h"
 
@@ -109,6 +113,7 @@ class CheckpointFile {
  private:
   std::string path_;
   torch::serialize::InputArchive archive_;
+  std::optional<MappedTensors> mapped_;  // a container's mapped tensors (int8 model files)
   bool model_file_ = false;
   bool int8_only_ = false;
   bool has_flow_ = false;

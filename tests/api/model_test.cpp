@@ -5,6 +5,7 @@
 #include "geo/geo.h"
 
 #include "core/config.h"
+#include "core/mapped_archive.h"
 #include "core/runtime.h"
 #include "core/state_io.h"
 #include "data/image_io.h"
@@ -291,6 +292,53 @@ TEST(Api, Int8FilesKeepTheirCalibration) {
   GEO_EXPECT_THROW_WITH(plain.quantize_int8({}), "precision 'int8' needs calibration frames");
   o.calibration = {a};
   GEO_EXPECT_THROW_WITH(Model::load(checkpoint(), o), "at least 2");
+}
+
+// An int8 model file as geo wrote it before its kernels were read in place ("geo-model 2": each
+// network's kernels in a sub-archive of the LibTorch archive) opens as it did, to the same numbers as
+// the file written now (core/mapped_archive.h). A format name that does not match its container is
+// refused naming the file.
+TEST(Api, Int8ModelFilesOfEarlierGeoStillOpen) {
+  torch::manual_seed(2);
+  const auto a = torch::rand({3, 64, 208}), b = torch::rand({3, 64, 208}), c = torch::rand({3, 64, 208});
+  Model lean = Model::load(checkpoint());
+  lean.quantize_int8({a, b, c}, false);
+  const auto dir = test::fresh_dir("api_int8_earlier");
+  lean.save(dir + "/now.pt");
+  EXPECT_TRUE(has_mapped_tensors(dir + "/now.pt"));
+  {  // the earlier layout, made of the pieces of the file written now
+    CheckpointFile now(dir + "/now.pt");
+    Networks nets = Networks::create(now.spec(), now.has_flow());
+    now.load_networks(nets, false, /*int8_kernels=*/true);
+    torch::serialize::OutputArchive earlier;
+    earlier.write("geo_model_format", c10::IValue(std::string("geo-model 2 (int8 kernels)")));
+    earlier.write("spec", c10::IValue(now.spec().to_yaml()));
+    const auto put = [&](const std::string& name, const torch::nn::Module& module) {
+      torch::serialize::OutputArchive state, kernels;
+      write_state(module, state);
+      earlier.write(name, state);
+      earlier.write("int8_" + name, *now.int8_ranges(name));
+      for (const auto& [k, t] : now.int8_kernels(name)) kernels.write(k, t.clone());
+      earlier.write("int8_kernels_" + name, kernels);
+    };
+    put("depth", *nets.depth);
+    put("pose", *nets.pose);
+    put("flow", *nets.flow);
+    save_archive(earlier, dir + "/earlier.pt");
+  }
+  EXPECT_FALSE(has_mapped_tensors(dir + "/earlier.pt"));
+  LoadOptions o;
+  o.precision = "int8";
+  const Model earlier = Model::load(dir + "/earlier.pt", o);
+  EXPECT_TRUE(torch::equal(earlier.depth(a), lean.depth(a)));
+  EXPECT_TRUE(torch::equal(earlier.flow(a, b), lean.flow(a, b)));
+  EXPECT_TRUE(torch::equal(earlier.pose({a, b, c}), lean.pose({a, b, c})));
+  torch::serialize::OutputArchive mislabelled;
+  mislabelled.write("geo_model_format", c10::IValue(std::string("geo-model 3 (int8 kernels, mapped)")));
+  mislabelled.write("spec", c10::IValue(CheckpointFile(dir + "/now.pt").spec().to_yaml()));
+  save_archive(mislabelled, dir + "/mislabelled.pt");
+  GEO_EXPECT_THROW_WITH(CheckpointFile(dir + "/mislabelled.pt"), "mislabelled.pt: model file format 'geo-model 3",
+                        "without its mapped kernels");
 }
 
 TEST(Api, CreatedModelsAreTheConfigsNetworksAndOnlyCheckpointsCarryTrainingConfigs) {
