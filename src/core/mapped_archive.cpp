@@ -151,7 +151,8 @@ MappedArchive open_mapped_archive(const std::string& path) {
         throw std::runtime_error(where + ": not 'name type sizes...': '" + line + "'");
       const auto dtype = static_cast<c10::ScalarType>(type);
       if (c10::isQIntType(dtype) || dtype == c10::ScalarType::Undefined)
-        throw std::runtime_error(where + ": tensor '" + name + "' of type " + std::to_string(type) + ", not a plain one");
+        throw std::runtime_error(where + ": tensor '" + name + "' of type " + std::to_string(type) +
+                                 ", not a plain one");
       const auto& r = record(kTensors + name);
       std::vector<int64_t> sizes;
       uint64_t numel = 1;
@@ -163,8 +164,8 @@ MappedArchive open_mapped_archive(const std::string& path) {
       }
       if (!fields.eof()) throw std::runtime_error(where + ": not 'name type sizes...': '" + line + "'");
       if (numel * c10::elementSize(dtype) != r.size)
-        throw std::runtime_error(where + ": tensor '" + name + "' of " + std::to_string(numel) + " elements, its record " +
-                                 std::to_string(r.size) + " bytes");
+        throw std::runtime_error(where + ": tensor '" + name + "' of " + std::to_string(numel) +
+                                 " elements, its record " + std::to_string(r.size) + " bytes");
       void* data = const_cast<char*>(bytes(r));
       out.tensors.by_name[name] = torch::from_blob(
           data, sizes, [mapping](void*) {}, torch::TensorOptions().dtype(dtype));

@@ -91,8 +91,8 @@ __attribute__((target("pclmul,sse4.1"))) inline __m128i fold(__m128i x, __m128i 
 __attribute__((target("pclmul,sse4.1"))) uint32_t crc32_folded(const unsigned char* p, size_t size, uint32_t crc) {
   const __m128i k1k2 = _mm_set_epi64x(0x01c6e41596, 0x0154442bd4);  // x^(4*128+32), x^(4*128-32) mod P
   const __m128i k3k4 = _mm_set_epi64x(0x00ccaa009e, 0x01751997d0);  // x^(128+32), x^(128-32) mod P
-  const __m128i k5 = _mm_set_epi64x(0, 0x0163cd6124);                 // x^64 mod P
-  const __m128i poly = _mm_set_epi64x(0x01f7011641, 0x01db710641);    // mu = floor(x^64 / P), P'
+  const __m128i k5 = _mm_set_epi64x(0, 0x0163cd6124);               // x^64 mod P
+  const __m128i poly = _mm_set_epi64x(0x01f7011641, 0x01db710641);  // mu = floor(x^64 / P), P'
   const __m128i low32 = _mm_setr_epi32(~0, 0, ~0, 0);
   const auto load = [](const unsigned char* q) { return _mm_loadu_si128(reinterpret_cast<const __m128i*>(q)); };
   __m128i x1 = _mm_xor_si128(load(p), _mm_cvtsi32_si128(static_cast<int>(crc)));
@@ -171,8 +171,7 @@ std::optional<std::vector<ZipRecord>> read_directory(const File& f, const std::s
       throw damaged(path, "its ZIP64 directory is unreadable");
     entries = u64(end64 + 32), cd_size = u64(end64 + 40), cd_offset = u64(end64 + 48);
   }
-  if (cd_size > f.size() || entries > cd_size / 46 + 1)
-    throw damaged(path, "its directory lies outside the file");
+  if (cd_size > f.size() || entries > cd_size / 46 + 1) throw damaged(path, "its directory lies outside the file");
   std::vector<unsigned char> cd(cd_size);
   if (!f.read(cd_offset, cd.data(), cd_size)) throw damaged(path, "truncated directory");
   std::vector<ZipRecord> records;
@@ -240,8 +239,7 @@ bool verify_zip_checksums(const std::string& path) {
       c = crc32(buffer.data(), n, c);
       data += n, left -= n;
     }
-    if (c != r.crc)
-      throw damaged(path, "record '" + r.name + "' fails its CRC-32 check: bytes were altered");
+    if (c != r.crc) throw damaged(path, "record '" + r.name + "' fails its CRC-32 check: bytes were altered");
   }
   if (!compressed.empty()) {
     // Inflated by LibTorch's own reader (which skips the CRCs), checked here. Its names leave out
@@ -256,8 +254,7 @@ bool verify_zip_checksums(const std::string& path) {
           if (n != r.size || crc32(data.get(), n) != r.crc)
             throw damaged(path, "record '" + r.name + "' fails its CRC-32 check: bytes were altered");
         } catch (const c10::Error& e) {
-          throw damaged(path, "record '" + r.name +
-                                   "' cannot be inflated: " + e.what_without_backtrace());
+          throw damaged(path, "record '" + r.name + "' cannot be inflated: " + e.what_without_backtrace());
         }
       }
     } catch (const c10::Error& e) {

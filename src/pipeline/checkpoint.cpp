@@ -96,10 +96,8 @@ void write_model_file(const std::string& path, const Networks& nets, bool half) 
     TORCH_CHECK(g->float_released(), "int8: a model whose networks let go of their float kernels in part");
     for (const auto& [name, t] : g->kernels()) kernels[std::string("int8_kernels_") + network + "/" + name] = t;
   }
-  if (int8_only)
-    save_archive_with_mapped(a, kernels, path);
-  else
-    save_archive(a, path);
+  if (int8_only) save_archive_with_mapped(a, kernels, path);
+  else save_archive(a, path);
 }
 
 void check_model_file_target(const std::string& label, const std::string& out, const std::string& source, bool force) {

@@ -20,7 +20,8 @@ bool maps_file(const std::string& path) {
   std::ifstream maps("/proc/self/maps");
   const std::string canonical = std::filesystem::canonical(path).string();
   for (std::string line; std::getline(maps, line);)
-    if (line.size() >= canonical.size() && line.compare(line.size() - canonical.size(), canonical.size(), canonical) == 0)
+    if (line.size() >= canonical.size() &&
+        line.compare(line.size() - canonical.size(), canonical.size(), canonical) == 0)
       return true;
   return false;
 }
