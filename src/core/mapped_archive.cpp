@@ -13,8 +13,6 @@
 #include <cstring>
 #include <filesystem>
 #include <future>
-#include <limits>
-#include <optional>
 #include <sstream>
 #include <stdexcept>
 
