@@ -12,7 +12,6 @@
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
-#include <future>
 #include <sstream>
 #include <stdexcept>
 
@@ -74,14 +73,12 @@ void save_archive_with_mapped(torch::serialize::OutputArchive& archive,
     return n;
   });
   std::string index;
-  std::vector<torch::Tensor> dense;
   for (const auto& [name, t] : tensors) {
     TORCH_CHECK(!name.empty() && name.find_first_of(" \t\r\n") == std::string::npos,
                 "a mapped tensor's name may not be empty or hold spaces, tabs or line breaks: '", name, "'");
     TORCH_CHECK(t.defined() && t.device().is_cpu() && !t.is_quantized(), "mapped tensor '", name,
                 "' must be a CPU tensor of a plain type");
     index += index_line(name, t);
-    dense.push_back(t.contiguous());
   }
   write_file_durable(path, [&](const ChunkWriter& write) {
     caffe2::serialize::PyTorchStreamWriter writer([&](const void* data, size_t n) {
@@ -90,10 +87,9 @@ void save_archive_with_mapped(torch::serialize::OutputArchive& archive,
     });
     writer.writeRecord(kArchive, bytes.data(), bytes.size());
     writer.writeRecord(kIndex, index.data(), index.size());
-    size_t i = 0;
-    for (const auto& entry : tensors) {
-      const auto& t = dense[i++];
-      writer.writeRecord(kTensors + entry.first, t.data_ptr(), t.nbytes());
+    for (const auto& [name, t] : tensors) {
+      const auto dense = t.contiguous();
+      writer.writeRecord(kTensors + name, dense.data_ptr(), dense.nbytes());
     }
     writer.writeEndOfFile();
   });
@@ -109,13 +105,8 @@ bool has_mapped_tensors(const std::string& path) {
 }
 
 MappedArchive open_mapped_archive(const std::string& path) {
-  const std::string why = unreadable_file_reason(path);
-  if (!why.empty()) throw std::runtime_error(path + ": " + why);
-  // Every record's CRC-32 on another thread while the archive is read; a damaged file is said first.
-  auto checked = std::async(std::launch::async, [&path] { verify_zip_checksums(path); });
   MappedArchive out;
-  std::exception_ptr error;
-  try {
+  read_while_checked(path, [&] {
     const auto records = zip_directory(path);
     if (!records) throw std::runtime_error(path + ": not a ZIP archive");
     std::map<std::string, ZipRecord> by_name;
@@ -168,11 +159,7 @@ MappedArchive open_mapped_archive(const std::string& path) {
       out.tensors.by_name[name] = torch::from_blob(
           data, sizes, [mapping](void*) {}, torch::TensorOptions().dtype(dtype));
     }
-  } catch (...) {
-    error = std::current_exception();
-  }
-  checked.get();  // (a damaged file is said first)
-  if (error) std::rethrow_exception(error);
+  });
   return out;
 }
 

@@ -4,7 +4,6 @@
 #include "core/zip_check.h"
 
 #include <filesystem>
-#include <future>
 #include <set>
 #include <stdexcept>
 #include <unistd.h>
@@ -107,28 +106,16 @@ void save_state(const torch::nn::Module& module, const std::string& path) {
 }
 
 torch::serialize::InputArchive open_archive(const std::string& path) {
-  const std::string why = unreadable_file_reason(path);
-  if (!why.empty()) throw std::runtime_error(path + ": " + why);
-  // Bytes altered inside a tensor would load silently (LibTorch does not check the records' CRCs):
-  // checked on another thread while LibTorch reads the file (a quarter of opening a model), and
-  // said first when both fail.
-  auto checked = std::async(std::launch::async, [&path] { verify_zip_checksums(path); });
   torch::serialize::InputArchive archive;
-  std::string unreadable;
-  std::exception_ptr other;
-  try {
-    archive.load_from(path);
-  } catch (const c10::Error& e) {
-    unreadable = e.what_without_backtrace();
-    unreadable = unreadable.substr(0, unreadable.find('\n'));
-  } catch (...) {  // what LibTorch makes of damaged bytes (std::out_of_range, ...)
-    other = std::current_exception();
-  }
-  checked.get();
-  if (other) std::rethrow_exception(other);
-  if (!unreadable.empty())
-    throw std::runtime_error(path + ": not a readable geo/LibTorch file, truncated or of another kind (" + unreadable +
-                             ")");
+  read_while_checked(path, [&] {
+    try {
+      archive.load_from(path);
+    } catch (const c10::Error& e) {
+      const std::string what = e.what_without_backtrace();
+      throw std::runtime_error(path + ": not a readable geo/LibTorch file, truncated or of another kind (" +
+                               what.substr(0, what.find('\n')) + ")");
+    }
+  });
   return archive;
 }
 

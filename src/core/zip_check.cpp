@@ -8,6 +8,7 @@
 #include <array>
 #include <cerrno>
 #include <cstring>
+#include <future>
 #include <stdexcept>
 #include <vector>
 
@@ -18,6 +19,8 @@
 
 #include <caffe2/serialize/inline_container.h>
 #include <c10/util/Exception.h>
+
+#include "core/files.h"
 
 namespace geo {
 namespace {
@@ -262,6 +265,20 @@ bool verify_zip_checksums(const std::string& path) {
     }
   }
   return true;
+}
+
+void read_while_checked(const std::string& path, const std::function<void()>& read) {
+  const std::string why = unreadable_file_reason(path);
+  if (!why.empty()) throw std::runtime_error(path + ": " + why);
+  auto checked = std::async(std::launch::async, [&path] { verify_zip_checksums(path); });
+  std::exception_ptr error;
+  try {
+    read();
+  } catch (...) {  // (what LibTorch makes of damaged bytes too: std::out_of_range, ...)
+    error = std::current_exception();
+  }
+  checked.get();
+  if (error) std::rethrow_exception(error);
 }
 
 }  // namespace geo

@@ -5,6 +5,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -19,6 +20,12 @@ uint32_t crc32(const void* data, size_t size, uint32_t crc = 0);
 // inflated by LibTorch's reader and then checked. Throws std::runtime_error naming the file and the damaged record;
 // a file that is no ZIP archive at all is left to the reader (returns false); true when checked.
 bool verify_zip_checksums(const std::string& path);
+
+// Runs `read` (which reads the archive `path`) while verify_zip_checksums checks it on another
+// thread: bytes altered inside a tensor would load silently, as LibTorch's reader skips the CRCs.
+// A damaged file is said first, then `read`'s own error. A missing file, a folder, a device or a
+// FIFO is refused before either starts, naming it.
+void read_while_checked(const std::string& path, const std::function<void()>& read);
 
 // A record of a ZIP archive's central directory.
 struct ZipRecord {
