@@ -84,11 +84,7 @@ std::vector<std::pair<std::string, std::string>> non_defaults(const Section& sec
   Section given = section, plain;
   std::vector<std::pair<std::string, std::string>> a, b, out;
   auto into = [](std::vector<std::pair<std::string, std::string>>& list) {
-    return [&list](const char* name, const auto& value) {
-      if constexpr (std::is_same_v<std::decay_t<decltype(value)>, bool>)
-        list.emplace_back(name, value ? "true" : "false");
-      else list.emplace_back(name, to_text(value));
-    };
+    return [&list](const char* name, const auto& value) { list.emplace_back(name, to_text(value)); };
   };
   auto collect_a = into(a);
   auto collect_b = into(b);

@@ -51,6 +51,7 @@ std::string to_text(const T& v) {
   }
 }
 inline std::string to_text(double v) { return format_double(v); }
+inline std::string to_text(bool v) { return v ? "true" : "false"; }
 inline std::string to_text(const std::string& v) { return "'" + v + "'"; }
 inline std::string to_text(const std::vector<std::string>& v) {
   std::string s = "[";
