@@ -90,9 +90,6 @@ void VideoDataConfig::validate(Checker& c) const {
   c.require(std::isfinite(standing_share) && standing_share > 0 && standing_share <= 1, "standing_share",
             standing_share,
             "must be in (0, 1] (the share of tracked features a rotation alone explains when the camera stands)");
-  c.require(!keep_standing || standing_parallax > 0, "keep_standing", keep_standing,
-            "needs the standing-camera test (standing_parallax > 0): without it no frame is known to be one where "
-            "the camera stood");
   c.require(std::isfinite(val_fraction) && val_fraction >= 0 && val_fraction <= 0.5, "val_fraction", val_fraction,
             "must be in [0, 0.5]");
   c.require(val_block >= 3 && val_block <= 1000000, "val_block", val_block, "must be in 3..1000000 frames");

@@ -88,11 +88,6 @@ struct VideoDataConfig {
   // data/video/camera_motion.h). 0 turns this off.
   double standing_parallax = 0.5;
   double standing_share = 0.5;
-  // Keep those frames instead (still counted as standing): the photometric loss learns nothing
-  // from them (auto-masking leaves out the still world, the PoseNet learns the camera stood), while
-  // what needs no camera motion, the road-plane prior (stages[].weights.ground) and smoothness, learns
-  // the things that pass a standing camera.
-  bool keep_standing = false;
   double val_fraction = 0.1;  // frames held out for validation, as whole time blocks (GeoNet: 10%)
   int val_block = 100;        // frames per validation block (10 s at 10 fps)
   bool crop = true;           // crop to the training aspect ratio before resizing (else stretch)
@@ -105,7 +100,6 @@ struct VideoDataConfig {
     v("static_threshold", static_threshold);
     v("standing_parallax", standing_parallax);
     v("standing_share", standing_share);
-    v("keep_standing", keep_standing);
     v("val_fraction", val_fraction);
     v("val_block", val_block);
     v("crop", crop);

@@ -17,7 +17,6 @@
 
 #include <spdlog/spdlog.h>
 
-#include <algorithm>
 #include <atomic>
 #include <csignal>
 #include <filesystem>
@@ -112,13 +111,6 @@ class Run {
           "no validation data ({}): nothing is validated, no best-<stage>.pt is kept, and a run folder "
           "resolves to its latest checkpoint",
           data_.format == "packed" ? "the cache has no val/" : "no validation list found");
-    const bool any_ground =
-        std::any_of(cfg_.stages.begin(), cfg_.stages.end(), [](const StageConfig& s) { return s.weights.ground > 0; });
-    if (data_.format == "video" && cfg_.data.video.keep_standing && !any_ground)
-      spdlog::warn(
-          "data.video.keep_standing keeps the frames where the camera stood, but no stage trains the road-plane "
-          "prior (stages[].weights.ground is 0): nothing learns from those frames then, and depth tends to a "
-          "constant; set --set stages.0.weights.ground=0.2 with it (docs/video.md)");
     int64_t total = 0;
     for (const auto& s : cfg_.stages) total += s.iterations;
     // The advice (0.1) only where it helps: a run too short even for 0.1 gets the count it needs.

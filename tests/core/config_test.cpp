@@ -322,8 +322,7 @@ TEST(Config, VideoConfigNeedsClipsAndTakesOneCamera) {
   msg.clear();
   try {
     geo::load_config(path, {"data.videos=[a.mp4]", "data.camera.fov_deg=90", "data.camera.intrinsics=[0,700,640,360]",
-                            "data.video.static_threshold=1.5", "data.video.crop_y=-1", "data.video.keep_standing=true",
-                            "data.video.standing_parallax=0"});
+                            "data.video.static_threshold=1.5", "data.video.crop_y=-1"});
   } catch (const ConfigError& e) {
     msg = e.what();
   }
@@ -331,9 +330,7 @@ TEST(Config, VideoConfigNeedsClipsAndTakesOneCamera) {
                            "key 'data.camera.intrinsics' = [0, 700, 640, 360] (from --set): focal lengths fx = 0, fy = "
                            "700 are not plausible",
                            "key 'data.video.static_threshold' = 1.5 (from --set): must be in [0, 1)",
-                           "key 'data.video.crop_y' = -1 (from --set): must be in [0, 1]",
-                           "key 'data.video.keep_standing' = true (from --set): needs the standing-camera test "
-                           "(standing_parallax > 0)"})
+                           "key 'data.video.crop_y' = -1 (from --set): must be in [0, 1]"})
     EXPECT_NE(msg.find(want), std::string::npos) << want << "\n" << msg;
 }
 

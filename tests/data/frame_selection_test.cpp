@@ -67,32 +67,6 @@ TEST(FrameSelection, StaticFramesAreLeftOutAndTheNextMovingFrameFollows) {
   EXPECT_EQ(all.kept().size(), 10u);
 }
 
-TEST(FrameSelection, FramesWhereTheCameraStoodAreKeptOnlyWhenAsked) {
-  // Frames 0..9, frame 6 equal to frame 2, every other one changed; the camera stands before frames
-  // 3..5 (a truck passing) and moves before the others. Without keep_standing 3..5 are left out and
-  // frame 6, equal to the last kept frame 2, is static. With it 3..5 are kept and marked, the camera
-  // still counts as standing there, and frame 6 differs from the last kept frame 5: kept.
-  std::vector<torch::Tensor> thumbs;
-  for (int i = 0; i < 10; ++i) thumbs.push_back(torch::full({8, 8}, 0.05 * (i == 6 ? 2 : i)));
-  auto stands = [](int i) { return i >= 3 && i <= 5; };
-  for (bool keep : {false, true}) {
-    geo::FrameSelector s(1, 0.05, keep);
-    std::vector<int64_t> stood;
-    for (int i = 0; i < 10; ++i) {
-      const bool kept = s.offer(i, thumbs[static_cast<size_t>(i)], [&] { return !stands(i); });
-      if (kept && s.stood()) stood.push_back(i);
-    }
-    EXPECT_EQ(s.standing(), 3);
-    EXPECT_EQ(s.kept_standing(), keep ? 3 : 0);
-    EXPECT_EQ(s.skipped_static(), keep ? 0 : 1);
-    EXPECT_EQ(s.kept(),
-              keep ? (std::vector<int64_t>{0, 1, 2, 3, 4, 5, 6, 7, 8, 9}) : (std::vector<int64_t>{0, 1, 2, 7, 8, 9}));
-    EXPECT_EQ(stood, keep ? (std::vector<int64_t>{3, 4, 5}) : (std::vector<int64_t>{}));
-    // The camera moved before 1, 2, (6,) 7, 8, 9 of the 9 frames after the first.
-    EXPECT_DOUBLE_EQ(s.moving_share(), keep ? 6.0 / 9.0 : 5.0 / 9.0);
-  }
-}
-
 TEST(FrameSelection, ValidationBlocksNeverNeighbourTrainingFrames) {
   // 100 frames, 10%, blocks of up to 100: one block, the last 10 frames; frame 89 left out.
   auto r = split_clip(100, 0.1, 100, 3);

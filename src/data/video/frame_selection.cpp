@@ -24,8 +24,8 @@ double changed_fraction(const torch::Tensor& a, const torch::Tensor& b) {
   return (a - b).abs().gt(kChangedLevel).to(torch::kFloat64).mean().item<double>();
 }
 
-FrameSelector::FrameSelector(int64_t stride, double static_threshold, bool keep_standing)
-    : stride_(std::max<int64_t>(1, stride)), threshold_(static_threshold), keep_standing_(keep_standing) {}
+FrameSelector::FrameSelector(int64_t stride, double static_threshold)
+    : stride_(std::max<int64_t>(1, stride)), threshold_(static_threshold) {}
 
 bool FrameSelector::offer(int64_t index, const torch::Tensor& thumbnail, const std::function<bool()>& camera_moved) {
   ++decoded_;
@@ -42,25 +42,19 @@ bool FrameSelector::offer(int64_t index, const torch::Tensor& thumbnail, const s
     }
     if (camera_moved && !camera_moved()) {
       ++standing_;
-      if (!keep_standing_) return false;
-      ++kept_standing_;
-      last_kept_ = thumbnail;
-      kept_.push_back(index);
-      stood_ = true;
-      return true;
+      return false;
     }
   }
   last_kept_ = thumbnail;
   kept_.push_back(index);
-  stood_ = false;
   return true;
 }
 
 double FrameSelector::moving_share() const {
   const int64_t after_first = looked_at() - 1;
-  return after_first > 0 ? static_cast<double>(static_cast<int64_t>(kept_.size()) - kept_standing_ - 1) /
-                               static_cast<double>(after_first)
-                         : 1.0;
+  return after_first > 0
+             ? static_cast<double>(static_cast<int64_t>(kept_.size()) - 1) / static_cast<double>(after_first)
+             : 1.0;
 }
 
 ClipRuns split_clip(int64_t n, double val_fraction, int64_t val_block, int64_t seq_length) {

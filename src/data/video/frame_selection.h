@@ -31,13 +31,10 @@ double changed_fraction(const torch::Tensor& a, const torch::Tensor& b);
 // at, and kept unless less than `static_threshold` of its pixels changed since the last kept frame
 // or, where enough changed, the camera stood while other things moved (`camera_moved`, for example
 // camera_motion.h's test against the last kept frame). So after a stop the next kept frame is the
-// next one where the camera moved, as GeoNet's static-frame removal. With `keep_standing` the frames
-// where the camera stood while other things moved are kept too (what needs no camera motion, such as
-// the road-plane prior, learns from them), marked by stood(), and count as kept for the pixel-change
-// rule; the camera's own motion is still told against the last frame it moved to (the caller's test).
+// next one where the camera moved, as GeoNet's static-frame removal.
 class FrameSelector {
  public:
-  FrameSelector(int64_t stride, double static_threshold, bool keep_standing = false);
+  FrameSelector(int64_t stride, double static_threshold);
   // Frame `index` (decoding order, from 0) with its thumbnail (undefined for frames skipped by the
   // rate: wants() says whether one is needed). `camera_moved`, where given, is asked when enough
   // pixels changed: whether the camera moved since the last kept frame. True when the frame is kept.
@@ -48,24 +45,19 @@ class FrameSelector {
   int64_t decoded() const { return decoded_; }
   int64_t looked_at() const { return decoded_ - by_rate_; }
   int64_t skipped_by_rate() const { return by_rate_; }
-  int64_t skipped_static() const { return static_; }        // under static_threshold of the pixels changed
-  int64_t standing() const { return standing_; }            // pixels changed, the camera stood
-  int64_t kept_standing() const { return kept_standing_; }  // of those, kept (keep_standing)
-  // Whether the last frame kept is one where the camera stood (only with keep_standing).
-  bool stood() const { return stood_; }
+  int64_t skipped_static() const { return static_; }         // under static_threshold of the pixels changed
+  int64_t skipped_standing() const { return standing_; }     // pixels changed, the camera stood
   double largest_change() const { return largest_change_; }  // over the frames looked at
   // The share of the frames looked at after the first where the camera had moved since the last
-  // frame kept where it moved (1 when only one was looked at).
+  // kept frame (1 when only one was looked at).
   double moving_share() const;
 
  private:
   int64_t stride_;
   double threshold_;
-  bool keep_standing_;
   torch::Tensor last_kept_;
   std::vector<int64_t> kept_;
-  int64_t decoded_ = 0, by_rate_ = 0, static_ = 0, standing_ = 0, kept_standing_ = 0;
-  bool stood_ = false;
+  int64_t decoded_ = 0, by_rate_ = 0, static_ = 0, standing_ = 0;
   double largest_change_ = 0;
 };
 

@@ -123,7 +123,7 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
   const auto& v = d.video;
   FrameStream stream(path, "clip");
   const double source_fps = stream.is_video() && v.source_fps == 0 ? stream.fps() : v.source_fps;
-  FrameSelector selector(frame_rate_stride(source_fps, v.fps), v.static_threshold, v.keep_standing);
+  FrameSelector selector(frame_rate_stride(source_fps, v.fps), v.static_threshold);
   const CameraMotionOptions standing{v.standing_parallax, v.standing_share};
   // The standing-camera test sees the crop window at up to kMotionWidth columns: at least the
   // training size's detail, and the same test whatever size the networks train at.
@@ -160,7 +160,7 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
       camera_moved = [&] { return standing_test->moved(grey); };
     }
     const bool kept = selector.offer(idx, motion_thumbnail(mat_to_tensor(small, path)), camera_moved);
-    if (standing_test) standing_test->looked_at(grey, kept && !selector.stood());
+    if (standing_test) standing_test->looked_at(grey, kept);
     if (!kept) continue;
     c.index.push_back(idx);
     if (stream.is_video()) {  // kept in memory as JPEG; a folder's frames are read again from disk
@@ -191,17 +191,11 @@ Clip read_clip(const std::string& path, const DataConfig& d, std::string* report
   *report = "clip '" + path + "': " + std::to_string(total) + " frames (" + std::to_string(W0) + "x" +
             std::to_string(H0) + ", " + rate + "); " + ordinal(stride) +
             (stride > 1 ? " for " + fixed(v.fps, 0) + " fps" : "") + ", " +
-            (v.keep_standing
-                 ? std::to_string(selector.skipped_static()) + " static frames left out (with under " +
-                       fixed(100 * v.static_threshold, 1) + "% of the pixels changed), " +
-                       std::to_string(selector.standing()) +
-                       " with the camera standing while other things moved kept (data.video.keep_standing)"
-                 : std::to_string(selector.skipped_static() + selector.standing()) + " static frames left out (" +
-                       std::to_string(selector.skipped_static()) + " with under " + fixed(100 * v.static_threshold, 1) +
-                       "% of the pixels changed, " + std::to_string(selector.standing()) +
-                       " with the camera standing while other things moved)") +
-            ": " + std::to_string(kept) + " kept; the camera moved in " + fixed(100 * selector.moving_share(), 0) +
-            "% of the frames looked at";
+            std::to_string(selector.skipped_static() + selector.skipped_standing()) + " static frames left out (" +
+            std::to_string(selector.skipped_static()) + " with under " + fixed(100 * v.static_threshold, 1) +
+            "% of the pixels changed, " + std::to_string(selector.skipped_standing()) +
+            " with the camera standing while other things moved): " + std::to_string(kept) +
+            " kept; the camera moved in " + fixed(100 * selector.moving_share(), 0) + "% of the frames looked at";
   if (selector.moving_share() < kFewMovingFrames)
     *warning = "clip '" + path + "': the camera moved in only " + fixed(100 * selector.moving_share(), 0) +
                "% of its " + std::to_string(selector.looked_at()) +
