@@ -110,7 +110,8 @@ def main():
     a = ap.parse_args()
     # bf16 rows only where the CPU computes in bf16 (AVX512-BF16 or AMX): elsewhere LibTorch emulates
     # it in fp32 at several times fp32's time, which measures nothing a user would run.
-    a.bf16 = any(f in cpu()[1].split() for f in ("avx512_bf16", "amx_bf16"))
+    model, flags = cpu()
+    a.bf16 = any(f in flags.split() for f in ("avx512_bf16", "amx_bf16"))
     if not a.bf16:
         print("vs_onnxruntime: this CPU has neither AVX512-BF16 nor AMX: the bf16 rows are left out", flush=True)
     a.repo = pathlib.Path(__file__).resolve().parents[1]
@@ -151,7 +152,6 @@ def main():
                 times.setdefault((name, fr), []).append(ms)
                 print(f"round {r + 1}/{a.rounds}: {name}, FR {fr}: {ms:.1f} ms", flush=True)
     variants = list(times)
-    model, flags = cpu()
     med = {k: statistics.median(v) for k, v in times.items()}
     lines = [f"DepthNet inference, batch 1, {a.height}x{a.width}, {a.threads} threads, median of {a.rounds} rounds "
              f"(each the median of {a.iters} runs); CPU {model} ({flags}); ONNX Runtime {a.ort_version} (onnxruntime-node); "
