@@ -14,6 +14,7 @@
 #include "models/decoder.h"
 #include "models/fr.h"
 #include "models/graph.h"
+#include "models/int8_engine.h"
 #include "models/layers.h"
 #include "models/pose_net.h"
 #include "models/upsample_conv.h"
@@ -177,13 +178,15 @@ struct Count {
   torch::Tensor pred(Conv2dImpl& m, const torch::Tensor& x) { return conv_shaped(m.options, x); }
 };
 
-// w qint8 [Co,Ci,k,k] per output channel (zero points 0) and its float bias -> prepacked.
+// w qint8 [Co,Ci,k,k] per output channel (zero points 0) and its float bias -> prepacked (a 1x1
+// kernel as a dilated one where int8_dilated_1x1 says).
 c10::IValue prepack(const torch::Tensor& qweight, const torch::Tensor& bias, int64_t stride, int64_t padding) {
+  const int64_t dilation = qweight.size(2) == 1 && qweight.size(3) == 1 && int8_dilated_1x1() ? 2 : 1;
   torch::jit::Stack stack{qweight,
                           bias.defined() ? c10::IValue(bias.to(torch::kFloat32)) : c10::IValue(),
                           std::vector<int64_t>{stride, stride},
                           std::vector<int64_t>{padding, padding},
-                          std::vector<int64_t>{1, 1},
+                          std::vector<int64_t>{dilation, dilation},
                           int64_t{1}};
   op("quantized::conv2d_prepack", "").callBoxed(&stack);
   return stack.at(0);

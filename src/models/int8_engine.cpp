@@ -44,4 +44,17 @@ bool int8_reduced_range() {
 #endif
 }
 
+bool int8_dilated_1x1() {
+#if defined(__GNUC__) && defined(__x86_64__)
+  static const bool amx = [] {
+    // AMX-INT8: CPUID leaf 7, sub-leaf 0, EDX bit 25.
+    unsigned eax = 0, ebx = 0, ecx = 0, edx = 0;
+    return __get_cpuid_count(7, 0, &eax, &ebx, &ecx, &edx) && (edx & (1u << 25));
+  }();
+  return amx;
+#else
+  return false;
+#endif
+}
+
 }  // namespace geo

@@ -16,4 +16,11 @@ std::string select_int8_engine();
 // at 0.16 of its disparity's spread.
 bool int8_reduced_range();
 
+// Whether 1x1 int8 convolutions are packed as dilated ones (dilation 2: the same arithmetic for a
+// 1x1 kernel) so that oneDNN runs them with its general kernel instead of its 1x1 one: on CPUs with
+// AMX, oneDNN's AMX 1x1 int8 kernel writes outside its buffers for some small images (oneDNN 2.6, as
+// in LibTorch 1.13: 64 -> 128 channels on 1x27 ... 1x48 pixels, 2048 -> 512 on 4x12), corrupting
+// the heap (Int8.EverySizeAndCalibrationIsMemorySafe). The general kernel gives the same bytes.
+bool int8_dilated_1x1();
+
 }  // namespace geo
