@@ -86,11 +86,10 @@ torch::Tensor ConvBnImpl::forward_upsampled(const torch::Tensor& x) {
   if (x.size(2) * x.size(3) < kMinSubpixelArea) return forward(upsample2(x, UpsampleMode::kNearest));
   prepack_once(x);
   const int64_t B = x.size(0), Co = conv->weight.size(0), h = x.size(2), w = x.size(3);
-  if (uses_packed(x, packed_phase_weight_.defined())) {
-    const auto y = interleave_phases(
-        packed_conv(x, packed_phase_weight_, packed_phase_bias_, {1, 1}, {1, 1}).view({B, 2, 2, Co, h + 1, w + 1}));
-    return relu ? torch::relu(y) : y;
-  }
+  if (uses_packed(x, packed_phase_weight_.defined()))
+    return interleave_phases_channels_last(
+        packed_conv(x, packed_phase_weight_, packed_phase_bias_, {1, 1}, {1, 1}).view({B, 2, 2, Co, h + 1, w + 1}),
+        relu);
   return conv_bn_relu(x, conv3x3_of_upsampled);
 }
 

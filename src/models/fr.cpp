@@ -124,21 +124,29 @@ struct MaxMeanPool : torch::autograd::Function<MaxMeanPool> {
   }
 };
 
+// x in channels-last order and not also in the dense one (inference's activations): pooled where
+// it lies, as [B,H,W,C], instead of copied into the dense order first.
+bool pooled_channels_last(const torch::Tensor& x) {
+  return x.is_contiguous(at::MemoryFormat::ChannelsLast) && !x.is_contiguous();
+}
+
 }  // namespace
 
 std::pair<torch::Tensor, torch::Tensor> max_mean_over_channels(const torch::Tensor& x) {
   TORCH_CHECK(x.dim() == 4, "x must be [B,C,H,W], got ", x.sizes());
   if (!fused_cpu_kernel_applies(x)) return {x.amax(1, true), x.mean(1, true)};
   const int64_t B = x.size(0), C = x.size(1), H = x.size(2), W = x.size(3);
-  const auto r = MaxMeanPool::apply(x, C, H * W);
+  const auto r =
+      pooled_channels_last(x) ? MaxMeanPool::apply(x.permute({0, 2, 3, 1}), C, 1) : MaxMeanPool::apply(x, C, H * W);
   return {r[0].view({B, 1, H, W}), r[1].view({B, 1, H, W})};
 }
 
 std::pair<torch::Tensor, torch::Tensor> max_mean_over_space(const torch::Tensor& x) {
   TORCH_CHECK(x.dim() == 4, "x must be [B,C,H,W], got ", x.sizes());
   if (!fused_cpu_kernel_applies(x)) return {x.amax({2, 3}, true), x.mean({2, 3}, true)};
-  const int64_t B = x.size(0), C = x.size(1);
-  const auto r = MaxMeanPool::apply(x, x.size(2) * x.size(3), 1);
+  const int64_t B = x.size(0), C = x.size(1), HW = x.size(2) * x.size(3);
+  const auto r =
+      pooled_channels_last(x) ? MaxMeanPool::apply(x.permute({0, 2, 3, 1}), HW, C) : MaxMeanPool::apply(x, HW, 1);
   return {r[0].view({B, C, 1, 1}), r[1].view({B, C, 1, 1})};
 }
 

@@ -37,9 +37,35 @@ struct FloatOps {
   torch::Tensor upconv(ConvBnImpl& m, const torch::Tensor& x, UpsampleMode mode) {
     return mode == UpsampleMode::kNearest ? m.forward_upsampled(x) : m.forward(upsample2(x, mode));
   }
-  torch::Tensor add_relu(const torch::Tensor& a, const torch::Tensor& b) { return torch::relu(a + b); }
+  // Inference on the CPU: one fused pass, in place over `a` (the block's own output, which nothing
+  // else holds); the same numbers as relu(a + b).
+  torch::Tensor add_relu(const torch::Tensor& a, const torch::Tensor& b) {
+    if (torch::GradMode::is_enabled() || !a.is_cpu() || a.scalar_type() != torch::kFloat32 || a.sizes() != b.sizes())
+      return torch::relu(a + b);
+    auto out = a;
+    return at::_add_relu_(out, b);
+  }
   torch::Tensor fr(FeatureRefinementImpl& m, const torch::Tensor& x) { return m.forward(x); }
-  torch::Tensor cat(const std::vector<torch::Tensor>& parts) { return torch::cat(parts, 1); }
+  // Inference on the CPU where the first part is channels-last (the prepacked float convolutions
+  // read and write that order): the result in it too, so that the next convolution reads it as it
+  // lies, each part copied into its channels (LibTorch's channels-last cat copies a pixel's channels
+  // part by part: 4-6x slower beside a one-channel part).
+  torch::Tensor cat(const std::vector<torch::Tensor>& parts) {
+    if (torch::GradMode::is_enabled() || !parts[0].is_cpu() || parts[0].dim() != 4 ||
+        !parts[0].is_contiguous(at::MemoryFormat::ChannelsLast))
+      return torch::cat(parts, 1);
+    int64_t channels = 0;
+    for (const auto& p : parts) channels += p.size(1);
+    const auto& first = parts[0];
+    auto out = torch::empty({first.size(0), channels, first.size(2), first.size(3)},
+                            first.options().memory_format(at::MemoryFormat::ChannelsLast));
+    int64_t at = 0;
+    for (const auto& p : parts) {
+      out.narrow(1, at, p.size(1)).copy_(p);
+      at += p.size(1);
+    }
+    return out;
+  }
   // A prediction head (a plain convolution, float output).
   torch::Tensor pred(Conv2dImpl& m, const torch::Tensor& x) { return m.forward(x); }
 };

@@ -89,6 +89,22 @@ torch::Tensor phase_kernels(const torch::Tensor& weight) {
 
 torch::Tensor interleave_phases(const torch::Tensor& phases) { return InterleavePhases::apply(phases); }
 
+torch::Tensor interleave_phases_channels_last(const torch::Tensor& phases, bool relu) {
+  TORCH_CHECK(phases.dim() == 6 && phases.size(1) == 2 && phases.size(2) == 2,
+              "interleave_phases_channels_last: phases must be [B,2,2,Co,h+1,w+1], got ", phases.sizes());
+  const int64_t B = phases.size(0), Co = phases.size(3), h = phases.size(4) - 1, w = phases.size(5) - 1;
+  auto out = torch::empty({B, Co, 2 * h, 2 * w}, phases.options().memory_format(at::MemoryFormat::ChannelsLast));
+  const auto image6 = out.view({B, Co, h, 2, w, 2});  // (splitting rows and columns keeps the strides)
+  for (int64_t a = 0; a < 2; ++a)
+    for (int64_t b = 0; b < 2; ++b) {
+      const auto window = phases.select(1, a).select(1, b).narrow(2, a, h).narrow(3, b, w);
+      auto pixels = image6.select(5, b).select(3, a);
+      if (relu) at::clamp_min_out(pixels, window, 0);
+      else pixels.copy_(window);
+    }
+  return out;
+}
+
 torch::Tensor conv3x3_of_upsampled(const torch::Tensor& x, const torch::Tensor& weight, const torch::Tensor& bias) {
   TORCH_CHECK(
       x.dim() == 4 && weight.dim() == 4 && weight.size(2) == 3 && weight.size(3) == 3 && weight.size(1) == x.size(1),

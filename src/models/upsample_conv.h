@@ -18,5 +18,8 @@ torch::Tensor conv3x3_of_upsampled(const torch::Tensor& x, const torch::Tensor& 
 // [B,Co,2h,2w].
 torch::Tensor phase_kernels(const torch::Tensor& weight);
 torch::Tensor interleave_phases(const torch::Tensor& phases);
+// The same for inference (no autograd), into a channels-last [B,Co,2h,2w], ReLU applied on the way
+// where `relu`: what the next (prepacked, channels-last) convolution reads as it lies.
+torch::Tensor interleave_phases_channels_last(const torch::Tensor& phases, bool relu);
 
 }  // namespace geo

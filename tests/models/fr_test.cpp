@@ -96,23 +96,28 @@ TEST(FeatureRefinement, ParameterCountIsSharedMlpPlusSpatialConv) {
 TEST(FeatureRefinement, FusedMaxMeanPoolingMatchesAmaxAndMean) {
   torch::manual_seed(5);
   const auto opts = torch::TensorOptions().dtype(torch::kFloat64);
-  for (auto shape : std::vector<std::vector<int64_t>>{{2, 3, 4, 5}, {1, 1, 1, 1}, {2, 16, 3, 1}}) {
-    auto x = torch::relu(torch::randint(-3, 4, shape, opts)).requires_grad_();  // many ties
-    for (bool channels : {true, false}) {
-      const auto got = channels ? geo::max_mean_over_channels(x) : geo::max_mean_over_space(x);
-      const auto ref = channels ? std::make_pair(x.amax(1, true), x.mean(1, true))
-                                : std::make_pair(x.amax({2, 3}, true), x.mean({2, 3}, true));
-      ASSERT_EQ(got.first.sizes(), ref.first.sizes());
-      EXPECT_TRUE(torch::equal(got.first, ref.first));
-      EXPECT_LT((got.second - ref.second).abs().max().item<double>(), 1e-12);
-      const auto gm = torch::randn_like(ref.first), ga = torch::randn_like(ref.second);
-      const auto want = torch::autograd::grad({ref.first, ref.second}, {x}, {gm, ga}, /*retain_graph=*/true)[0];
-      const auto have = torch::autograd::grad({got.first, got.second}, {x}, {gm, ga}, /*retain_graph=*/true)[0];
-      EXPECT_LT((want - have).abs().max().item<double>(), 1e-12) << (channels ? "channels" : "space");
-      const auto max_only = torch::autograd::grad({got.first}, {x}, {gm})[0];
-      EXPECT_LT((max_only - torch::autograd::grad({ref.first}, {x}, {gm})[0]).abs().max().item<double>(), 1e-12);
+  // Also in channels-last order (inference's activations), pooled where they lie.
+  for (auto shape : std::vector<std::vector<int64_t>>{{2, 3, 4, 5}, {1, 1, 1, 1}, {2, 16, 3, 1}})
+    for (bool channels_last : {false, true}) {
+      auto x = torch::relu(torch::randint(-3, 4, shape, opts));  // many ties
+      if (channels_last) x = x.contiguous(at::MemoryFormat::ChannelsLast);
+      x.requires_grad_();
+      SCOPED_TRACE(channels_last ? "channels-last" : "dense");
+      for (bool channels : {true, false}) {
+        const auto got = channels ? geo::max_mean_over_channels(x) : geo::max_mean_over_space(x);
+        const auto ref = channels ? std::make_pair(x.amax(1, true), x.mean(1, true))
+                                  : std::make_pair(x.amax({2, 3}, true), x.mean({2, 3}, true));
+        ASSERT_EQ(got.first.sizes(), ref.first.sizes());
+        EXPECT_TRUE(torch::equal(got.first, ref.first));
+        EXPECT_LT((got.second - ref.second).abs().max().item<double>(), 1e-12);
+        const auto gm = torch::randn_like(ref.first), ga = torch::randn_like(ref.second);
+        const auto want = torch::autograd::grad({ref.first, ref.second}, {x}, {gm, ga}, /*retain_graph=*/true)[0];
+        const auto have = torch::autograd::grad({got.first, got.second}, {x}, {gm, ga}, /*retain_graph=*/true)[0];
+        EXPECT_LT((want - have).abs().max().item<double>(), 1e-12) << (channels ? "channels" : "space");
+        const auto max_only = torch::autograd::grad({got.first}, {x}, {gm})[0];
+        EXPECT_LT((max_only - torch::autograd::grad({ref.first}, {x}, {gm})[0]).abs().max().item<double>(), 1e-12);
+      }
     }
-  }
   // Hand-computed tie: channels (2, 2, 1) at one pixel -> max 2, gradient 1 shared as (0.5, 0.5, 0).
   const auto t = torch::tensor({2., 2., 1.}, opts).view({1, 3, 1, 1}).requires_grad_();
   const auto g = torch::autograd::grad({geo::max_mean_over_channels(t).first}, {t})[0];

@@ -14,6 +14,7 @@
 #include "models/flow_net.h"
 #include "models/fr.h"
 #include "models/conv_bn.h"
+#include "models/graph.h"
 #include "models/layers.h"
 #include "models/prepacked_conv.h"
 #include "models/sync_batch_norm.h"
@@ -45,6 +46,32 @@ TEST(Layers, Conv3x3OfUpsampledEqualsConvOfUpsampledImage) {
   EXPECT_LT((conv3x3_of_upsampled(x, w, {}) - torch::conv2d(nearest_x2(x), w, {}, 1, 1)).abs().max().item<double>(),
             1e-12);
   EXPECT_THROW(conv3x3_of_upsampled(x, torch::randn({5, 3, 3, 3}, torch::kFloat64), {}), c10::Error);
+}
+
+// Inference's channels-last shortcuts give exactly the plain operations' values: the phases
+// interleaved (with and without the ReLU), the decoder's concatenation, a block's add + ReLU.
+TEST(Layers, ChannelsLastInferenceShortcutsAreThePlainOperations) {
+  torch::manual_seed(4);
+  const torch::NoGradGuard no_grad;
+  for (auto hw : std::vector<std::pair<int64_t, int64_t>>{{1, 1}, {3, 5}}) {
+    const auto phases = torch::randn({2, 2, 2, 6, hw.first + 1, hw.second + 1});
+    for (bool relu : {false, true}) {
+      const auto got = interleave_phases_channels_last(phases, relu);
+      const auto want = relu ? torch::relu(interleave_phases(phases)) : interleave_phases(phases);
+      EXPECT_TRUE(got.is_contiguous(at::MemoryFormat::ChannelsLast));
+      EXPECT_TRUE(torch::equal(got, want)) << hw.first << "x" << hw.second << (relu ? " relu" : "");
+    }
+  }
+  EXPECT_THROW(interleave_phases_channels_last(torch::zeros({1, 4, 3, 2, 2}), false), c10::Error);
+  FloatOps ops;
+  const auto a = torch::randn({2, 5, 3, 4}).contiguous(at::MemoryFormat::ChannelsLast);
+  const std::vector<torch::Tensor> parts = {a, torch::randn({2, 3, 3, 4}), torch::randn({2, 1, 3, 4})};
+  const auto cat = ops.cat(parts);
+  EXPECT_TRUE(cat.is_contiguous(at::MemoryFormat::ChannelsLast));
+  EXPECT_TRUE(torch::equal(cat, torch::cat(parts, 1)));
+  const auto b = torch::randn({2, 5, 3, 4});
+  const auto want = torch::relu(a + b);
+  EXPECT_TRUE(torch::equal(ops.add_relu(a.clone(), b), want));
 }
 
 // geo::conv2d against a float64 convolution (not run by oneDNN), values and gradients, for channel
