@@ -86,10 +86,14 @@ torch::Tensor ConvBnImpl::forward_upsampled(const torch::Tensor& x) {
   if (x.size(2) * x.size(3) < kMinSubpixelArea) return forward(upsample2(x, UpsampleMode::kNearest));
   prepack_once(x);
   const int64_t B = x.size(0), Co = conv->weight.size(0), h = x.size(2), w = x.size(3);
-  if (uses_packed(x, packed_phase_weight_.defined()))
-    return interleave_phases_channels_last(
-        packed_conv(x, packed_phase_weight_, packed_phase_bias_, {1, 1}, {1, 1}).view({B, 2, 2, Co, h + 1, w + 1}),
-        relu);
+  if (uses_packed(x, packed_phase_weight_.defined())) {
+    const auto phases =
+        packed_conv(x, packed_phase_weight_, packed_phase_bias_, {1, 1}, {1, 1}).view({B, 2, 2, Co, h + 1, w + 1});
+    // float32: channels-last, as the prepacked convolutions after it read; bf16's read the dense order.
+    if (packed_conv_) return interleave_phases_channels_last(phases, relu);
+    const auto y = interleave_phases(phases);
+    return relu ? torch::relu(y) : y;
+  }
   return conv_bn_relu(x, conv3x3_of_upsampled);
 }
 
