@@ -40,14 +40,16 @@ torch::Tensor phase_matrix(const torch::TensorOptions& options) {
 // gradient buffer (slicing y with select/narrow instead costs a zero-filled y-sized buffer and an
 // addition per phase in the backward pass).
 struct InterleavePhases : torch::autograd::Function<InterleavePhases> {
+  // (relu: the image gets max(window, 0); inference's channels-last interleave)
   static void copy_windows(const torch::Tensor& phases, const torch::Tensor& image6, int64_t h, int64_t w,
-                           bool to_image) {
+                           bool to_image, bool relu = false) {
     for (int64_t a = 0; a < 2; ++a)
       for (int64_t b = 0; b < 2; ++b) {
         auto window = phases.select(1, a).select(1, b).narrow(2, a, h).narrow(3, b, w);
         auto pixels = image6.select(5, b).select(3, a);
-        if (to_image) pixels.copy_(window);
-        else window.copy_(pixels);
+        if (!to_image) window.copy_(pixels);
+        else if (relu) at::clamp_min_out(pixels, window, 0);
+        else pixels.copy_(window);
       }
   }
   static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& y) {
@@ -94,14 +96,8 @@ torch::Tensor interleave_phases_channels_last(const torch::Tensor& phases, bool 
               "interleave_phases_channels_last: phases must be [B,2,2,Co,h+1,w+1], got ", phases.sizes());
   const int64_t B = phases.size(0), Co = phases.size(3), h = phases.size(4) - 1, w = phases.size(5) - 1;
   auto out = torch::empty({B, Co, 2 * h, 2 * w}, phases.options().memory_format(at::MemoryFormat::ChannelsLast));
-  const auto image6 = out.view({B, Co, h, 2, w, 2});  // (splitting rows and columns keeps the strides)
-  for (int64_t a = 0; a < 2; ++a)
-    for (int64_t b = 0; b < 2; ++b) {
-      const auto window = phases.select(1, a).select(1, b).narrow(2, a, h).narrow(3, b, w);
-      auto pixels = image6.select(5, b).select(3, a);
-      if (relu) at::clamp_min_out(pixels, window, 0);
-      else pixels.copy_(window);
-    }
+  // (splitting rows and columns keeps the channels-last strides)
+  InterleavePhases::copy_windows(phases, out.view({B, Co, h, 2, w, 2}), h, w, /*to_image=*/true, relu);
   return out;
 }
 
