@@ -30,14 +30,26 @@ std::string select_int8_engine() {
   return "";
 }
 
+namespace {
+
+// Whether CPUID leaf 7, sub-leaf `subleaf`, sets `bit` of register EAX (0) or EDX (3) on this CPU
+// (false away from x86-64).
+bool cpuid7_bit(unsigned subleaf, int reg, unsigned bit) {
+#if defined(__GNUC__) && defined(__x86_64__)
+  unsigned r[4] = {0, 0, 0, 0};
+  return __get_cpuid_count(7, subleaf, &r[0], &r[1], &r[2], &r[3]) && (r[reg] & (1u << bit));
+#else
+  (void)subleaf, (void)reg, (void)bit;
+  return false;
+#endif
+}
+
+}  // namespace
+
 bool int8_reduced_range() {
 #if defined(__GNUC__) && defined(__x86_64__)
-  static const bool reduced = [] {
-    // AVX-VNNI (which __builtin_cpu_supports does not know in every GCC): CPUID leaf 7, sub-leaf 1, EAX bit 4.
-    unsigned eax = 0, ebx = 0, ecx = 0, edx = 0;
-    const bool avx_vnni = __get_cpuid_count(7, 1, &eax, &ebx, &ecx, &edx) && (eax & (1u << 4));
-    return !avx_vnni && !__builtin_cpu_supports("avx512vnni");
-  }();
+  // AVX-VNNI (which __builtin_cpu_supports does not know in every GCC): sub-leaf 1, EAX bit 4.
+  static const bool reduced = !cpuid7_bit(1, 0, 4) && !__builtin_cpu_supports("avx512vnni");
   return reduced;
 #else
   return false;
@@ -45,16 +57,8 @@ bool int8_reduced_range() {
 }
 
 bool int8_dilated_1x1() {
-#if defined(__GNUC__) && defined(__x86_64__)
-  static const bool amx = [] {
-    // AMX-INT8: CPUID leaf 7, sub-leaf 0, EDX bit 25.
-    unsigned eax = 0, ebx = 0, ecx = 0, edx = 0;
-    return __get_cpuid_count(7, 0, &eax, &ebx, &ecx, &edx) && (edx & (1u << 25));
-  }();
+  static const bool amx = cpuid7_bit(0, 3, 25);  // AMX-INT8: sub-leaf 0, EDX bit 25
   return amx;
-#else
-  return false;
-#endif
 }
 
 }  // namespace geo
