@@ -6,6 +6,7 @@
 #include <torch/torch.h>
 
 #include <cstddef>
+#include <memory>
 #include <string>
 
 namespace geo {
@@ -24,5 +25,9 @@ class SnippetSource {
   virtual std::string id(size_t index) const = 0;
   virtual int64_t seq_length() const = 0;
 };
+
+// Up to `n` (>= 1) of `source`'s snippets spread evenly over it, the first and the last among them,
+// in their order: a quick look at a whole dataset. `source` itself when it has no more than n.
+std::shared_ptr<const SnippetSource> spread_snippets(std::shared_ptr<const SnippetSource> source, size_t n);
 
 }  // namespace geo

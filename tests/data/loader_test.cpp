@@ -38,6 +38,24 @@ LoaderOptions options(int workers) {
   return o;
 }
 
+// A quick look at a whole dataset (stages[].hold_masked's measurement): evenly spread, the first
+// and the last included, in order; a source no larger than asked is itself.
+TEST(SpreadSnippets, PicksEvenlyFromFirstToLast) {
+  const auto source = std::make_shared<FakeSource>(10);
+  const auto four = spread_snippets(source, 4);
+  ASSERT_EQ(four->size(), 4u);
+  std::vector<std::string> ids;
+  for (size_t i = 0; i < four->size(); ++i) ids.push_back(four->id(i));
+  EXPECT_EQ(ids, (std::vector<std::string>{"fake 0", "fake 3", "fake 6", "fake 9"}));
+  EXPECT_EQ(four->get(2).id, "fake 6");
+  EXPECT_TRUE(torch::equal(four->get(2).frames, source->get(6).frames));
+  EXPECT_EQ(four->seq_length(), 3);
+  EXPECT_EQ(spread_snippets(source, 1)->id(0), "fake 0");
+  EXPECT_EQ(spread_snippets(source, 10), source);
+  EXPECT_EQ(spread_snippets(source, 32), source);
+  EXPECT_THROW(spread_snippets(source, 0), std::invalid_argument);
+}
+
 TEST(Loader, EveryEpochIsAPermutation) {
   std::vector<int> seen(7, 0);
   for (int64_t p = 7; p < 14; ++p) ++seen[sample_at(3, 7, p)];
