@@ -441,6 +441,8 @@ void Config::validate() const {
     c.section(key, stages[i]);
     Checker::Scope s(c, key);
     c.require(names.insert(stages[i].name).second, "name", stages[i].name, "stage names must be unique");
+    c.require(stages[i].hold_masked == 0 || loss.automask, "hold_masked", stages[i].hold_masked,
+              "needs loss.automask: true (it measures the share of pixels auto-masking leaves out)");
   }
   c.section("optimizer", optimizer);
   c.section("logging", logging);

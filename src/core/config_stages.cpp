@@ -57,7 +57,17 @@ void StageConfig::validate(Checker& c) const {
               "trains flow, so at least one flow loss weight must be > 0");
   c.require(weights.anchor == 0 || train.depth, "train", train.names(),
             "must include depth when weights.anchor is > 0 (the anchor holds the trained depth)");
+  c.require(hold_masked >= 0 && hold_masked <= 1, "hold_masked", hold_masked,
+            "must be in [0, 1] (the share of auto-masked pixels at which depth is held; 0: never)");
   c.section("weights", weights);
+}
+
+StageConfig StageConfig::held_depth() const {
+  StageConfig s = *this;
+  if (!train.pose && !train.flow) return s;
+  s.train.depth = false;
+  s.weights.anchor = 0;
+  return s;
 }
 
 }  // namespace geo

@@ -54,9 +54,8 @@ struct LossWeights {
 
 // What helps a clip that is unlikely to teach depth (geo_train's warnings say it; docs/video.md).
 inline constexpr const char* kHardClipAdvice =
-    "A longer clip with more driving helps, or start from a model trained on forward driving and hold its "
-    "depth: geo_train --init RUN --set stages.0.weights.anchor=1 --set stages.0.freeze_batch_norm=true "
-    "(docs/video.md)";
+    "A longer clip with more driving helps, or start from a model trained on forward driving: geo_train --init "
+    "RUN, which holds that model's depth where the clip cannot teach it (stages[].hold_masked, docs/video.md)";
 
 // One training stage (paper Sec. 4.2). Stages are data, not flags.
 struct StageConfig {
@@ -73,6 +72,13 @@ struct StageConfig {
   // weights train: fine-tuning on a few frames (geo_infer --refine), whose batch statistics would
   // replace what training on many frames measured.
   bool freeze_batch_norm = false;
+  // A clip the weights the stage starts from already explain no better than still frames teaches no
+  // depth, and fine-tuning depth on it unlearns (docs/video.md: the real stop-and-go traffic frames).
+  // A stage that trains depth and starts from trained weights (init, --init, or an earlier stage)
+  // first measures, with those weights, the share of pixels auto-masking leaves out on up to
+  // kHoldProbeSnippets training snippets (loss.automask); at this share or above the stage holds
+  // depth (held_depth()). 0: never (the paper's recipe); configs/video.yaml: 0.65.
+  double hold_masked = 0.0;
   LossWeights weights;
 
   bool trains(Net net) const { return train.has(net); }
@@ -90,9 +96,17 @@ struct StageConfig {
     v("lr_gamma", lr_gamma);
     v("init", init);
     v("freeze_batch_norm", freeze_batch_norm);
+    v("hold_masked", hold_masked);
     v("weights", weights);
   }
   void validate(Checker& c) const;
+  // This stage holding depth (hold_masked): the DepthNet is not trained (kept as the stage starts,
+  // its BatchNorm statistics included, so no depth anchor); the other networks train as configured.
+  // Without another network to train it is the stage as it is.
+  StageConfig held_depth() const;
 };
+
+// How many training snippets, spread over the data, hold_masked's measurement looks at.
+inline constexpr size_t kHoldProbeSnippets = 32;
 
 }  // namespace geo

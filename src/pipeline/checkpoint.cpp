@@ -74,6 +74,7 @@ void write_train_state(torch::serialize::OutputArchive& a, const TrainState& s) 
   state.write("best_score", c10::IValue(s.best_score));
   state.write("world_size", c10::IValue(s.world_size));
   state.write("validation_pending", c10::IValue(s.validation_pending));
+  state.write("depth_held", c10::IValue(s.depth_held));
   a.write("train_state", state);
 }
 
@@ -195,11 +196,15 @@ TrainState CheckpointFile::train_state() {
     s.iteration = iteration.toInt();
     s.best_score = best.toDouble();
     s.world_size = world.toInt();
-    c10::IValue pending;  // absent in checkpoints written before it existed: nothing pending
-    if (typed.try_read("validation_pending", pending)) {
-      if (!pending.isBool()) throw std::runtime_error(path_ + ": train_state holds values of the wrong types");
-      s.validation_pending = pending.toBool();
-    }
+    // Absent in checkpoints written before they existed: nothing pending, depth not held.
+    const auto flag = [&](const char* key, bool& out) {
+      c10::IValue v;
+      if (!typed.try_read(key, v)) return;
+      if (!v.isBool()) throw std::runtime_error(path_ + ": train_state holds values of the wrong types");
+      out = v.toBool();
+    };
+    flag("validation_pending", s.validation_pending);
+    flag("depth_held", s.depth_held);
   } else {  // before the typed state: float64 [stage, iteration, best] and an int "world_size"
     torch::Tensor meta;
     if (!archive_.try_read("meta", meta) || meta.numel() != 3)

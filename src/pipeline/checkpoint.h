@@ -46,6 +46,9 @@ struct TrainState {
   int64_t world_size = 1;  // processes of the run that wrote it (train/distributed.h)
   // The validation due at this iteration was interrupted (a signal): a resumed run does it first.
   bool validation_pending = false;
+  // The stage holds depth (StageConfig::hold_masked, decided before its first step): a resumed run
+  // trains the held stage too.
+  bool depth_held = false;
 };
 
 // A training checkpoint's contents, written by write_checkpoint. The optimizer is optional (tests,

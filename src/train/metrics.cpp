@@ -133,6 +133,7 @@ void SummaryPngSink::on_image(const ImageRecord& r) {
 // 50): forward driving 62%, then 56%, 48%, 44%; stop-and-go traffic 76%, then 70%, 66%, 62%.
 void ProgressSink::warn_if_mostly_masked(const StepRecord& r, double masked) {
   constexpr double kMostlyMasked = 0.6;
+  if (!r.trains_depth) return;  // depth held (the trainer said so) or not trained: nothing to unlearn
   masked_sum_ += masked;
   const int64_t window = std::clamp<int64_t>(r.stage_iterations / 2, 1, 50);
   if (++masked_steps_ < window) return;

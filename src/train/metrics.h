@@ -30,6 +30,7 @@ struct StepRecord {
   double grad_norm = 0;
   int64_t skipped_steps = 0;   // NaN/Inf steps skipped so far in this process
   std::vector<double> camera;  // a learned camera (model.learn_intrinsics): fx, fy, cx, cy in training pixels
+  bool trains_depth = true;    // the stage trains the DepthNet (not when it holds depth)
 };
 
 struct ValidationRecord {

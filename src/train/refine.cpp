@@ -45,6 +45,7 @@ Config refine_config(const RefineOptions& o, const NetworkSpec& spec) {
   stage["learning_rate"] = kRefineLearningRate;
   stage["freeze_batch_norm"] = true;
   stage["weights"]["anchor"] = o.anchor;
+  stage["hold_masked"] = 0;  // the anchor (--refine-anchor) is what holds depth here
   stage.remove("init");
   YAML::Node stages(YAML::NodeType::Sequence);
   stages.push_back(stage);

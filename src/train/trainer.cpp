@@ -156,7 +156,50 @@ class Run {
     }
   }
 
-  const StageConfig& stage() const { return cfg_.stages[state_.stage]; }
+  // The current stage as it trains: held (StageConfig::held_depth) when it holds depth.
+  const StageConfig& stage() const { return held_ ? *held_ : cfg_.stages[state_.stage]; }
+
+  // The stage starts from trained weights: an earlier stage's, or init / --init.
+  bool starts_trained(const StageConfig& s) const {
+    return state_.stage > 0 || !opts_.init.empty() || !s.init.empty();
+  }
+
+  // StageConfig::hold_masked, before a fresh stage's first step: the weights it starts from, on up
+  // to kHoldProbeSnippets training snippets spread over the data (networks in eval mode, no
+  // augmentation), leave this share of the pixels auto-masked. Every process measures the same
+  // snippets with the same weights; any that holds makes all hold.
+  void decide_hold() {
+    const StageConfig& s = cfg_.stages[state_.stage];
+    if (s.hold_masked <= 0 || !s.trains(Net::kDepth) || !starts_trained(s)) return;
+    if (!s.train.pose && !s.train.flow) {
+      if (writer_)
+        spdlog::warn("stage {}: hold_masked {} is unused: the stage trains only depth, so holding it would train nothing",
+                     s.name, s.hold_masked);
+      return;
+    }
+    const auto probe = spread_snippets(data_.train, kHoldProbeSnippets);
+    const Validation v = geo::validate(nets_, probe, s, cfg_, device_);
+    const double masked = v.automasked.value_or(0);
+    const bool hold = agreed_signal(group_, masked >= s.hold_masked ? 1 : 0, device_) != 0;
+    if (hold) {
+      held_ = s.held_depth();
+      state_.depth_held = true;
+    }
+    if (!writer_) return;
+    const std::string measured = fmt::format(
+        "stage {}: the weights it starts from leave {:.0f}% of the pixels of {} training snippets auto-masked (a "
+        "still frame explains them better than the predicted motion)",
+        s.name, 100 * masked, probe->size());
+    if (hold)
+      spdlog::warn(
+          "{}, at least stages[{}].hold_masked {}: the clip is unlikely to teach depth (traffic moving with the "
+          "camera, a camera that hardly moves), and fine-tuning depth on such footage unlearns. Depth is held: the "
+          "DepthNet stays as it starts (its BatchNorm statistics too) and the stage trains [{}]. To train depth all "
+          "the same: --set stages.{}.hold_masked=0 (docs/video.md)",
+          measured, state_.stage, s.hold_masked, join_list(held_->train.names(), ", "), state_.stage);
+    else
+      spdlog::info("{}, below stages[{}].hold_masked {}: depth trains", measured, state_.stage, s.hold_masked);
+  }
   bool several() const { return group_.size() > 1; }
 
   int64_t global_step() const {
@@ -169,6 +212,8 @@ class Run {
     ++state_.stage;
     state_.iteration = 0;
     state_.best_score = std::numeric_limits<double>::infinity();  // best is per stage
+    state_.depth_held = false;
+    held_.reset();
     resume_from_.clear();
     if (state_.stage < static_cast<int64_t>(cfg_.stages.size())) init_networks(stage());
   }
@@ -183,6 +228,8 @@ class Run {
     file.load_networks(nets_, false);
     state_ = file.train_state();
     init_configs_ = file.init_configs();
+    if (state_.depth_held && state_.stage < static_cast<int64_t>(cfg_.stages.size()))
+      held_ = cfg_.stages[state_.stage].held_depth();
     const int64_t was = state_.world_size;
     const int64_t now = group_.size();
     if (was != now && writer_)
@@ -223,7 +270,7 @@ class Run {
     if (s.weights.anchor <= 0) return nullptr;
     const std::string path = folder_.anchor(s.name);
     const bool fresh = resume_from_.empty();
-    if (fresh && state_.stage == 0 && opts_.init.empty() && s.init.empty()) {
+    if (fresh && !starts_trained(s)) {
       if (writer_)
         spdlog::warn(
             "stage {}: weights.anchor {} is unused: the stage starts from random weights, so there is no depth to "
@@ -251,8 +298,9 @@ class Run {
   }
 
   int run_stage(const SignalScope& signals) {
-    const auto& s = stage();
     broadcast_networks(group_, nets_);  // every process starts the stage from rank 0's weights
+    if (resume_from_.empty() && state_.iteration == 0) decide_hold();
+    const auto& s = stage();
     TrainStep step(nets_, cfg_, s);
     step.set_gradient_averager(averager_.get(), cfg_.run.distributed.overlap);
     step.set_anchor(anchor_teacher(s));
@@ -339,6 +387,7 @@ class Run {
     rec.grad_norm = r.grad_norm;
     rec.skipped_steps = skipped_;
     rec.camera = r.camera;
+    rec.trains_depth = stage().trains(Net::kDepth);
     for (auto& sink : sinks_) sink->on_step(rec);
   }
 
@@ -424,6 +473,7 @@ class Run {
   Networks nets_;
   std::vector<std::shared_ptr<MetricsSink>> sinks_;
   TrainState state_;
+  std::optional<StageConfig> held_;        // the current stage holding depth (state_.depth_held)
   std::string resume_from_;                // the checkpoint the current stage resumes from ("" = a fresh stage)
   std::vector<std::string> init_configs_;  // CheckpointContents::init_configs of this run
   int64_t skipped_ = 0;

@@ -21,7 +21,7 @@ Validation validate(Networks& nets, std::shared_ptr<const SnippetSource> source,
   BatchLoader loader(std::move(source), lo);
   const int64_t batches = (static_cast<int64_t>(v.snippets) + lo.batch_size - 1) / lo.batch_size;
   const bool flow = stage.uses_flow();
-  double rigid = 0, flow_sum = 0;
+  double rigid = 0, flow_sum = 0, masked = 0;
   const int64_t total = static_cast<int64_t>(v.snippets);
   for (int64_t k = 0; k < batches; ++k) {
     if (stop && stop()) {
@@ -36,12 +36,14 @@ Validation validate(Networks& nets, std::shared_ptr<const SnippetSource> source,
                                     b.K.slice(0, 0, count).to(device), stage, config);
     rigid += out.losses.rigid.item<double>() * static_cast<double>(count);
     if (flow) flow_sum += out.losses.flow.item<double>() * static_cast<double>(count);
+    if (out.losses.automasked.defined()) masked += out.losses.automasked.item<double>() * static_cast<double>(count);
   }
   nets.set_modes(stage);
   if (v.interrupted) return v;
   const double n = static_cast<double>(std::max<int64_t>(total, 1));
   v.rigid = rigid / n;
   if (flow) v.flow = flow_sum / n;
+  if (config.loss.automask) v.automasked = masked / n;
   const bool rigid_trained = stage.trains(Net::kDepth) || stage.trains(Net::kPose);
   v.score = (rigid_trained ? v.rigid : 0.0) + (flow ? *v.flow : 0.0);
   return v;

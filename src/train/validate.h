@@ -20,6 +20,9 @@ struct Validation {
   // pose leave L_br constant).
   double score = 0;
   size_t snippets = 0;
+  // loss.automask: the mean share of pixels a still frame explains better than the predicted
+  // motion (RigidTerms::automasked), each snippet weighing the same.
+  std::optional<double> automasked;
   bool interrupted = false;  // `stop` said so before the pass ended: no score
 };
 

@@ -143,6 +143,34 @@ TEST(Config, NegativeLearningRateNamesKeyValueAndLine) {
   EXPECT_NE(msg.find("'stages[0].learning_rate' = -0.001 (line 3): must be in (0, 1]"), std::string::npos) << msg;
 }
 
+// stages[].hold_masked is a share of pixels, measured by the auto-mask: outside [0, 1] or without
+// loss.automask it is refused by key and line. A held stage trains what it trains besides depth,
+// without the anchor.
+TEST(Config, HoldMaskedIsAShareOfTheAutoMaskAndHoldsOnlyDepth) {
+  const std::string range =
+      error_of([] { geo::parse_config("loss: {automask: true}\nstages:\n  - name: s\n    hold_masked: 1.5\n", "x.yaml"); });
+  EXPECT_NE(range.find("'stages[0].hold_masked' = 1.5 (line 4): must be in [0, 1]"), std::string::npos) << range;
+  const std::string unmasked = error_of([] { geo::parse_config("stages:\n  - name: s\n    hold_masked: 0.5\n", "x.yaml"); });
+  EXPECT_NE(unmasked.find("'stages[0].hold_masked' = 0.5 (line 3): needs loss.automask: true"), std::string::npos)
+      << unmasked;
+  const Config video = geo::load_config(geo::resolve_config_path("video.yaml"), {"data.videos=[a.mp4]", "data.camera.fov_deg=90"});
+  EXPECT_DOUBLE_EQ(video.stages[0].hold_masked, 0.65);
+  EXPECT_DOUBLE_EQ(Config{}.stages[0].hold_masked, 0.0);  // the paper's recipe never holds
+
+  geo::StageConfig s;
+  s.train = {true, true, false};
+  s.weights.anchor = 2;
+  const geo::StageConfig held = s.held_depth();
+  EXPECT_EQ(held.train, (geo::NetworkSet{false, true, false}));
+  EXPECT_FALSE(held.freeze_batch_norm);
+  EXPECT_EQ(held.weights.anchor, 0);
+  EXPECT_EQ(held.learning_rate, s.learning_rate);
+  EXPECT_EQ(held.name, s.name);
+  s.train = {true, false, false};  // nothing else to train: the stage as it is
+  EXPECT_EQ(s.held_depth().train, s.train);
+  EXPECT_EQ(s.held_depth().weights.anchor, 2);
+}
+
 // A value left empty is an error, not the default; integers are decimal (YAML's 010 is octal 8).
 TEST(Config, EmptyValuesAndNonDecimalIntegersAreRefused) {
   for (const auto& [text, why] : std::vector<std::pair<std::string, std::string>>{

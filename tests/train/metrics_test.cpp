@@ -11,7 +11,7 @@ namespace {
 // The log of a stage of `iterations` steps whose auto-masked share is `masked(i)` at step i (1-based;
 // negative: no auto-masking, the term absent as LossTerms::values leaves it out).
 template <class F>
-std::string stage_log(int64_t iterations, F masked) {
+std::string stage_log(int64_t iterations, F masked, bool trains_depth = true) {
   return test::captured_log("%l %v", [&] {
     ProgressSink progress(1000);
     for (int64_t i = 1; i <= iterations; ++i) {
@@ -19,6 +19,7 @@ std::string stage_log(int64_t iterations, F masked) {
       r.stage = "s1";
       r.iteration = i;
       r.stage_iterations = iterations;
+      r.trains_depth = trains_depth;
       r.losses = {{"rigid", 0.5}, {"total", 0.5}};
       if (masked(i) >= 0) r.losses.emplace_back("automasked", masked(i));
       progress.on_step(r);
@@ -57,6 +58,8 @@ TEST(ProgressSink, WarnsOnceWhenMostPixelsStayAutoMasked) {
   const auto refine = stage_log(25, [](int64_t) { return 0.64; });
   EXPECT_NE(refine.find("64% of the pixels were auto-masked over iterations 1-24"), std::string::npos) << refine;
   EXPECT_EQ(stage_log(1, [](int64_t) { return 0.9; }).find("warning "), std::string::npos);
+  // A stage that holds depth (stages[].hold_masked) has no depth to unlearn: nothing is said.
+  EXPECT_EQ(stage_log(220, [](int64_t) { return 0.7; }, false).find("warning "), std::string::npos);
   // Without auto-masking nothing is said.
   EXPECT_EQ(stage_log(60, [](int64_t) { return -1.0; }).find("warning "), std::string::npos);
 }

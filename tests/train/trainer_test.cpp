@@ -509,6 +509,84 @@ TEST(Trainer, InitFromAnotherArchitectureOrABrokenFileIsOneClearLine) {
   GEO_EXPECT_THROW_WITH(train(cfg, i), base + "/cut.pt: not a readable geo/LibTorch file");
 }
 
+// Every parameter and buffer (BatchNorm's statistics) of `a` equal to `b`'s.
+bool same_state(const torch::nn::Module& a, const torch::nn::Module& b) {
+  const auto pa = a.named_parameters(), pb = b.named_parameters();
+  const auto ba = a.named_buffers(), bb = b.named_buffers();
+  if (pa.size() != pb.size() || ba.size() != bb.size()) return false;
+  for (const auto& p : pa)
+    if (!torch::equal(p.value(), pb[p.key()])) return false;
+  for (const auto& x : ba)
+    if (!torch::equal(x.value(), bb[x.key()])) return false;
+  return true;
+}
+
+// stages[].hold_masked: a stage that starts from trained weights and finds at least that share of
+// the pixels auto-masked holds depth (the DepthNet and its statistics leave it exactly as they came,
+// the PoseNet trains), says so, and records it in its checkpoints; below it depth trains; a stage
+// from random weights measures nothing.
+TEST(Trainer, AStageFromTrainedWeightsHoldsDepthWhereMostPixelsAreAutoMasked) {
+  const auto base = test::fresh_dir("hold");
+  auto cfg = one_step_config();
+  TrainOptions a;
+  a.run_dir = base + "/a";
+  ASSERT_EQ(train(cfg, a), 0);
+  Networks start = CheckpointFile(resolve_checkpoint(a.run_dir)).networks();
+  cfg.loss.automask = true;
+  cfg.stages[0].iterations = 2;
+  struct Result {
+    std::string log;
+    Networks nets;
+    bool held;
+  };
+  const auto run = [&](double hold_masked, const std::string& name, const std::string& init) {
+    cfg.stages[0].hold_masked = hold_masked;
+    TrainOptions o;
+    o.run_dir = base + "/" + name;
+    o.init = init;
+    Result r;
+    EXPECT_EQ(train(cfg, o), 0);
+    r.log = test::read_file(o.run_dir + "/train.log");
+    const std::string ck = resolve_checkpoint(o.run_dir);
+    r.nets = CheckpointFile(ck).networks();
+    r.held = state_of(ck).depth_held;
+    return r;
+  };
+  const Result held = run(1e-9, "held", a.run_dir);  // any auto-masked pixel holds
+  EXPECT_TRUE(held.held);
+  EXPECT_TRUE(same_state(*held.nets.depth, *start.depth));
+  EXPECT_FALSE(same_state(*held.nets.pose, *start.pose));
+  EXPECT_NE(held.log.find("[warning] stage s1: the weights it starts from leave "), std::string::npos) << held.log;
+  EXPECT_NE(held.log.find("pixels of 7 training snippets auto-masked"), std::string::npos) << held.log;
+  EXPECT_NE(held.log.find("Depth is held: the DepthNet stays as it starts (its BatchNorm statistics too) and the stage "
+                          "trains [pose]. To train depth all the same: --set stages.0.hold_masked=0"),
+            std::string::npos)
+      << held.log;
+
+  const Result trains = run(1.0, "trains", a.run_dir);  // only a wholly masked clip would hold
+  EXPECT_FALSE(trains.held);
+  EXPECT_FALSE(same_state(*trains.nets.depth, *start.depth));
+  EXPECT_NE(trains.log.find("below stages[0].hold_masked 1: depth trains"), std::string::npos) << trains.log;
+
+  const Result fresh = run(1e-9, "fresh", "");  // random weights: nothing to hold, nothing measured
+  EXPECT_FALSE(fresh.held);
+  EXPECT_EQ(fresh.log.find("the weights it starts from"), std::string::npos) << fresh.log;
+}
+
+// A held stage killed and resumed stays held: the same losses as the run that was not interrupted.
+TEST(Trainer, AHeldStageResumesHeld) {
+  auto cfg = tiny_config();
+  cfg.loss.automask = true;
+  cfg.stages[1].hold_masked = 1e-9;  // s2 starts from s1's weights and holds
+  const auto r = test::killed_and_resumed(cfg, test::fresh_dir("hold_resume"), 6);
+  EXPECT_EQ(r.latest_when_killed, "s2-00000002.pt\n");  // resumed inside the held stage
+  EXPECT_EQ(r.whole, r.resumed);
+  const Networks s1 = CheckpointFile(r.whole_dir + "/checkpoints/s1-00000003.pt").networks();
+  const Networks s2 = CheckpointFile(resolve_checkpoint(r.whole_dir)).networks();
+  EXPECT_TRUE(same_state(*s2.depth, *s1.depth));
+  EXPECT_TRUE(state_of(resolve_checkpoint(r.killed_dir)).depth_held);
+}
+
 // Every checkpoint of a run records what its initial weights were trained on, nearest first, and a
 // run initialised from it inherits the chain (geo_eval's training-drive check follows it).
 TEST(Trainer, CheckpointsRecordTheirInitChain) {
