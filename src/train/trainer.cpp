@@ -160,9 +160,7 @@ class Run {
   const StageConfig& stage() const { return held_ ? *held_ : cfg_.stages[state_.stage]; }
 
   // The stage starts from trained weights: an earlier stage's, or init / --init.
-  bool starts_trained(const StageConfig& s) const {
-    return state_.stage > 0 || !opts_.init.empty() || !s.init.empty();
-  }
+  bool starts_trained(const StageConfig& s) const { return state_.stage > 0 || !opts_.init.empty() || !s.init.empty(); }
 
   // StageConfig::hold_masked, before a fresh stage's first step: the weights it starts from, on up
   // to kHoldProbeSnippets training snippets spread over the data (networks in eval mode, no
@@ -173,8 +171,9 @@ class Run {
     if (s.hold_masked <= 0 || !s.trains(Net::kDepth) || !starts_trained(s)) return;
     if (!s.train.pose && !s.train.flow) {
       if (writer_)
-        spdlog::warn("stage {}: hold_masked {} is unused: the stage trains only depth, so holding it would train nothing",
-                     s.name, s.hold_masked);
+        spdlog::warn(
+            "stage {}: hold_masked {} is unused: the stage trains only depth, so holding it would train nothing",
+            s.name, s.hold_masked);
       return;
     }
     const auto probe = spread_snippets(data_.train, kHoldProbeSnippets);
@@ -197,8 +196,7 @@ class Run {
           "DepthNet stays as it starts (its BatchNorm statistics too) and the stage trains [{}]. To train depth all "
           "the same: --set stages.{}.hold_masked=0 (docs/video.md)",
           measured, state_.stage, s.hold_masked, join_list(held_->train.names(), ", "), state_.stage);
-    else
-      spdlog::info("{}, below stages[{}].hold_masked {}: depth trains", measured, state_.stage, s.hold_masked);
+    else spdlog::info("{}, below stages[{}].hold_masked {}: depth trains", measured, state_.stage, s.hold_masked);
   }
   bool several() const { return group_.size() > 1; }
 

@@ -147,13 +147,15 @@ TEST(Config, NegativeLearningRateNamesKeyValueAndLine) {
 // loss.automask it is refused by key and line. A held stage trains what it trains besides depth,
 // without the anchor.
 TEST(Config, HoldMaskedIsAShareOfTheAutoMaskAndHoldsOnlyDepth) {
-  const std::string range =
-      error_of([] { geo::parse_config("loss: {automask: true}\nstages:\n  - name: s\n    hold_masked: 1.5\n", "x.yaml"); });
+  const std::string range = error_of(
+      [] { geo::parse_config("loss: {automask: true}\nstages:\n  - name: s\n    hold_masked: 1.5\n", "x.yaml"); });
   EXPECT_NE(range.find("'stages[0].hold_masked' = 1.5 (line 4): must be in [0, 1]"), std::string::npos) << range;
-  const std::string unmasked = error_of([] { geo::parse_config("stages:\n  - name: s\n    hold_masked: 0.5\n", "x.yaml"); });
+  const std::string unmasked =
+      error_of([] { geo::parse_config("stages:\n  - name: s\n    hold_masked: 0.5\n", "x.yaml"); });
   EXPECT_NE(unmasked.find("'stages[0].hold_masked' = 0.5 (line 3): needs loss.automask: true"), std::string::npos)
       << unmasked;
-  const Config video = geo::load_config(geo::resolve_config_path("video.yaml"), {"data.videos=[a.mp4]", "data.camera.fov_deg=90"});
+  const Config video =
+      geo::load_config(geo::resolve_config_path("video.yaml"), {"data.videos=[a.mp4]", "data.camera.fov_deg=90"});
   EXPECT_DOUBLE_EQ(video.stages[0].hold_masked, 0.65);
   EXPECT_DOUBLE_EQ(Config{}.stages[0].hold_masked, 0.0);  // the paper's recipe never holds
 

@@ -59,7 +59,10 @@ TEST(ProgressSink, WarnsOnceWhenMostPixelsStayAutoMasked) {
   EXPECT_NE(refine.find("64% of the pixels were auto-masked over iterations 1-24"), std::string::npos) << refine;
   EXPECT_EQ(stage_log(1, [](int64_t) { return 0.9; }).find("warning "), std::string::npos);
   // A stage that holds depth (stages[].hold_masked) has no depth to unlearn: nothing is said.
-  EXPECT_EQ(stage_log(220, [](int64_t) { return 0.7; }, false).find("warning "), std::string::npos);
+  EXPECT_EQ(stage_log(
+                220, [](int64_t) { return 0.7; }, false)
+                .find("warning "),
+            std::string::npos);
   // Without auto-masking nothing is said.
   EXPECT_EQ(stage_log(60, [](int64_t) { return -1.0; }).find("warning "), std::string::npos);
 }

@@ -533,7 +533,6 @@ TEST(Trainer, AStageFromTrainedWeightsHoldsDepthWhereMostPixelsAreAutoMasked) {
   ASSERT_EQ(train(cfg, a), 0);
   Networks start = CheckpointFile(resolve_checkpoint(a.run_dir)).networks();
   cfg.loss.automask = true;
-  cfg.stages[0].iterations = 2;
   struct Result {
     std::string log;
     Networks nets;
@@ -577,11 +576,14 @@ TEST(Trainer, AStageFromTrainedWeightsHoldsDepthWhereMostPixelsAreAutoMasked) {
 TEST(Trainer, AHeldStageResumesHeld) {
   auto cfg = tiny_config();
   cfg.loss.automask = true;
+  cfg.stages[0].iterations = 1;
+  cfg.stages[1].iterations = 2;
   cfg.stages[1].hold_masked = 1e-9;  // s2 starts from s1's weights and holds
-  const auto r = test::killed_and_resumed(cfg, test::fresh_dir("hold_resume"), 6);
-  EXPECT_EQ(r.latest_when_killed, "s2-00000002.pt\n");  // resumed inside the held stage
+  cfg.logging.checkpoint_interval = 1;
+  const auto r = test::killed_and_resumed(cfg, test::fresh_dir("hold_resume"), 3);
+  EXPECT_EQ(r.latest_when_killed, "s2-00000001.pt\n");  // resumed inside the held stage
   EXPECT_EQ(r.whole, r.resumed);
-  const Networks s1 = CheckpointFile(r.whole_dir + "/checkpoints/s1-00000003.pt").networks();
+  const Networks s1 = CheckpointFile(r.whole_dir + "/checkpoints/s1-00000001.pt").networks();
   const Networks s2 = CheckpointFile(resolve_checkpoint(r.whole_dir)).networks();
   EXPECT_TRUE(same_state(*s2.depth, *s1.depth));
   EXPECT_TRUE(state_of(resolve_checkpoint(r.killed_dir)).depth_held);
