@@ -509,6 +509,15 @@ TEST(Trainer, InitFromAnotherArchitectureOrABrokenFileIsOneClearLine) {
   GEO_EXPECT_THROW_WITH(train(cfg, i), base + "/cut.pt: not a readable geo/LibTorch file");
 }
 
+// Sends this process SIGTERM (as a cluster scheduler would) after `n` steps: just before validation.
+struct TermAtStep : MetricsSink {
+  explicit TermAtStep(int64_t n) : left(n) {}
+  void on_step(const StepRecord&) override {
+    if (--left == 0) std::raise(SIGTERM);
+  }
+  int64_t left;
+};
+
 // Every parameter and buffer (BatchNorm's statistics) of `a` equal to `b`'s.
 bool same_state(const torch::nn::Module& a, const torch::nn::Module& b) {
   const auto pa = a.named_parameters(), pb = b.named_parameters();
@@ -523,8 +532,8 @@ bool same_state(const torch::nn::Module& a, const torch::nn::Module& b) {
 
 // stages[].hold_masked: a stage that starts from trained weights and finds at least that share of
 // the pixels auto-masked holds depth (the DepthNet and its statistics leave it exactly as they came,
-// the PoseNet trains), says so, and records it in its checkpoints; below it depth trains; a stage
-// from random weights measures nothing.
+// the PoseNet trains), says so, and records it in its checkpoints, so that a resumed run stays held;
+// below it depth trains; a stage from random weights measures nothing.
 TEST(Trainer, AStageFromTrainedWeightsHoldsDepthWhereMostPixelsAreAutoMasked) {
   const auto base = test::fresh_dir("hold");
   auto cfg = one_step_config();
@@ -538,20 +547,29 @@ TEST(Trainer, AStageFromTrainedWeightsHoldsDepthWhereMostPixelsAreAutoMasked) {
     Networks nets;
     bool held;
   };
-  const auto run = [&](double hold_masked, const std::string& name, const std::string& init) {
+  // `stop_after` > 0: stopped by a SIGTERM after that many steps, then resumed.
+  const auto run = [&](double hold_masked, const std::string& name, const std::string& init, int64_t stop_after = 0) {
     cfg.stages[0].hold_masked = hold_masked;
+    cfg.stages[0].iterations = stop_after + 1;
     TrainOptions o;
     o.run_dir = base + "/" + name;
     o.init = init;
     Result r;
-    EXPECT_EQ(train(cfg, o), 0);
+    if (stop_after > 0) {
+      o.sinks.push_back(std::make_shared<TermAtStep>(stop_after));
+      EXPECT_EQ(train(cfg, o), 130);
+      EXPECT_EQ(resume(o.run_dir, {}), 0);
+    } else {
+      EXPECT_EQ(train(cfg, o), 0);
+    }
     r.log = test::read_file(o.run_dir + "/train.log");
     const std::string ck = resolve_checkpoint(o.run_dir);
     r.nets = CheckpointFile(ck).networks();
     r.held = state_of(ck).depth_held;
     return r;
   };
-  const Result held = run(1e-9, "held", a.run_dir);  // any auto-masked pixel holds
+  // Any auto-masked pixel holds; stopped after the first step and resumed, the stage stays held.
+  const Result held = run(1e-9, "held", a.run_dir, 1);
   EXPECT_TRUE(held.held);
   EXPECT_TRUE(same_state(*held.nets.depth, *start.depth));
   EXPECT_FALSE(same_state(*held.nets.pose, *start.pose));
@@ -570,23 +588,6 @@ TEST(Trainer, AStageFromTrainedWeightsHoldsDepthWhereMostPixelsAreAutoMasked) {
   const Result fresh = run(1e-9, "fresh", "");  // random weights: nothing to hold, nothing measured
   EXPECT_FALSE(fresh.held);
   EXPECT_EQ(fresh.log.find("the weights it starts from"), std::string::npos) << fresh.log;
-}
-
-// A held stage killed and resumed stays held: the same losses as the run that was not interrupted.
-TEST(Trainer, AHeldStageResumesHeld) {
-  auto cfg = tiny_config();
-  cfg.loss.automask = true;
-  cfg.stages[0].iterations = 1;
-  cfg.stages[1].iterations = 2;
-  cfg.stages[1].hold_masked = 1e-9;  // s2 starts from s1's weights and holds
-  cfg.logging.checkpoint_interval = 1;
-  const auto r = test::killed_and_resumed(cfg, test::fresh_dir("hold_resume"), 3);
-  EXPECT_EQ(r.latest_when_killed, "s2-00000001.pt\n");  // resumed inside the held stage
-  EXPECT_EQ(r.whole, r.resumed);
-  const Networks s1 = CheckpointFile(r.whole_dir + "/checkpoints/s1-00000001.pt").networks();
-  const Networks s2 = CheckpointFile(resolve_checkpoint(r.whole_dir)).networks();
-  EXPECT_TRUE(same_state(*s2.depth, *s1.depth));
-  EXPECT_TRUE(state_of(resolve_checkpoint(r.killed_dir)).depth_held);
 }
 
 // Every checkpoint of a run records what its initial weights were trained on, nearest first, and a
@@ -619,15 +620,6 @@ TEST(Trainer, CheckpointsRecordTheirInitChain) {
   ASSERT_EQ(resume(c.run_dir, {}), 0);  // a resumed run keeps it
   EXPECT_EQ(CheckpointFile(resolve_checkpoint(c.run_dir)).init_configs(), chain_c);
 }
-
-// Sends this process SIGTERM (as a cluster scheduler would) after `n` steps: just before validation.
-struct TermAtStep : MetricsSink {
-  explicit TermAtStep(int64_t n) : left(n) {}
-  void on_step(const StepRecord&) override {
-    if (--left == 0) std::raise(SIGTERM);
-  }
-  int64_t left;
-};
 
 TEST(Trainer, ASigtermDuringValidationEndsItCheckpointsAndTheResumeValidatesFirst) {
   auto cfg = tiny_config();
