@@ -159,6 +159,13 @@ class Run {
   // The current stage as it trains: held (StageConfig::held_depth) when it holds depth.
   const StageConfig& stage() const { return held_ ? *held_ : cfg_.stages[state_.stage]; }
 
+  // Sets state_.depth_held and what follows from it, the held stage (held_): the one place either changes.
+  void hold_depth(bool held) {
+    state_.depth_held = held;
+    held_.reset();
+    if (held) held_ = cfg_.stages[state_.stage].held_depth();
+  }
+
   // The stage starts from trained weights: an earlier stage's, or init / --init.
   bool starts_trained(const StageConfig& s) const { return state_.stage > 0 || !opts_.init.empty() || !s.init.empty(); }
 
@@ -180,10 +187,7 @@ class Run {
     const Validation v = geo::validate(nets_, probe, s, cfg_, device_);
     const double masked = v.automasked.value_or(0);
     const bool hold = agreed_signal(group_, masked >= s.hold_masked ? 1 : 0, device_) != 0;
-    if (hold) {
-      held_ = s.held_depth();
-      state_.depth_held = true;
-    }
+    hold_depth(hold);
     if (!writer_) return;
     const std::string measured = fmt::format(
         "stage {}: the weights it starts from leave {:.0f}% of the pixels of {} training snippets auto-masked (a "
@@ -210,8 +214,7 @@ class Run {
     ++state_.stage;
     state_.iteration = 0;
     state_.best_score = std::numeric_limits<double>::infinity();  // best is per stage
-    state_.depth_held = false;
-    held_.reset();
+    hold_depth(false);
     resume_from_.clear();
     if (state_.stage < static_cast<int64_t>(cfg_.stages.size())) init_networks(stage());
   }
@@ -226,8 +229,7 @@ class Run {
     file.load_networks(nets_, false);
     state_ = file.train_state();
     init_configs_ = file.init_configs();
-    if (state_.depth_held && state_.stage < static_cast<int64_t>(cfg_.stages.size()))
-      held_ = cfg_.stages[state_.stage].held_depth();
+    if (state_.stage < static_cast<int64_t>(cfg_.stages.size())) hold_depth(state_.depth_held);
     const int64_t was = state_.world_size;
     const int64_t now = group_.size();
     if (was != now && writer_)
